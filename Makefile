@@ -1,0 +1,28 @@
+# Two commands do all set-up: `make test` and `make repro` (see README.md).
+VENV ?= .venv
+PY := $(VENV)/bin/python
+PROFILE ?=
+
+.PHONY: setup test test-fast repro smoke lint clean-data
+
+setup:
+	@bash scripts/setup.sh
+
+## run the test suite (unit tests + papermill smoke runs of every notebook)
+test: setup
+	$(PY) -m pytest -q
+
+## unit tests only, no notebooks
+test-fast: setup
+	$(PY) -m pytest -q -m "not notebooks"
+
+## regenerate every table and figure: dvc repro (profile from params.yaml; PROFILE=smoke to override)
+repro: setup
+	@if [ -n "$(PROFILE)" ]; then $(PY) -m semmatch.experiments.profile set $(PROFILE); fi
+	$(VENV)/bin/dvc repro
+
+lint: setup
+	$(VENV)/bin/ruff check semmatch tests
+
+clean-data:
+	rm -rf data/scenes data/maps data/labels data/models reports/*.ipynb

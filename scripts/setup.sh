@@ -1,0 +1,34 @@
+#!/usr/bin/env bash
+# Set up everything semmatch needs on a fresh Debian 12 / Python 3.11 machine that reaches only
+# the package registries: Debian's libusb-1.0-0 (Open3D needs it), a .venv with the pinned
+# dependencies (CPU torch), semmatch itself in editable mode. Idempotent and quick when done.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+VENV=${VENV:-.venv}
+PYTHON=${PYTHON:-python3}
+
+if ! /sbin/ldconfig -p 2>/dev/null | grep -q 'libusb-1.0.so.0'; then
+  if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
+    echo "setup: installing Debian's libusb-1.0-0 (needed by Open3D)"
+    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libusb-1.0-0 >/dev/null
+  else
+    echo "setup: error: Open3D needs the system library libusb-1.0-0, which is missing." >&2
+    echo "setup: install it as root:  apt-get install libusb-1.0-0   (or: sudo apt-get install libusb-1.0-0)" >&2
+    exit 1
+  fi
+fi
+
+if [ ! -x "$VENV/bin/python" ]; then
+  echo "setup: creating $VENV"
+  "$PYTHON" -m venv "$VENV"
+fi
+stamp="$VENV/.semmatch-installed"
+if [ ! -f "$stamp" ] || [ requirements.txt -nt "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
+  echo "setup: installing pinned dependencies into $VENV (CPU torch)"
+  "$VENV/bin/python" -m pip install -q --upgrade pip
+  # torch first and alone: a pinned CPU build, so nothing can pull a CUDA build
+  "$VENV/bin/python" -m pip install -q "torch==2.13.0"
+  "$VENV/bin/python" -m pip install -q -r requirements.txt
+  "$VENV/bin/python" -m pip install -q --no-deps -e .
+  touch "$stamp"
+fi

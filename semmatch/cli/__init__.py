@@ -1,0 +1,54 @@
+"""``semmatch <verb>``: a thin command-line layer over the package.
+
+Each verb lives in its own module of this package and exposes ``register(subparsers)``,
+which adds its sub-parser and sets ``func`` (called with the parsed namespace, returning an
+exit code). ``semmatch bench <what>`` benchmarks are registered the same way by modules
+under :mod:`semmatch.cli.bench`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+#: verb modules, in the order ``semmatch --help`` lists them
+VERBS = ("simulate", "train", "predict", "reconstruct", "transfer", "evaluate", "bench")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The full ``semmatch`` argument parser."""
+    parser = argparse.ArgumentParser(
+        prog="semmatch",
+        description="3D semantic label transfer across human and robot viewpoints.",
+    )
+    from semmatch import __version__
+
+    parser.add_argument("--version", action="version", version=f"semmatch {__version__}")
+    sub = parser.add_subparsers(dest="verb", metavar="VERB")
+    sub.required = True
+    for verb in VERBS:
+        try:
+            mod = importlib.import_module(f"semmatch.cli.{verb}")
+        except ModuleNotFoundError as e:
+            if e.name == f"semmatch.cli.{verb}":
+                continue  # verb not built yet
+            raise
+        mod.register(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the ``semmatch`` console script."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except (ValueError, FileNotFoundError, FileExistsError, KeyError) as e:
+        msg = e.args[0] if isinstance(e, KeyError) and e.args else e
+        print(f"semmatch {args.verb}: error: {msg}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

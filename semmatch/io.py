@@ -1,0 +1,639 @@
+"""Files of the data contract: sequence folders, TUM poses, PLY semantic maps, atomic writes.
+
+A sequence folder (DESIGN.md §3)::
+
+    <sequence>/intrinsics.json  poses.txt  rgb/000000.png  depth/000000.png  labels/000000.png
+
+Writers never leave a half-written file behind: files are written to a temporary name in the
+same folder and renamed; a sequence is written into a hidden temporary folder and renamed to
+its final name only when complete, so an interrupted run leaves nothing that reads as a
+complete sequence.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import shutil
+import tempfile
+import uuid
+from collections.abc import Iterator
+from collections.abc import Sequence as _SequenceABC
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from .geometry import Intrinsics, check_pose, pose_from_tum, pose_to_tum
+from .labels import NUM_CLASSES, colors_to_labels, labels_to_colors
+
+__all__ = [
+    "Frame",
+    "SequenceReader",
+    "SequenceWriter",
+    "SemanticMap",
+    "atomic_path",
+    "atomic_write_text",
+    "write_json",
+    "read_intrinsics",
+    "write_intrinsics",
+    "read_tum",
+    "write_tum",
+    "read_image",
+    "write_image",
+    "read_depth",
+    "write_depth",
+    "read_labels_folder",
+    "write_labels_folder",
+    "is_sequence",
+    "read_sequence",
+    "read_map",
+    "write_map",
+]
+
+PathLike = str | os.PathLike
+
+
+# ----------------------------------------------------------------------------- atomic writes
+@contextlib.contextmanager
+def atomic_path(path: PathLike) -> Iterator[Path]:
+    """Yield a temporary path beside ``path``; rename it to ``path`` when the block succeeds.
+
+    The temporary file keeps the suffix of ``path`` so that libraries choosing a format by
+    extension (OpenCV, Open3D, matplotlib) still work. On error it is removed.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.stem}.{uuid.uuid4().hex[:8]}.tmp{path.suffix}")
+    try:
+        yield tmp
+        os.replace(tmp, path)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+
+
+def atomic_write_text(path: PathLike, text: str) -> None:
+    """Write ``text`` to ``path`` atomically."""
+    with atomic_path(path) as tmp:
+        tmp.write_text(text)
+
+
+def write_json(path: PathLike, obj) -> None:
+    """Write ``obj`` as indented JSON, atomically."""
+    atomic_write_text(path, json.dumps(obj, indent=2, sort_keys=False) + "\n")
+
+
+# ----------------------------------------------------------------------------- images
+def write_image(path: PathLike, image: np.ndarray) -> None:
+    """Write an RGB ``uint8 (H,W,3)``, a ``uint8``/``uint16 (H,W)`` image as PNG, atomically."""
+    image = np.asarray(image)
+    if image.ndim == 3:
+        if image.shape[2] != 3 or image.dtype != np.uint8:
+            raise ValueError(f"{path}: RGB must be uint8 (H,W,3), got {image.dtype} {image.shape}")
+        image = image[..., ::-1]
+    elif image.ndim != 2 or image.dtype not in (np.uint8, np.uint16):
+        raise ValueError(f"{path}: expected uint8/uint16 (H,W), got {image.dtype} {image.shape}")
+    with atomic_path(path) as tmp:
+        if not cv2.imwrite(str(tmp), np.ascontiguousarray(image), [cv2.IMWRITE_PNG_COMPRESSION, 1]):
+            raise OSError(f"could not write image {path}")
+
+
+def read_image(path: PathLike, *, flags: int = cv2.IMREAD_UNCHANGED) -> np.ndarray:
+    """Read a PNG/JPEG; colour images come back as RGB."""
+    img = cv2.imread(str(path), flags)
+    if img is None:
+        raise FileNotFoundError(f"cannot read image {path}")
+    if img.ndim == 3:
+        img = img[..., 2::-1] if img.shape[2] >= 3 else img
+        img = np.ascontiguousarray(img)
+    return img
+
+
+def write_depth(path: PathLike, depth: np.ndarray, depth_scale: float = 1000.0) -> None:
+    """Write metric depth as a 16-bit PNG (``value = metres * depth_scale``, 0 = none)."""
+    d = np.asarray(depth, dtype=np.float64)
+    d = np.where(np.isfinite(d) & (d > 0), d, 0.0) * depth_scale
+    write_image(path, np.clip(np.rint(d), 0, 65535).astype(np.uint16))
+
+
+def read_depth(path: PathLike, depth_scale: float = 1000.0) -> np.ndarray:
+    """Read a 16-bit depth PNG as float32 metres."""
+    raw = read_image(path)
+    if raw.ndim != 2 or raw.dtype != np.uint16:
+        raise ValueError(f"{path}: depth must be a 16-bit single-channel PNG, got {raw.dtype} {raw.shape}")
+    return raw.astype(np.float32) / np.float32(depth_scale)
+
+
+# ----------------------------------------------------------------------------- intrinsics, poses
+def read_intrinsics(path: PathLike) -> Intrinsics:
+    """Read ``intrinsics.json``."""
+    path = Path(path)
+    try:
+        d = json.loads(path.read_text())
+        return Intrinsics.from_dict(d)
+    except FileNotFoundError:
+        raise FileNotFoundError(f"{path}: no intrinsics file") from None
+    except (ValueError, TypeError) as e:
+        raise ValueError(f"{path}: {e}") from None
+
+
+def write_intrinsics(path: PathLike, intr: Intrinsics) -> None:
+    """Write ``intrinsics.json`` atomically."""
+    write_json(path, intr.to_dict())
+
+
+def read_tum(path: PathLike) -> tuple[np.ndarray, np.ndarray]:
+    """Read a TUM trajectory file (``t tx ty tz qx qy qz qw`` per line, ``#`` comments).
+
+    Returns
+    -------
+    timestamps : ndarray (N,) float64
+    poses : ndarray (N, 4, 4) float64, ``T_world_camera``
+    """
+    path = Path(path)
+    stamps, poses = [], []
+    for lineno, line in enumerate(path.read_text().splitlines(), 1):
+        line = line.strip()
+        if not line or line.startswith("#"):
+            continue
+        parts = line.replace(",", " ").split()
+        if len(parts) != 8:
+            raise ValueError(f"{path}:{lineno}: expected 8 values 't tx ty tz qx qy qz qw', got {len(parts)}")
+        try:
+            v = np.array([float(p) for p in parts])
+        except ValueError:
+            raise ValueError(f"{path}:{lineno}: not a number in {line!r}") from None
+        if not np.isfinite(v).all():
+            raise ValueError(f"{path}:{lineno}: NaN or inf in pose")
+        try:
+            poses.append(pose_from_tum(v[1:]))
+        except ValueError as e:
+            raise ValueError(f"{path}:{lineno}: {e}") from None
+        stamps.append(v[0])
+    return np.asarray(stamps, dtype=np.float64), np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4)
+
+
+def write_tum(path: PathLike, timestamps: np.ndarray, poses: np.ndarray) -> None:
+    """Write poses (N,4,4) with timestamps (N,) in TUM format, atomically."""
+    poses = np.asarray(poses)
+    lines = ["# timestamp tx ty tz qx qy qz qw (T_world_camera)"]
+    for t, T in zip(np.asarray(timestamps, dtype=np.float64), poses, strict=True):
+        v = pose_to_tum(T)
+        lines.append(f"{t:.6f} " + " ".join(f"{x:.9f}" for x in v))
+    atomic_write_text(path, "\n".join(lines) + "\n")
+
+
+# ----------------------------------------------------------------------------- sequences
+@dataclass
+class Frame:
+    """One posed RGB-D frame.
+
+    Attributes
+    ----------
+    rgb : uint8 (H,W,3)
+    depth : float32 (H,W), metres, 0 = no measurement
+    labels : uint8 (H,W) category ids, or None when unknown
+    pose : float64 (4,4) ``T_world_camera``, or None when unknown
+    intrinsics : Intrinsics
+    index : int
+        Position in its sequence.
+    timestamp : float
+    """
+
+    rgb: np.ndarray
+    depth: np.ndarray
+    labels: np.ndarray | None
+    pose: np.ndarray | None
+    intrinsics: Intrinsics
+    index: int = 0
+    timestamp: float = 0.0
+    extras: dict = field(default_factory=dict)
+
+
+def _frame_name(i: int) -> str:
+    return f"{i:06d}.png"
+
+
+def is_sequence(path: PathLike) -> bool:
+    """True when ``path`` holds a (complete) sequence folder."""
+    p = Path(path)
+    return (p / "intrinsics.json").is_file() and (p / "poses.txt").is_file()
+
+
+class SequenceReader(_SequenceABC):
+    """Lazy, random-access reader of a sequence folder: ``len(seq)``, ``seq[i] -> Frame``.
+
+    Parameters
+    ----------
+    path : path
+        The sequence folder.
+    labels : path, optional
+        A labels folder to use instead of ``<path>/labels`` (e.g. transferred labels).
+    """
+
+    def __init__(self, path: PathLike, labels: PathLike | None = None) -> None:
+        self.path = Path(path)
+        if not self.path.is_dir():
+            raise FileNotFoundError(f"{self.path}: no such sequence folder")
+        if not (self.path / "intrinsics.json").is_file():
+            raise ValueError(f"{self.path}: not a sequence folder (no intrinsics.json)")
+        if not (self.path / "poses.txt").is_file():
+            raise ValueError(
+                f"{self.path}: no poses.txt; the sequence is incomplete (interrupted write?)"
+            )
+        self.intrinsics = read_intrinsics(self.path / "intrinsics.json")
+        self.timestamps, self.poses = read_tum(self.path / "poses.txt")
+        self.labels_dir = Path(labels) if labels is not None else self.path / "labels"
+        n = len(self.poses)
+        for sub in ("rgb", "depth"):
+            d = self.path / sub
+            have = len(list(d.glob("*.png"))) if d.is_dir() else 0
+            if have != n:
+                missing = [i for i in range(n) if not (d / _frame_name(i)).is_file()]
+                what = f"frame {missing[0]} ({d / _frame_name(missing[0])}) is missing" if missing else (
+                    f"{have} files for {n} poses"
+                )
+                raise ValueError(f"{self.path}: {sub}/ does not match poses.txt: {what}")
+        self.has_labels = self.labels_dir.is_dir() and any(self.labels_dir.glob("*.png"))
+
+    def __len__(self) -> int:
+        return len(self.poses)
+
+    def _check_shape(self, arr: np.ndarray, path: Path, i: int) -> None:
+        if arr.shape[:2] != self.intrinsics.shape:
+            raise ValueError(
+                f"{path}: frame {i} is {arr.shape[1]}x{arr.shape[0]} but intrinsics.json says "
+                f"{self.intrinsics.width}x{self.intrinsics.height}"
+            )
+
+    def read_labels(self, i: int) -> np.ndarray | None:
+        """Label image of frame ``i`` or None when the labels folder has none."""
+        p = self.labels_dir / _frame_name(i)
+        if not p.is_file():
+            if self.has_labels:
+                raise ValueError(f"{self.labels_dir}: frame {i} ({p.name}) is missing")
+            return None
+        lab = read_image(p)
+        if lab.ndim != 2 or lab.dtype != np.uint8:
+            raise ValueError(f"{p}: labels must be an 8-bit single-channel PNG")
+        self._check_shape(lab, p, i)
+        if lab.max(initial=0) >= NUM_CLASSES:
+            raise ValueError(f"{p}: label id {lab.max()} outside 0..{NUM_CLASSES - 1}")
+        return lab
+
+    def __getitem__(self, i):  # type: ignore[override]
+        if isinstance(i, slice):
+            return [self[j] for j in range(*i.indices(len(self)))]
+        n = len(self)
+        if not -n <= i < n:
+            raise IndexError(f"frame {i} out of range for a sequence of {n} frames")
+        i = i % n
+        rp = self.path / "rgb" / _frame_name(i)
+        dp = self.path / "depth" / _frame_name(i)
+        rgb = read_image(rp)
+        if rgb.ndim != 3:
+            raise ValueError(f"{rp}: RGB frame must have 3 channels")
+        depth = read_depth(dp, self.intrinsics.depth_scale)
+        self._check_shape(rgb, rp, i)
+        self._check_shape(depth, dp, i)
+        return Frame(
+            rgb=rgb,
+            depth=depth,
+            labels=self.read_labels(i),
+            pose=self.poses[i].copy(),
+            intrinsics=self.intrinsics,
+            index=i,
+            timestamp=float(self.timestamps[i]),
+        )
+
+    def __iter__(self) -> Iterator[Frame]:
+        for i in range(len(self)):
+            yield self[i]
+
+    def __repr__(self) -> str:
+        return f"SequenceReader({str(self.path)!r}, frames={len(self)})"
+
+
+def read_sequence(path: PathLike, labels: PathLike | None = None) -> SequenceReader:
+    """Open a sequence folder (lazy; see :class:`SequenceReader`)."""
+    return SequenceReader(path, labels=labels)
+
+
+class SequenceWriter:
+    """Stream frames into a sequence folder; the folder appears only when :meth:`close` runs.
+
+    Frames go to a hidden temporary folder beside ``path``; ``close()`` writes ``poses.txt``
+    and renames the folder into place. Use as a context manager: on an exception the
+    temporary folder is removed and ``path`` is untouched.
+
+    Parameters
+    ----------
+    path : path
+        Final sequence folder.
+    intrinsics : Intrinsics
+    overwrite : bool
+        Replace an existing sequence at ``path``. Without it an existing non-empty folder is an
+        error that names it.
+    """
+
+    def __init__(self, path: PathLike, intrinsics: Intrinsics, *, overwrite: bool = False) -> None:
+        self.path = Path(path)
+        if self.path.exists() and (not self.path.is_dir() or any(self.path.iterdir())):
+            if not overwrite:
+                kind = "another sequence" if is_sequence(self.path) else "other files"
+                raise FileExistsError(
+                    f"{self.path}: output folder already holds {kind}; choose another folder "
+                    "or pass overwrite"
+                )
+        self.intrinsics = intrinsics
+        self.overwrite = overwrite
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._tmp = Path(tempfile.mkdtemp(prefix=f".{self.path.name}.", suffix=".partial", dir=self.path.parent))
+        for sub in ("rgb", "depth"):
+            (self._tmp / sub).mkdir()
+        self._poses: list[np.ndarray] = []
+        self._stamps: list[float] = []
+        self._closed = False
+
+    def __len__(self) -> int:
+        return len(self._poses)
+
+    def add(
+        self,
+        rgb: np.ndarray,
+        depth: np.ndarray,
+        pose: np.ndarray,
+        labels: np.ndarray | None = None,
+        timestamp: float | None = None,
+        **extra_images: np.ndarray,
+    ) -> None:
+        """Append one frame. Extra uint8/uint16 images go to ``<name>/NNNNNN.png``."""
+        i = len(self._poses)
+        shape = self.intrinsics.shape
+        for what, arr in (("rgb", rgb), ("depth", depth), ("labels", labels)):
+            if arr is not None and np.asarray(arr).shape[:2] != shape:
+                raise ValueError(f"frame {i}: {what} is {np.asarray(arr).shape[:2]}, intrinsics say {shape}")
+        pose = check_pose(pose, what=f"frame {i} pose")
+        name = _frame_name(i)
+        write_image(self._tmp / "rgb" / name, np.asarray(rgb, dtype=np.uint8))
+        write_depth(self._tmp / "depth" / name, depth, self.intrinsics.depth_scale)
+        if labels is not None:
+            write_image(self._tmp / "labels" / name, np.asarray(labels, dtype=np.uint8))
+        for key, img in extra_images.items():
+            write_image(self._tmp / key / name, img)
+        self._poses.append(pose)
+        self._stamps.append(float(i) if timestamp is None else float(timestamp))
+
+    def write_extra(self, name: str, text: str) -> None:
+        """Write an extra text file (e.g. ``meta.json``) into the sequence."""
+        atomic_write_text(self._tmp / name, text)
+
+    def close(self) -> Path:
+        """Finish: write intrinsics and poses, then move the folder into place."""
+        if self._closed:
+            return self.path
+        if not self._poses:
+            raise ValueError(f"{self.path}: refusing to write a sequence with no frames")
+        write_intrinsics(self._tmp / "intrinsics.json", self.intrinsics)
+        write_tum(self._tmp / "poses.txt", np.asarray(self._stamps), np.asarray(self._poses))
+        if self.path.exists():
+            old = self.path.with_name(f".{self.path.name}.{uuid.uuid4().hex[:6]}.old")
+            os.replace(self.path, old)
+            os.replace(self._tmp, self.path)
+            shutil.rmtree(old, ignore_errors=True)
+        else:
+            os.replace(self._tmp, self.path)
+        self._closed = True
+        return self.path
+
+    def abort(self) -> None:
+        """Drop everything written so far."""
+        shutil.rmtree(self._tmp, ignore_errors=True)
+        self._closed = True
+
+    def __enter__(self) -> SequenceWriter:
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if exc_type is None:
+            self.close()
+        else:
+            self.abort()
+
+
+def write_labels_folder(path: PathLike, labels: Iterator[np.ndarray] | list[np.ndarray]) -> Path:
+    """Write label images ``000000.png ...`` into ``path`` (temp folder, renamed when done)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".partial", dir=path.parent))
+    try:
+        for i, lab in enumerate(labels):
+            write_image(tmp / _frame_name(i), np.asarray(lab, dtype=np.uint8))
+        if path.exists():
+            shutil.rmtree(path)
+        os.replace(tmp, path)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return path
+
+
+def read_labels_folder(path: PathLike) -> list[Path]:
+    """Sorted label image paths of a labels folder."""
+    path = Path(path)
+    if not path.is_dir():
+        raise FileNotFoundError(f"{path}: no such labels folder")
+    return sorted(path.glob("*.png"))
+
+
+# ----------------------------------------------------------------------------- PLY maps
+@dataclass
+class SemanticMap:
+    """A semantic map: points (or mesh vertices) with category labels.
+
+    Attributes
+    ----------
+    points : float32 (N,3)
+    labels : uint8 (N,)
+    colors : uint8 (N,3) or None
+        Appearance colours (RGB meshes); label colours are derived from ``labels``.
+    faces : int32 (M,3) or None
+        Triangles when the map is a mesh.
+    normals : float32 (N,3) or None
+    source : str
+        File it was read from, for messages.
+    """
+
+    points: np.ndarray
+    labels: np.ndarray
+    colors: np.ndarray | None = None
+    faces: np.ndarray | None = None
+    normals: np.ndarray | None = None
+    source: str = "<memory>"
+
+    def __post_init__(self) -> None:
+        self.points = np.ascontiguousarray(self.points, dtype=np.float32).reshape(-1, 3)
+        self.labels = np.ascontiguousarray(self.labels, dtype=np.uint8).reshape(-1)
+        if len(self.labels) != len(self.points):
+            raise ValueError(f"{self.source}: {len(self.points)} points but {len(self.labels)} labels")
+        if self.faces is not None:
+            self.faces = np.ascontiguousarray(self.faces, dtype=np.int32).reshape(-1, 3)
+            if self.faces.size and (self.faces.min() < 0 or self.faces.max() >= len(self.points)):
+                raise ValueError(f"{self.source}: face index outside the vertex list")
+
+    def __len__(self) -> int:
+        return len(self.points)
+
+    @property
+    def is_mesh(self) -> bool:
+        """True when the map has triangles."""
+        return self.faces is not None and len(self.faces) > 0
+
+    @property
+    def label_colors(self) -> np.ndarray:
+        """Palette colours of the labels, uint8 (N,3)."""
+        return labels_to_colors(self.labels)
+
+    def check(self) -> SemanticMap:
+        """Raise ``ValueError`` for an empty map or NaN/inf vertices; return self."""
+        if len(self.points) == 0:
+            raise ValueError(f"{self.source}: the map is empty (no vertices)")
+        bad = ~np.isfinite(self.points).all(axis=1)
+        if bad.any():
+            raise ValueError(f"{self.source}: {int(bad.sum())} vertices hold NaN or inf")
+        return self
+
+    def to_open3d(self, *, label_colors: bool = True):
+        """Legacy ``open3d.geometry.TriangleMesh`` (mesh) or ``PointCloud`` with colours."""
+        import open3d as o3d
+
+        col = (self.label_colors if label_colors or self.colors is None else self.colors) / 255.0
+        if self.is_mesh:
+            m = o3d.geometry.TriangleMesh(
+                o3d.utility.Vector3dVector(self.points.astype(np.float64)),
+                o3d.utility.Vector3iVector(self.faces),
+            )
+            m.vertex_colors = o3d.utility.Vector3dVector(col)
+            return m
+        pc = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(self.points.astype(np.float64)))
+        pc.colors = o3d.utility.Vector3dVector(col)
+        return pc
+
+
+def read_map(path: PathLike, *, require_labels: bool = True) -> SemanticMap:
+    """Read a semantic PLY (mesh or point cloud).
+
+    The ``label`` vertex property wins when present; otherwise labels come from the vertex
+    colours through the palette (colours outside it read as void and are counted in a
+    ``UserWarning``).
+
+    Raises
+    ------
+    ValueError
+        The file is not a PLY with vertices, has neither colours nor ``label``
+        (with ``require_labels``), or holds NaN vertices.
+    """
+    from plyfile import PlyData, PlyParseError
+
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such map file")
+    try:
+        ply = PlyData.read(str(path))
+    except (PlyParseError, ValueError, IndexError, EOFError) as e:
+        raise ValueError(f"{path}: not a readable PLY file ({e})") from None
+    if "vertex" not in ply:
+        raise ValueError(f"{path}: PLY has no vertex element")
+    v = ply["vertex"].data
+    names = v.dtype.names or ()
+    if not {"x", "y", "z"} <= set(names):
+        raise ValueError(f"{path}: PLY vertices lack x, y, z")
+    pts = np.stack([v["x"], v["y"], v["z"]], axis=1).astype(np.float32)
+    colors = None
+    for rgb in (("red", "green", "blue"), ("r", "g", "b"), ("diffuse_red", "diffuse_green", "diffuse_blue")):
+        if set(rgb) <= set(names):
+            c = np.stack([v[k] for k in rgb], axis=1)
+            if np.issubdtype(c.dtype, np.floating):
+                c = np.clip(np.rint(c * 255.0 if c.max(initial=0) <= 1.0 else c), 0, 255)
+            colors = c.astype(np.uint8)
+            break
+    if "label" in names:
+        labels = np.asarray(v["label"]).astype(np.int64)
+        if labels.size and (labels.min() < 0 or labels.max() >= NUM_CLASSES):
+            raise ValueError(f"{path}: label property outside 0..{NUM_CLASSES - 1}")
+        labels = labels.astype(np.uint8)
+    elif colors is not None:
+        labels, _ = colors_to_labels(colors, source=str(path))
+    elif require_labels:
+        raise ValueError(f"{path}: PLY has neither vertex colours nor a 'label' property")
+    else:
+        labels = np.zeros(len(pts), dtype=np.uint8)
+    normals = None
+    if {"nx", "ny", "nz"} <= set(names):
+        normals = np.stack([v["nx"], v["ny"], v["nz"]], axis=1).astype(np.float32)
+    faces = None
+    if "face" in ply and ply["face"].count:
+        fd = ply["face"].data
+        key = "vertex_indices" if "vertex_indices" in fd.dtype.names else fd.dtype.names[0]
+        col = fd[key]
+        try:
+            faces = np.stack(col).astype(np.int32)
+        except ValueError:
+            raise ValueError(f"{path}: only triangle faces are supported") from None
+        if faces.ndim != 2 or faces.shape[1] != 3:
+            raise ValueError(f"{path}: only triangle faces are supported")
+    m = SemanticMap(pts, labels, colors=colors, faces=faces, normals=normals, source=str(path))
+    bad = ~np.isfinite(m.points).all(axis=1)
+    if bad.any():
+        raise ValueError(f"{path}: {int(bad.sum())} vertices hold NaN or inf")
+    return m
+
+
+def write_map(
+    path: PathLike,
+    m: SemanticMap,
+    *,
+    colors: str = "labels",
+    binary: bool = True,
+) -> Path:
+    """Write a semantic map as PLY: vertex colours + ``label`` (uchar) property, atomically.
+
+    Parameters
+    ----------
+    path : path
+    m : SemanticMap
+    colors : {"labels", "rgb"}
+        Vertex colours: palette colours of the labels (the contract's semantic map) or the
+        map's appearance colours (an RGB mesh; ``label`` is written in both cases).
+    binary : bool
+        Binary little-endian (default) or ASCII.
+    """
+    from plyfile import PlyData, PlyElement
+
+    if colors not in ("labels", "rgb"):
+        raise ValueError(f"colors must be 'labels' or 'rgb', got {colors!r}")
+    if colors == "rgb" and m.colors is None:
+        raise ValueError("colors='rgb' needs a map with appearance colours")
+    col = m.label_colors if colors == "labels" else np.asarray(m.colors, dtype=np.uint8)
+    fields = [("x", "f4"), ("y", "f4"), ("z", "f4")]
+    if m.normals is not None:
+        fields += [("nx", "f4"), ("ny", "f4"), ("nz", "f4")]
+    fields += [("red", "u1"), ("green", "u1"), ("blue", "u1"), ("label", "u1")]
+    arr = np.empty(len(m.points), dtype=fields)
+    arr["x"], arr["y"], arr["z"] = m.points.T
+    if m.normals is not None:
+        arr["nx"], arr["ny"], arr["nz"] = np.asarray(m.normals, dtype=np.float32).T
+    arr["red"], arr["green"], arr["blue"] = col.T
+    arr["label"] = m.labels
+    elements = [PlyElement.describe(arr, "vertex")]
+    if m.is_mesh:
+        f = np.empty(len(m.faces), dtype=[("vertex_indices", "i4", (3,))])
+        f["vertex_indices"] = m.faces
+        elements.append(PlyElement.describe(f, "face"))
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        PlyData(elements, text=not binary, comments=["semmatch semantic map; label = category id"]).write(str(tmp))
+    return path
+

@@ -1,0 +1,164 @@
+"""The data contract: labels, geometry, sequences, TUM poses, PLY maps."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from semmatch import geometry as g
+from semmatch import labels as L
+from semmatch.io import (
+    SemanticMap,
+    SequenceWriter,
+    read_map,
+    read_sequence,
+    read_tum,
+    write_map,
+    write_tum,
+)
+
+
+def random_pose(rng) -> np.ndarray:
+    q = rng.normal(size=4)
+    T = np.eye(4)
+    T[:3, :3] = g.quat_to_rotation(q)
+    T[:3, 3] = rng.uniform(-5, 5, 3)
+    return T
+
+
+def test_palette_round_trip():
+    ids = np.arange(L.NUM_CLASSES, dtype=np.uint8)
+    back, n_bad = L.colors_to_labels(L.labels_to_colors(ids))
+    assert n_bad == 0 and (back == ids).all()
+    assert L.id_of("sofa") == 10 and L.EVAL_CLASSES == tuple(range(1, 11))
+    # the authors' shared sink/oven colour reads as sink
+    assert L.colors_to_labels(np.array([[70, 72, 115]]))[0][0] == L.id_of("sink")
+
+
+def test_unknown_colours_warn_and_read_void():
+    cols = np.array([[119, 119, 119], [1, 2, 3], [4, 5, 6]], dtype=np.uint8)
+    with pytest.warns(UserWarning, match="2 of 3 colours in x.ply"):
+        lab, n = L.colors_to_labels(cols, source="x.ply")
+    assert n == 2 and lab.tolist() == [1, 0, 0]
+
+
+def test_backproject_then_project_returns_pixels(rng):
+    intr = g.DEFAULT_INTRINSICS
+    depth = rng.uniform(0.3, 8.0, intr.shape).astype(np.float32)
+    depth[::7, ::5] = 0  # holes
+    pose = random_pose(rng)
+    pts, idx = g.backproject(depth, intr, pose)
+    uv, z = g.project(pts, intr, pose)
+    v, u = np.divmod(idx, intr.width)
+    assert np.abs(uv[:, 0] - u).max() < 1e-2 and np.abs(uv[:, 1] - v).max() < 1e-2
+    assert np.allclose(z, depth.reshape(-1)[idx], rtol=1e-5)
+    assert len(pts) == int((depth > 0).sum())
+
+
+def test_intrinsics_validation():
+    with pytest.raises(ValueError, match="focal length fx must be > 0"):
+        g.Intrinsics(fx=0)
+    with pytest.raises(ValueError, match="focal length fy"):
+        g.Intrinsics(fy=-3)
+
+
+def test_pose_validation():
+    T = np.eye(4)
+    T[0, 0] = np.nan
+    with pytest.raises(ValueError, match="NaN"):
+        g.check_pose(T)
+    S = np.eye(4)
+    S[0, 0] = 2
+    with pytest.raises(ValueError, match="not a rotation"):
+        g.check_pose(S)
+
+
+def test_tum_round_trip(tmp_path, rng):
+    poses = np.stack([random_pose(rng) for _ in range(20)])
+    stamps = np.arange(20) * 0.033 + 1000.0
+    write_tum(tmp_path / "p.txt", stamps, poses)
+    t2, p2 = read_tum(tmp_path / "p.txt")
+    assert np.allclose(t2, stamps, atol=1e-6)
+    assert np.allclose(p2, poses, atol=1e-7)
+
+
+def test_tum_reader_names_bad_line(tmp_path):
+    (tmp_path / "p.txt").write_text("# c\n0 0 0 0 0 0 0 1\n1 0 0 0 0 0 1\n")
+    with pytest.raises(ValueError, match=r"p.txt:3: expected 8 values"):
+        read_tum(tmp_path / "p.txt")
+
+
+def _write_seq(path, n=3, rng=None, **kw):
+    rng = rng or np.random.default_rng(1)
+    intr = g.Intrinsics(64, 48, 50.0, 50.0, 32.0, 24.0)
+    frames = []
+    with SequenceWriter(path, intr, **kw) as w:
+        for i in range(n):
+            rgb = rng.integers(0, 255, (48, 64, 3), dtype=np.uint8)
+            depth = np.round(rng.uniform(0.5, 4.0, (48, 64)), 3).astype(np.float32)
+            lab = rng.integers(0, 21, (48, 64), dtype=np.uint8)
+            pose = random_pose(rng)
+            w.add(rgb, depth, pose, labels=lab)
+            frames.append((rgb, depth, lab, pose))
+    return intr, frames
+
+
+def test_sequence_round_trip(tmp_path):
+    intr, frames = _write_seq(tmp_path / "seq")
+    seq = read_sequence(tmp_path / "seq")
+    assert len(seq) == 3 and seq.intrinsics == intr
+    for i in (2, 0, -1):
+        f = seq[i]
+        rgb, depth, lab, pose = frames[i]
+        assert (f.rgb == rgb).all() and (f.labels == lab).all()
+        assert np.abs(f.depth - depth).max() < 1e-3 + 1e-6
+        assert np.allclose(f.pose, pose, atol=1e-6)
+
+
+def test_sequence_writer_refuses_existing_and_interrupted_leaves_nothing(tmp_path):
+    _write_seq(tmp_path / "seq")
+    with pytest.raises(FileExistsError, match="already holds another sequence"):
+        _write_seq(tmp_path / "seq")
+    with pytest.raises(RuntimeError):
+        with SequenceWriter(tmp_path / "seq2", g.Intrinsics(64, 48, 50, 50, 32, 24)) as w:
+            w.add(np.zeros((48, 64, 3), np.uint8), np.ones((48, 64)), np.eye(4))
+            raise RuntimeError("interrupted")
+    assert not (tmp_path / "seq2").exists()
+    assert [p.name for p in tmp_path.iterdir()] == ["seq"]
+
+
+def test_sequence_reader_names_missing_frame(tmp_path):
+    _write_seq(tmp_path / "seq")
+    (tmp_path / "seq" / "depth" / "000001.png").unlink()
+    with pytest.raises(ValueError, match=r"depth/ does not match poses.txt: frame 1"):
+        read_sequence(tmp_path / "seq")
+
+
+@pytest.mark.parametrize("binary", [True, False])
+def test_map_round_trip(tmp_path, rng, binary):
+    pts = rng.normal(size=(50, 3)).astype(np.float32)
+    lab = rng.integers(0, 21, 50).astype(np.uint8)
+    faces = rng.integers(0, 50, (20, 3))
+    write_map(tmp_path / "m.ply", SemanticMap(pts, lab, faces=faces), binary=binary)
+    m = read_map(tmp_path / "m.ply")
+    assert np.allclose(m.points, pts) and (m.labels == lab).all() and (m.faces == faces).all()
+
+
+def test_map_without_labels_or_colours_is_refused(tmp_path):
+    (tmp_path / "bad.ply").write_text(
+        "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\n"
+        "property float z\nend_header\n0 0 0\n"
+    )
+    with pytest.raises(ValueError, match="bad.ply: PLY has neither vertex colours nor a 'label'"):
+        read_map(tmp_path / "bad.ply")
+
+
+def test_replica_map_reads_with_palette(shared_dir):
+    import warnings
+
+    path = shared_dir / "scenes/replica/office_3/high_3d_neighbor_using_GT_mesh_0_noise.ply"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        m = read_map(path)
+    assert m.is_mesh and len(m) > 10000
+    assert set(np.unique(m.labels)) & set(L.EVAL_CLASSES)
