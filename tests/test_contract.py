@@ -93,7 +93,7 @@ def _write_seq(path, n=3, rng=None, **kw):
     intr = g.Intrinsics(64, 48, 50.0, 50.0, 32.0, 24.0)
     frames = []
     with SequenceWriter(path, intr, **kw) as w:
-        for i in range(n):
+        for _ in range(n):
             rgb = rng.integers(0, 255, (48, 64, 3), dtype=np.uint8)
             depth = np.round(rng.uniform(0.5, 4.0, (48, 64)), 3).astype(np.float32)
             lab = rng.integers(0, 21, (48, 64), dtype=np.uint8)

@@ -30,6 +30,9 @@ class Scene:
     name : str
     meta : dict
         Anything trajectories need (room boxes, free-space grid, lights, ceiling height).
+    texture : uint8 (T,) or None
+        Procedural texture kind of each triangle's material (see
+        :mod:`semmatch.sim.materials`); None = untextured.
     """
 
     vertices: np.ndarray
@@ -39,6 +42,7 @@ class Scene:
     albedo: np.ndarray
     name: str = "scene"
     meta: dict = field(default_factory=dict)
+    texture: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         self.vertices = np.ascontiguousarray(self.vertices, dtype=np.float32).reshape(-1, 3)
@@ -47,7 +51,12 @@ class Scene:
         self.labels = np.ascontiguousarray(self.labels, dtype=np.uint8).reshape(-1)
         self.instances = np.ascontiguousarray(self.instances, dtype=np.int32).reshape(-1)
         self.albedo = np.ascontiguousarray(self.albedo, dtype=np.float32).reshape(-1, 3)
-        for what, arr in (("labels", self.labels), ("instances", self.instances), ("albedo", self.albedo)):
+        if self.texture is not None:
+            self.texture = np.ascontiguousarray(self.texture, dtype=np.uint8).reshape(-1)
+        for what, arr in (
+            ("labels", self.labels), ("instances", self.instances), ("albedo", self.albedo),
+            ("texture", self.texture if self.texture is not None else self.labels),
+        ):
             if len(arr) != n:
                 raise ValueError(f"scene {self.name!r}: {len(arr)} {what} for {n} triangles")
         if n == 0:
@@ -113,4 +122,7 @@ class Scene:
             albedo=np.concatenate([p.albedo for p in parts]),
             name=name,
             meta=dict(meta or {}),
+            texture=None if all(p.texture is None for p in parts) else np.concatenate(
+                [p.texture if p.texture is not None else np.zeros(p.n_triangles, np.uint8) for p in parts]
+            ),
         )

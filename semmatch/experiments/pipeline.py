@@ -1,0 +1,191 @@
+"""Run the numbered notebooks through papermill with parameters from ``params.yaml``.
+
+``params.yaml`` holds ``profile`` (the one ``dvc repro`` runs) and ``profiles``: for each
+profile a ``common`` section given to every notebook plus one section per notebook (the key is
+the notebook name without its number, e.g. ``simulate`` for ``01_simulate``). A notebook gets
+``common`` merged with its own section as papermill parameters, plus ``profile``,
+``data_root`` (default ``data/<profile>``) and ``figures_dir`` (default ``figures/<profile>``).
+
+Command line (used by ``dvc.yaml``)::
+
+    python -m semmatch.experiments run 01_simulate [--profile smoke]
+    python -m semmatch.experiments all [--profile smoke] [--data-root DIR]
+    python -m semmatch.experiments profiles
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+
+import yaml
+
+__all__ = [
+    "NOTEBOOKS",
+    "ROOT",
+    "NotebookFailed",
+    "section_of",
+    "load_params",
+    "notebook_parameters",
+    "run_notebook",
+    "run_all",
+    "main",
+]
+
+ROOT = Path(__file__).resolve().parents[2]
+
+#: the notebooks in run order
+NOTEBOOKS: tuple[str, ...] = (
+    "01_simulate",
+    "02_train_segmentation",
+    "03_reconstruct_upper",
+    "04_label_transfer",
+    "05_evaluate_synthetic",
+    "06_height_study",
+    "07_real_data",
+    "08_qualitative",
+)
+
+
+class NotebookFailed(RuntimeError):
+    """A notebook raised; the message names the notebook, the cell and the parameters."""
+
+
+def section_of(notebook: str) -> str:
+    """The ``params.yaml`` section of a notebook: ``01_simulate`` -> ``simulate``."""
+    if notebook not in NOTEBOOKS:
+        raise ValueError(f"unknown notebook {notebook!r}; valid: {', '.join(NOTEBOOKS)}")
+    return notebook.split("_", 1)[1]
+
+
+def load_params(params_file: str | os.PathLike = ROOT / "params.yaml", profile: str | None = None) -> dict:
+    """Load ``params.yaml`` and return the selected profile as a dict (plus ``profile``).
+
+    Raises
+    ------
+    ValueError
+        If the profile does not exist; the message lists the valid ones.
+    """
+    params_file = Path(params_file)
+    try:
+        data = yaml.safe_load(params_file.read_text())
+    except FileNotFoundError:
+        raise FileNotFoundError(f"{params_file}: no parameter file") from None
+    profiles = data.get("profiles") or {}
+    name = profile or data.get("profile")
+    if name not in profiles:
+        raise ValueError(
+            f"{params_file}: profile {name!r} does not exist; valid profiles: {', '.join(sorted(profiles))}"
+        )
+    out = dict(profiles[name])
+    out["profile"] = name
+    return out
+
+
+def notebook_parameters(
+    notebook: str, profile: str | None = None, params_file: str | os.PathLike = ROOT / "params.yaml",
+    **overrides,
+) -> dict:
+    """Papermill parameters of ``notebook``: the profile's ``common`` + its own section."""
+    p = load_params(params_file, profile)
+    params = dict(p.get("common") or {})
+    params.update(p.get(section_of(notebook)) or {})
+    params["profile"] = p["profile"]
+    params.setdefault("data_root", f"data/{p['profile']}")
+    params.setdefault("figures_dir", f"figures/{p['profile']}")
+    params.update({k: v for k, v in overrides.items() if v is not None})
+    return params
+
+
+def run_notebook(
+    notebook: str,
+    profile: str | None = None,
+    *,
+    params_file: str | os.PathLike = ROOT / "params.yaml",
+    notebooks_dir: str | os.PathLike = ROOT / "notebooks",
+    reports_dir: str | os.PathLike | None = None,
+    cwd: str | os.PathLike = ROOT,
+    progress: bool = False,
+    **overrides,
+) -> Path:
+    """Execute one notebook with papermill; return the executed copy.
+
+    The executed copy goes to ``reports/<profile>/<notebook>.ipynb`` (or ``reports_dir``).
+
+    Raises
+    ------
+    NotebookFailed
+        Naming the notebook, the failing cell (index and first line), the error and the
+        parameters it ran with.
+    """
+    import papermill as pm
+
+    params = notebook_parameters(notebook, profile, params_file, **overrides)
+    src = Path(notebooks_dir) / f"{notebook}.ipynb"
+    if not src.is_file():
+        raise FileNotFoundError(f"{src}: no such notebook")
+    out_dir = Path(reports_dir) if reports_dir is not None else Path(cwd) / "reports" / params["profile"]
+    out_dir.mkdir(parents=True, exist_ok=True)
+    out = out_dir / f"{notebook}.ipynb"
+    t0 = time.perf_counter()
+    try:
+        pm.execute_notebook(
+            str(src), str(out), parameters=params, cwd=str(cwd), progress_bar=progress,
+            kernel_name="python3", log_output=False,
+        )
+    except pm.PapermillExecutionError as e:
+        first = (e.source or "").strip().splitlines()[:1]
+        raise NotebookFailed(
+            f"notebook {notebook} failed in cell {e.cell_index} (execution count {e.exec_count}"
+            f"{', ' + repr(first[0]) if first else ''}): {e.ename}: {e.evalue}\n"
+            f"  parameters: {params}\n  executed copy with the traceback: {out}"
+        ) from None
+    print(f"[semmatch] {notebook} ({params['profile']}) done in {time.perf_counter() - t0:.0f} s -> {out}",
+          file=sys.stderr)
+    return out
+
+
+def run_all(profile: str | None = None, *, until: str | None = None, **kwargs) -> list[Path]:
+    """Run every notebook in order (``until``: stop after this one)."""
+    outs = []
+    for nb in NOTEBOOKS:
+        outs.append(run_notebook(nb, profile, **kwargs))
+        if nb == until:
+            break
+    return outs
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m semmatch.experiments``."""
+    ap = argparse.ArgumentParser(prog="python -m semmatch.experiments", description=__doc__.split("\n")[0])
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    r = sub.add_parser("run", help="run one notebook")
+    r.add_argument("notebook", choices=NOTEBOOKS)
+    a = sub.add_parser("all", help="run every notebook in order")
+    a.add_argument("--until", choices=NOTEBOOKS)
+    for p in (r, a):
+        p.add_argument("--profile", help="profile of params.yaml (default: its 'profile')")
+        p.add_argument("--params", default=str(ROOT / "params.yaml"))
+        p.add_argument("--data-root", help="override common.data_root")
+        p.add_argument("--figures-dir", help="override common.figures_dir")
+        p.add_argument("--reports-dir", help="where executed notebooks go (default reports/<profile>)")
+    sub.add_parser("profiles", help="list the profiles of params.yaml")
+    args = ap.parse_args(argv)
+    try:
+        if args.cmd == "profiles":
+            data = yaml.safe_load((ROOT / "params.yaml").read_text())
+            print("\n".join(sorted(data.get("profiles", {}))))
+            return 0
+        kw = dict(params_file=args.params, reports_dir=args.reports_dir, data_root=args.data_root,
+                  figures_dir=args.figures_dir)
+        if args.cmd == "run":
+            run_notebook(args.notebook, args.profile, **kw)
+        else:
+            run_all(args.profile, until=args.until, **kw)
+    except (NotebookFailed, ValueError, FileNotFoundError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 1
+    return 0

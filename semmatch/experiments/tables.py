@@ -1,0 +1,136 @@
+"""Tables of results beside the paper's, and the paper's findings checked on our numbers."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import pandas as pd
+
+from ..io import atomic_write_text
+from .paper import PAPER_MODEL_OF, TABLE1_FPS, table2_frame, table3_frame
+
+__all__ = [
+    "MEASURES",
+    "Finding",
+    "save_table",
+    "with_paper_columns",
+    "speed_table",
+    "check_findings",
+    "findings_markdown",
+]
+
+MEASURES = ("jaccard", "sorensen", "color_acc", "mean_acc")
+
+
+@dataclass
+class Finding:
+    """One finding of the paper and whether it holds on our numbers."""
+
+    statement: str
+    holds: bool
+    evidence: str
+
+
+def save_table(df: pd.DataFrame, figures_dir: str | Path, name: str, *, floatfmt: str = ".3f") -> tuple[Path, Path]:
+    """Write ``<name>.csv`` and ``<name>.md`` into ``figures_dir`` (atomically)."""
+    figures_dir = Path(figures_dir)
+    figures_dir.mkdir(parents=True, exist_ok=True)
+    csv, md = figures_dir / f"{name}.csv", figures_dir / f"{name}.md"
+    atomic_write_text(csv, df.to_csv(index=False, float_format="%.4f"))
+    atomic_write_text(md, df.to_markdown(index=False, floatfmt=floatfmt) + "\n")
+    return csv, md
+
+
+def with_paper_columns(ours: pd.DataFrame, table: int = 2) -> pd.DataFrame:
+    """Add the paper's values as ``paper_<measure>`` columns.
+
+    ``ours`` has columns ``model`` (ground truth / compact / strong), ``method`` (a transfer
+    method, ``upper`` or ``lower``) and the measures; our networks are matched to the paper's
+    (compact ~ Mask R-CNN, strong ~ Transfiner).
+    """
+    ref = (table2_frame() if table == 2 else table3_frame()).rename(
+        columns={m: f"paper_{m}" for m in MEASURES}
+    )
+    ref = ref.rename(columns={"model": "paper_model"})
+    out = ours.copy()
+    out["paper_model"] = out["model"].map(lambda m: PAPER_MODEL_OF.get(m, m))
+    out = out.merge(ref, on=["paper_model", "method"], how="left")
+    return out
+
+
+def speed_table(fps: dict[str, float], reference_fps: float | None = None) -> pd.DataFrame:
+    """Table 1: our FPS per method beside the paper's, with the speed-ups."""
+    rows = []
+    for name, ours in fps.items():
+        paper = TABLE1_FPS.get(name)
+        rows.append(
+            dict(
+                method=name,
+                fps=ours,
+                ms_per_frame=1000.0 / ours if ours else float("nan"),
+                paper_fps=paper,
+                speedup_vs_paper=ours / paper if paper else float("nan"),
+                speedup_vs_reference=ours / reference_fps if reference_fps else float("nan"),
+            )
+        )
+    return pd.DataFrame(rows)
+
+
+def _mean_acc(df: pd.DataFrame, model: str, method: str) -> float | None:
+    sel = df[(df["model"] == model) & (df["method"] == method)]["mean_acc"]
+    return float(sel.mean()) if len(sel) else None
+
+
+def check_findings(df: pd.DataFrame, methods: list[str]) -> list[Finding]:
+    """Check the paper's findings on a Table-2/3 style frame (averaged over scenes).
+
+    1. Label transfer beats the lower-view network (for every network and every method).
+    2. 3D neighbourhood has the best Mean Acc. among the transfer methods (per upper map).
+    3. The lower-view network is worse than the upper-view one.
+    """
+    out: list[Finding] = []
+    nets = [m for m in df["model"].unique() if m != "ground truth"]
+    ev, ok = [], True
+    for net in nets:
+        low = _mean_acc(df, net, "lower")
+        if low is None:
+            continue
+        for meth in methods:
+            v = _mean_acc(df, net, meth)
+            if v is None:
+                continue
+            ok &= v > low
+            ev.append(f"{net}/{meth} {v:.3f} vs lower {low:.3f}")
+    if ev:
+        out.append(Finding("label transfer beats the lower-view network", bool(ok), "; ".join(ev)))
+    ev, ok = [], True
+    for model in df["model"].unique():
+        scores = {m: _mean_acc(df, model, m) for m in methods}
+        scores = {m: v for m, v in scores.items() if v is not None}
+        if "3d-neighborhood" not in scores:
+            continue
+        best = max(scores, key=scores.get)
+        ok &= scores["3d-neighborhood"] >= scores[best] - 1e-9
+        ev.append(f"{model}: best {best} {scores[best]:.3f}, 3d-neighborhood {scores['3d-neighborhood']:.3f}")
+    if ev:
+        out.append(Finding("3D neighbourhood has the best Mean Acc.", bool(ok), "; ".join(ev)))
+    ev, ok = [], True
+    for net in nets:
+        up, low = _mean_acc(df, net, "upper"), _mean_acc(df, net, "lower")
+        if up is None or low is None:
+            continue
+        ok &= low < up
+        ev.append(f"{net}: upper {up:.3f}, lower {low:.3f}")
+    if ev:
+        out.append(Finding("the lower-view network is worse than the upper-view one", bool(ok), "; ".join(ev)))
+    return out
+
+
+def findings_markdown(findings: list[Finding]) -> str:
+    """Markdown list: each finding with holds / does not hold and the numbers behind it."""
+    lines = []
+    for f in findings:
+        mark = "holds" if f.holds else "does NOT hold"
+        lines.append(f"- **{f.statement}**: {mark} here ({f.evidence})")
+    return "\n".join(lines) + "\n"

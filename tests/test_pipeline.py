@@ -1,0 +1,71 @@
+"""The experiment pipeline: profiles, notebook hygiene, failure messages."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import nbformat
+import pytest
+
+from semmatch.experiments import paper, pipeline, tables
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_unknown_profile_is_refused_with_the_valid_ones():
+    with pytest.raises(ValueError, match=r"profile 'nope' does not exist; valid profiles: full, smoke"):
+        pipeline.load_params(ROOT / "params.yaml", "nope")
+
+
+def test_notebook_parameters_merge_common_and_section():
+    p = pipeline.notebook_parameters("01_simulate", "smoke")
+    assert p["profile"] == "smoke" and p["data_root"] == "data/smoke"
+    assert "n_frames_lower" in p and "eval_seeds" in p
+
+
+@pytest.mark.parametrize("name", pipeline.NOTEBOOKS)
+def test_notebooks_are_committed_clean_with_a_parameters_cell(name):
+    nb = json.loads((ROOT / "notebooks" / f"{name}.ipynb").read_text())
+    code = [c for c in nb["cells"] if c["cell_type"] == "code"]
+    assert not any(c.get("outputs") for c in code), f"{name} has outputs"
+    assert any("parameters" in c.get("metadata", {}).get("tags", []) for c in code), f"{name}: no parameters cell"
+    assert any(c["cell_type"] == "markdown" for c in nb["cells"]), f"{name}: no narrative"
+
+
+def test_failing_notebook_names_cell_and_parameters(tmp_path):
+    nb = nbformat.v4.new_notebook()
+    params = nbformat.v4.new_code_cell("seed = 0")
+    params.metadata["tags"] = ["parameters"]
+    nb.cells = [params, nbformat.v4.new_code_cell("x = 1"), nbformat.v4.new_code_cell("raise RuntimeError('boom')")]
+    (tmp_path / "nb").mkdir()
+    nbformat.write(nb, tmp_path / "nb" / "01_simulate.ipynb")
+    with pytest.raises(pipeline.NotebookFailed) as e:
+        pipeline.run_notebook("01_simulate", "smoke", notebooks_dir=tmp_path / "nb",
+                              reports_dir=tmp_path / "rep", cwd=tmp_path)
+    msg = str(e.value)
+    assert "01_simulate failed in cell" in msg and "RuntimeError: boom" in msg
+    assert "'profile': 'smoke'" in msg and "'seed': 0" in msg
+
+
+def test_findings_are_checked_on_numbers():
+    import pandas as pd
+
+    rows = [
+        ("compact", "upper", 0.80), ("compact", "lower", 0.70),
+        ("compact", "3d-neighborhood", 0.79), ("compact", "2d-slic", 0.75),
+        ("ground truth", "3d-neighborhood", 0.95), ("ground truth", "2d-slic", 0.96),
+    ]
+    df = pd.DataFrame([dict(model=m, method=k, mean_acc=v) for m, k, v in rows])
+    f = {x.statement: x.holds for x in tables.check_findings(df, ["2d-slic", "3d-neighborhood"])}
+    assert f["label transfer beats the lower-view network"] is True
+    assert f["3D neighbourhood has the best Mean Acc."] is False  # GT: 2d-slic wins here
+    assert f["the lower-view network is worse than the upper-view one"] is True
+
+
+def test_paper_columns_are_matched():
+    import pandas as pd
+
+    df = pd.DataFrame([dict(model="strong", method="3d-neighborhood", mean_acc=0.8)])
+    out = tables.with_paper_columns(df, 2)
+    assert out["paper_mean_acc"].iloc[0] == paper.TABLE2[("transfiner", "3d-neighborhood")][3]
