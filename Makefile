@@ -10,7 +10,7 @@ setup:
 
 ## run the test suite (unit tests + papermill smoke runs of every notebook)
 test: setup
-	$(PY) -m pytest -q
+	PATH="$(CURDIR)/$(VENV)/bin:$$PATH" $(PY) -m pytest -q
 
 ## unit tests only, no notebooks
 test-fast: setup
@@ -18,11 +18,11 @@ test-fast: setup
 
 ## regenerate every table and figure: dvc repro (profile from params.yaml; PROFILE=smoke to override)
 repro: setup
-	@if [ -n "$(PROFILE)" ]; then $(PY) -m semmatch.experiments.profile set $(PROFILE); fi
-	$(VENV)/bin/dvc repro
+	@if [ -n "$(PROFILE)" ]; then $(PY) -m semmatch.experiments set-profile $(PROFILE); fi
+	PATH="$(CURDIR)/$(VENV)/bin:$$PATH" $(VENV)/bin/dvc repro
 
 lint: setup
 	$(VENV)/bin/ruff check semmatch tests
 
 clean-data:
-	rm -rf data/scenes data/maps data/labels data/models reports/*.ipynb
+	rm -rf data/smoke data/full reports

@@ -23,6 +23,8 @@ from pathlib import Path
 
 import yaml
 
+from ..io import atomic_write_text
+
 __all__ = [
     "NOTEBOOKS",
     "ROOT",
@@ -32,6 +34,7 @@ __all__ = [
     "notebook_parameters",
     "run_notebook",
     "run_all",
+    "set_profile",
     "main",
 ]
 
@@ -158,6 +161,20 @@ def run_all(profile: str | None = None, *, until: str | None = None, **kwargs) -
     return outs
 
 
+def set_profile(profile: str, params_file: str | os.PathLike = ROOT / "params.yaml") -> None:
+    """Make ``profile`` the one ``dvc repro`` runs (rewrites the ``profile:`` line, keeps comments)."""
+    params_file = Path(params_file)
+    load_params(params_file, profile)  # refuses unknown profiles with the valid ones
+    lines = params_file.read_text().splitlines(keepends=True)
+    for i, line in enumerate(lines):
+        if line.startswith("profile:"):
+            lines[i] = f"profile: {profile}\n"
+            break
+    else:
+        raise ValueError(f"{params_file}: no top-level 'profile:' line")
+    atomic_write_text(params_file, "".join(lines))
+
+
 def main(argv: list[str] | None = None) -> int:
     """``python -m semmatch.experiments``."""
     ap = argparse.ArgumentParser(prog="python -m semmatch.experiments", description=__doc__.split("\n")[0])
@@ -173,11 +190,16 @@ def main(argv: list[str] | None = None) -> int:
         p.add_argument("--figures-dir", help="override common.figures_dir")
         p.add_argument("--reports-dir", help="where executed notebooks go (default reports/<profile>)")
     sub.add_parser("profiles", help="list the profiles of params.yaml")
+    sp = sub.add_parser("set-profile", help="select the profile dvc repro runs")
+    sp.add_argument("name")
     args = ap.parse_args(argv)
     try:
         if args.cmd == "profiles":
             data = yaml.safe_load((ROOT / "params.yaml").read_text())
             print("\n".join(sorted(data.get("profiles", {}))))
+            return 0
+        if args.cmd == "set-profile":
+            set_profile(args.name)
             return 0
         kw = dict(params_file=args.params, reports_dir=args.reports_dir, data_root=args.data_root,
                   figures_dir=args.figures_dir)
