@@ -1,0 +1,39 @@
+"""Label transfer: the upper (human-view) semantic map -> lower (robot-view) frame labels.
+
+The paper's five projection methods (§3.2) behind one call::
+
+    from semmatch.transfer import transfer, transfer_frame, prepare, METHODS
+    index = prepare(semantic_map)                  # index the map once
+    lab = transfer("3d-neighborhood", frame, index)   # (H,W) uint8, 0 = no support
+    r = transfer_frame("2d-slic", frame, index)       # r.labels, r.coverage, r.seconds, r.purity
+
+plus ``fused`` (transferred labels + a network's probabilities) and
+:func:`transfer_sequence` (a whole sequence into a labels folder).
+"""
+
+from .fused import fuse
+from .index import DEFAULT_MAX_DISTANCE, MapIndex, prepare
+from .registry import ALL_METHODS, METHODS, PAPER_FPS, TransferResult, method_params, transfer, transfer_frame
+from .sequence import transfer_sequence
+from .superpixels import BACKENDS as SUPERPIXEL_BACKENDS
+from .superpixels import superpixels
+from .voting import paint, vote
+
+__all__ = [
+    "transfer",
+    "transfer_frame",
+    "transfer_sequence",
+    "TransferResult",
+    "METHODS",
+    "ALL_METHODS",
+    "PAPER_FPS",
+    "MapIndex",
+    "prepare",
+    "DEFAULT_MAX_DISTANCE",
+    "method_params",
+    "fuse",
+    "superpixels",
+    "SUPERPIXEL_BACKENDS",
+    "vote",
+    "paint",
+]

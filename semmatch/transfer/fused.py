@@ -1,0 +1,67 @@
+"""``fused``: transferred labels where the map is confident, a network's prediction elsewhere."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..labels import NUM_CLASSES
+
+__all__ = ["fuse"]
+
+
+def fuse(
+    labels: np.ndarray,
+    probs: np.ndarray,
+    *,
+    purity: np.ndarray | None = None,
+    min_purity: float = 0.5,
+) -> np.ndarray:
+    """Combine transferred labels with per-pixel class probabilities of a network.
+
+    A pixel keeps its transferred label when the map supports it (label > 0) and, when
+    ``purity`` is given, its group's vote agreed at least ``min_purity``; every other pixel
+    takes the network's most probable class. So coverage is 100% (wherever the network has an
+    answer), the map decides where it is reliable, and the network fills what the map never
+    saw from above.
+
+    Parameters
+    ----------
+    labels : uint8 (H,W)
+        Transferred labels, 0 = no support.
+    probs : float (H,W,C)
+        Class probabilities (or scores) with channel ``c`` = category id ``c``;
+        ``C <= NUM_CLASSES``. Channel 0 (void) is ignored when C > 1.
+    purity : float (H,W), optional
+        Per-pixel agreement of the transferred label's group vote (``TransferResult.purity``).
+    min_purity : float
+        Below this agreement the network decides.
+
+    Returns
+    -------
+    uint8 (H,W)
+
+    Raises
+    ------
+    ValueError
+        Shapes that do not match, more than ``NUM_CLASSES`` channels, NaN probabilities.
+    """
+    labels = np.asarray(labels)
+    probs = np.asarray(probs)
+    if probs.ndim != 3 or probs.shape[:2] != labels.shape:
+        raise ValueError(f"probs must be (H,W,C) with (H,W) = {labels.shape}, got {probs.shape}")
+    C = probs.shape[2]
+    if not 1 <= C <= NUM_CLASSES:
+        raise ValueError(f"probs have {C} channels; expected 1..{NUM_CLASSES} (channel = category id)")
+    if not np.isfinite(probs).all():
+        raise ValueError("probs hold NaN or inf")
+    if C > 1:
+        net = (np.argmax(probs[..., 1:], axis=2) + 1).astype(np.uint8)
+    else:
+        net = np.zeros(labels.shape, np.uint8)
+    keep = labels > 0
+    if purity is not None:
+        purity = np.asarray(purity)
+        if purity.shape != labels.shape:
+            raise ValueError(f"purity is {purity.shape}, labels are {labels.shape}")
+        keep &= purity >= min_purity
+    return np.where(keep, labels, net).astype(np.uint8)

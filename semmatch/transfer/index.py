@@ -1,0 +1,446 @@
+"""The upper map, indexed once: a dense voxel label grid plus exact nearest-neighbour queries.
+
+:class:`MapIndex` turns a :class:`~semmatch.io.SemanticMap` (points + labels, or a semantic mesh)
+into
+
+* a **label grid**: every voxel (default 2 cm) within reach of the map holds the label of the map
+  surface nearest to its centre, or 0 (void) when that surface is farther than
+  ``max_distance``. A lookup is then one gather per pixel. Voxels whose 26 neighbours do not all
+  hold the same value (label boundaries and the ``max_distance`` shell) are flagged *ambiguous*;
+* **exact queries** for the points that fall into ambiguous voxels: the closest point on the
+  mesh (Open3D ``RaycastingScene.compute_closest_points``, what the authors' code does) or the
+  nearest map point (SciPy ``cKDTree``) for point maps.
+
+So :meth:`MapIndex.lookup` returns exactly the nearest-surface label wherever the answer can
+differ inside a voxel, and the grid answer elsewhere.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import cv2
+import numpy as np
+from scipy import ndimage
+from scipy.spatial import cKDTree
+
+from ..geometry import Intrinsics, check_pose, pixel_rays
+from ..io import SemanticMap
+
+__all__ = ["MapIndex", "prepare", "sample_mesh", "DEFAULT_MAX_DISTANCE"]
+
+#: Default distance threshold (metres): a lower-view point farther than this from every surface
+#: of the upper map has no support and gets label 0. 10 cm is above the depth noise of an RGB-D
+#: camera at room range (~1-3 cm) plus the surface error of a TSDF map at 4-5 cm voxels, and
+#: below the gap between furniture and the wall/floor it stands near, so unmapped objects
+#: (never seen from above) stay void instead of borrowing a neighbour's label.
+DEFAULT_MAX_DISTANCE = 0.10
+
+_AMBIGUOUS = 0x80  # grid bit: exact query needed (low 6 bits: the voxel-centre answer)
+_SHELL = 0x40  # grid bit: the neighbourhood mixes void and labelled voxels (max_distance shell)
+_MIXED = 0x40  # build-time flag (same bit, used before _SHELL is set)
+_LABEL_BITS = 0x3F
+
+
+def sample_mesh(
+    points: np.ndarray, faces: np.ndarray, labels: np.ndarray, spacing: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Sample a labelled triangle mesh on a barycentric grid.
+
+    Every triangle is split into ``n**2`` sub-triangles with ``n = ceil(longest edge / spacing)``
+    and sampled at the grid nodes; a sample takes the label of the triangle vertex with the
+    largest barycentric weight (the nearest vertex).
+
+    Parameters
+    ----------
+    points : float (V,3)
+    faces : int (F,3)
+    labels : uint8 (V,)
+        Per-vertex labels.
+    spacing : float
+        Largest distance between neighbouring samples along an edge (metres).
+
+    Returns
+    -------
+    samples : float32 (S,3)
+    sample_labels : uint8 (S,)
+    """
+    if not spacing > 0:
+        raise ValueError(f"spacing must be > 0, got {spacing}")
+    v = np.asarray(points, dtype=np.float64)[faces]  # (F,3,3)
+    edges = np.stack([v[:, 1] - v[:, 0], v[:, 2] - v[:, 1], v[:, 0] - v[:, 2]], axis=1)
+    longest = np.linalg.norm(edges, axis=2).max(axis=1)
+    n_sub = np.maximum(1, np.ceil(longest / spacing)).astype(np.int64)
+    out_p, out_l = [], []
+    flab = np.asarray(labels)[faces]
+    for n in np.unique(n_sub):
+        sel = np.nonzero(n_sub == n)[0]
+        i, j = np.mgrid[0 : n + 1, 0 : n + 1]
+        keep = i + j <= n
+        bary = np.stack([i[keep], j[keep], n - i[keep] - j[keep]], axis=1).astype(np.float64) / n
+        nearest = np.argmax(bary, axis=1)  # vertex of largest weight
+        # chunk to bound memory for meshes with many triangles of one size
+        chunk = max(1, 4_000_000 // len(bary))
+        for s in range(0, len(sel), chunk):
+            f = sel[s : s + chunk]
+            out_p.append(np.einsum("kc,fcd->fkd", bary, v[f]).reshape(-1, 3).astype(np.float32))
+            out_l.append(flab[f][:, nearest].reshape(-1))
+    return np.concatenate(out_p), np.concatenate(out_l).astype(np.uint8)
+
+
+class MapIndex:
+    """A semantic map indexed for fast nearest-label lookups (build once, query per frame).
+
+    Parameters
+    ----------
+    semantic_map : SemanticMap
+        Points + labels, or a semantic mesh (``faces``).
+    max_distance : float
+        Distance threshold in metres: points farther than this from the map read as void (0).
+    voxel_size : float
+        Edge of the label-grid voxels in metres. Smaller voxels flag fewer points as ambiguous
+        (faster lookups) at the cost of memory and build time.
+    max_voxels : int
+        Upper bound on the grid size; a map too large for ``voxel_size`` gets a coarser grid
+        (with a warning).
+    workers : int
+        Threads for SciPy KD-tree queries and Open3D queries (1 = single thread).
+
+    Raises
+    ------
+    ValueError
+        Empty map, NaN vertices, or a non-positive parameter.
+
+    Examples
+    --------
+    >>> index = MapIndex(read_map("upper.ply"))            # doctest: +SKIP
+    >>> labels = index.lookup(points)                      # doctest: +SKIP
+    """
+
+    def __init__(
+        self,
+        semantic_map: SemanticMap,
+        *,
+        max_distance: float = DEFAULT_MAX_DISTANCE,
+        voxel_size: float = 0.02,
+        max_voxels: int = 48_000_000,
+        workers: int = 1,
+    ) -> None:
+        if not isinstance(semantic_map, SemanticMap):
+            raise TypeError(f"expected a SemanticMap, got {type(semantic_map).__name__}")
+        semantic_map.check()
+        if not (np.isfinite(max_distance) and max_distance > 0):
+            raise ValueError(f"max_distance must be > 0, got {max_distance}")
+        if not (np.isfinite(voxel_size) and voxel_size > 0):
+            raise ValueError(f"voxel_size must be > 0, got {voxel_size}")
+        self.map = semantic_map
+        self.source = semantic_map.source
+        self.max_distance = float(max_distance)
+        self.workers = int(workers)
+        self.is_mesh = semantic_map.is_mesh
+        if self.is_mesh:
+            self.samples, self.sample_labels = sample_mesh(
+                semantic_map.points, semantic_map.faces, semantic_map.labels, voxel_size / 2
+            )
+        else:
+            self.samples, self.sample_labels = semantic_map.points, semantic_map.labels
+        self._tree = None if self.is_mesh else cKDTree(self.samples)
+        self._rc = None
+        self._rays: dict[Intrinsics, tuple[np.ndarray, np.ndarray]] = {}
+        self._build_grid(float(voxel_size), int(max_voxels))
+
+    # ------------------------------------------------------------------ construction
+    def _build_grid(self, voxel_size: float, max_voxels: int) -> None:
+        lo = self.samples.min(axis=0).astype(np.float64)
+        hi = self.samples.max(axis=0).astype(np.float64)
+        margin = self.max_distance + 2 * voxel_size
+        extent = hi - lo + 2 * margin
+        s = voxel_size
+        if np.prod(np.ceil(extent / s) + 1) > max_voxels:
+            s = float((np.prod(extent) / max_voxels) ** (1 / 3)) * 1.05
+            warnings.warn(
+                f"{self.source}: map extent {extent.round(2).tolist()} m needs more than {max_voxels} "
+                f"voxels at {voxel_size} m; using {s:.3f} m voxels",
+                UserWarning,
+                stacklevel=3,
+            )
+        self.voxel_size = s
+        self.origin = lo - margin
+        shape = np.ceil(extent / s).astype(np.int64) + 1
+        self.shape = tuple(int(x) for x in shape)
+        # label of every occupied voxel; voxels holding samples of several labels are "mixed"
+        k = np.floor((self.samples - self.origin) / s).astype(np.int64)
+        lin = np.ravel_multi_index(k.T, self.shape)
+        pair = np.unique(lin * 256 + self.sample_labels)
+        vox, lab = pair >> 8, (pair & 255).astype(np.uint8)
+        first = np.r_[True, vox[1:] != vox[:-1]]
+        n_lab = np.diff(np.r_[np.flatnonzero(first), len(vox)])
+        occ_lin = vox[first]
+        label_of = np.zeros(self.shape, dtype=np.uint8)
+        label_of.ravel()[occ_lin] = lab[first] | np.where(n_lab > 1, _MIXED, 0).astype(np.uint8)
+        # nearest occupied voxel of every voxel (Euclidean distance transform)
+        empty = np.ones(self.shape, dtype=bool)
+        empty.ravel()[occ_lin] = False
+        dist, idx = ndimage.distance_transform_edt(empty, return_indices=True)
+        del empty
+        near = label_of[tuple(idx)]
+        del idx
+        near[dist * s > self.max_distance] = 0
+        del dist
+        mixed = (near & _MIXED) > 0
+        grid = near & ~np.uint8(_MIXED)
+        # ambiguous: a mixed nearest voxel, or the 27-neighbourhood disagrees (label edge or the
+        # max_distance shell): there the exact query decides
+        lo_n, hi_n = ndimage.minimum_filter(grid, size=3), ndimage.maximum_filter(grid, size=3)
+        amb = mixed | (lo_n != hi_n)
+        shell = (lo_n == 0) & (hi_n > 0)
+        grid[amb] |= np.uint8(_AMBIGUOUS)
+        grid[shell] |= np.uint8(_SHELL)
+        # the outer layer stays void so that clipped out-of-range lookups read void
+        grid[[0, -1]] = 0
+        grid[:, [0, -1]] = 0
+        grid[:, :, [0, -1]] = 0
+        self.grid = grid
+        self._flat = grid.ravel()
+
+    @property
+    def n_points(self) -> int:
+        """Number of map points (mesh vertices)."""
+        return len(self.map.points)
+
+    @property
+    def raycasting_scene(self):
+        """Open3D ``RaycastingScene`` of the mesh (built on first use); None for point maps."""
+        if not self.is_mesh:
+            return None
+        if self._rc is None:
+            import open3d as o3d
+
+            rc = o3d.t.geometry.RaycastingScene()
+            rc.add_triangles(
+                o3d.core.Tensor(np.ascontiguousarray(self.map.points, dtype=np.float32)),
+                o3d.core.Tensor(np.ascontiguousarray(self.map.faces, dtype=np.uint32)),
+            )
+            self._rc = rc
+        return self._rc
+
+    # ------------------------------------------------------------------ queries
+    def nearest(
+        self, points: np.ndarray, max_distance: float | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Exact nearest-surface label and distance of each point.
+
+        Meshes: the closest point on the triangles (Open3D ``compute_closest_points``); the label
+        is that of the hit triangle's vertex nearest to the closest point. Point maps: the
+        nearest map point (``cKDTree``).
+
+        Parameters
+        ----------
+        points : float (N,3)
+            World coordinates.
+        max_distance : float, optional
+            Points with no surface within this distance get label 0 and distance ``inf`` (this
+            also bounds the KD-tree search, which is much faster).
+
+        Returns
+        -------
+        labels : uint8 (N,)
+        distance : float32 (N,)
+        """
+        p = np.ascontiguousarray(points, dtype=np.float32).reshape(-1, 3)
+        if len(p) == 0:
+            return np.zeros(0, np.uint8), np.zeros(0, np.float32)
+        if not self.is_mesh:
+            ub = np.inf if max_distance is None else float(max_distance)
+            d, i = self._tree.query(p, distance_upper_bound=ub, workers=self.workers)
+            hit = np.isfinite(d)
+            lab = np.zeros(len(p), np.uint8)
+            lab[hit] = self.map.labels[i[hit]]
+            return lab, d.astype(np.float32)
+        import open3d as o3d
+
+        ans = self.raycasting_scene.compute_closest_points(o3d.core.Tensor(p), nthreads=self.workers)
+        prim = ans["primitive_ids"].numpy().astype(np.int64)
+        uv = ans["primitive_uvs"].numpy()
+        bary = np.stack([1.0 - uv[:, 0] - uv[:, 1], uv[:, 0], uv[:, 1]], axis=1)
+        vert = self.map.faces[prim, np.argmax(bary, axis=1)]
+        d = np.linalg.norm(ans["points"].numpy() - p, axis=1).astype(np.float32)
+        lab = self.map.labels[vert]
+        if max_distance is not None:
+            far = d > max_distance
+            lab = np.where(far, 0, lab).astype(np.uint8)
+            d[far] = np.inf
+        return lab, d
+
+    def lookup(self, points: np.ndarray, *, exact: bool = True) -> np.ndarray:
+        """Label of the nearest map surface, 0 where it is farther than ``max_distance``.
+
+        Parameters
+        ----------
+        points : float (N,3)
+            World coordinates (non-finite rows read as void).
+        exact : bool
+            Resolve points in ambiguous voxels (label edges, threshold shell) with an exact
+            query. False: take the voxel-centre answer there too (faster; a point within about
+            one voxel of a class boundary may take the neighbouring class).
+
+        Returns
+        -------
+        uint8 (N,)
+        """
+        p = np.asarray(points, dtype=np.float32).reshape(-1, 3)
+        if len(p) == 0:
+            return np.zeros(0, np.uint8)
+        q = (p - self.origin.astype(np.float32)) / np.float32(self.voxel_size)
+        lin = None
+        for a in range(3):
+            qa = np.nan_to_num(q[:, a], nan=-1.0, posinf=-1.0, neginf=-1.0)
+            np.clip(qa, 0, self.shape[a] - 1, out=qa)
+            ka = qa.astype(np.int64)
+            lin = ka if lin is None else lin * self.shape[a] + ka
+        out = self._flat[lin]
+        return self._resolve(out, lambda sel: p[sel], exact)
+
+    def _gather_depth(self, depth: np.ndarray, pose: np.ndarray, intrinsics: Intrinsics):
+        """Raw grid values of every pixel and a function giving world points of selected pixels."""
+        T = check_pose(pose)
+        rx, ry = self._pixel_rays(intrinsics)
+        z = np.asarray(depth, dtype=np.float32)
+        valid = np.isfinite(z) & (z > 0)
+        if not valid.all():
+            z = np.where(valid, z, 0).astype(np.float32)
+        inv = 1.0 / self.voxel_size
+        R = T[:3, :3] * inv
+        t = (T[:3, 3] - self.origin) * inv
+        exact_dtype = np.float32 if np.prod(self.shape) < 2**24 else np.float64
+        lin = None
+        for a in range(3):
+            qa = cv2.addWeighted(rx, R[a, 0], ry, R[a, 1], R[a, 2])
+            qa = cv2.multiply(qa, z)
+            qa += np.float32(t[a])
+            np.clip(qa, 0, self.shape[a] - 1, out=qa)
+            np.floor(qa, out=qa)
+            if lin is None:
+                lin = qa.astype(exact_dtype, copy=False)
+            else:
+                lin *= self.shape[a]
+                lin += qa
+        out = self._flat[lin.astype(np.int64 if exact_dtype is np.float64 else np.int32)]
+        out[~valid] = 0
+
+        def world(sel: tuple[np.ndarray, ...]) -> np.ndarray:
+            zz = z[sel]
+            cam = np.stack([rx[sel] * zz, ry[sel] * zz, zz], axis=1)
+            return cam @ T[:3, :3].T.astype(np.float32) + T[:3, 3].astype(np.float32)
+
+        return out, world
+
+    def lookup_depth(
+        self, depth: np.ndarray, pose: np.ndarray, intrinsics: Intrinsics, *, exact: bool = True
+    ) -> np.ndarray:
+        """:meth:`lookup` for every pixel of a depth image (the fast path of ``3d-neighborhood``).
+
+        Parameters
+        ----------
+        depth : float32 (H,W)
+            Metres; 0 or non-finite = no measurement (label 0).
+        pose : (4,4)
+            ``T_world_camera``.
+        intrinsics : Intrinsics
+        exact : bool
+            See :meth:`lookup`.
+
+        Returns
+        -------
+        uint8 (H,W)
+        """
+        out, world = self._gather_depth(depth, pose, intrinsics)
+        return self._resolve(out, world, exact)
+
+    def support_depth(self, depth: np.ndarray, pose: np.ndarray, intrinsics: Intrinsics) -> np.ndarray:
+        """Which pixels have a map surface within ``max_distance`` of their 3D point.
+
+        Only voxels of the ``max_distance`` shell need an exact query, so this is cheaper than
+        :meth:`lookup_depth`.
+
+        Returns
+        -------
+        bool (H,W)
+        """
+        out, world = self._gather_depth(depth, pose, intrinsics)
+        sup = (out & np.uint8(_LABEL_BITS)) > 0
+        shell = (out & np.uint8(_SHELL)) > 0
+        if shell.any():
+            sel = np.nonzero(shell)
+            _, d = self.nearest(world(sel), self.max_distance)
+            sup[sel] = np.isfinite(d)
+        return sup
+
+    def _resolve(self, out: np.ndarray, points_of, exact: bool) -> np.ndarray:
+        """Replace ambiguous grid answers by exact queries (or by the voxel-centre answer)."""
+        amb = out >= _AMBIGUOUS
+        if not amb.any():
+            out &= np.uint8(_LABEL_BITS)
+            return out
+        if not exact:
+            out &= np.uint8(_LABEL_BITS)
+            return out
+        sel = np.nonzero(amb)
+        lab, _ = self.nearest(points_of(sel), self.max_distance)
+        out &= np.uint8(_LABEL_BITS)
+        out[sel] = lab
+        return out
+
+    def _pixel_rays(self, intr: Intrinsics) -> tuple[np.ndarray, np.ndarray]:
+        if intr not in self._rays:
+            r = pixel_rays(intr)
+            self._rays[intr] = (np.ascontiguousarray(r[..., 0]), np.ascontiguousarray(r[..., 1]))
+        return self._rays[intr]
+
+    def __repr__(self) -> str:
+        kind = "mesh" if self.is_mesh else "points"
+        return (
+            f"MapIndex({self.source!r}, {kind}, {self.n_points} vertices, grid {self.shape} at "
+            f"{self.voxel_size:.3f} m, max_distance={self.max_distance})"
+        )
+
+
+_CACHE: list = []
+
+
+def prepare(
+    semantic_map: SemanticMap | MapIndex,
+    *,
+    max_distance: float | None = None,
+    **index_params,
+) -> MapIndex:
+    """Return a :class:`MapIndex` for ``semantic_map`` (build it, or reuse a given index).
+
+    The last index built from a ``SemanticMap`` object is cached, so calling
+    ``transfer(name, frame, semantic_map)`` for many frames indexes the map once.
+
+    Raises
+    ------
+    ValueError
+        ``semantic_map`` is an index built for another ``max_distance``.
+    TypeError
+        Neither a SemanticMap nor a MapIndex.
+    """
+    if isinstance(semantic_map, MapIndex):
+        if max_distance is not None and abs(max_distance - semantic_map.max_distance) > 1e-9:
+            raise ValueError(
+                f"the index of {semantic_map.source} was built for max_distance="
+                f"{semantic_map.max_distance}; build MapIndex(map, max_distance={max_distance}) instead"
+            )
+        return semantic_map
+    if not isinstance(semantic_map, SemanticMap):
+        raise TypeError(
+            f"expected a SemanticMap or MapIndex, got {type(semantic_map).__name__}"
+        )
+    md = DEFAULT_MAX_DISTANCE if max_distance is None else float(max_distance)
+    key = (id(semantic_map), md, tuple(sorted(index_params.items())))
+    if _CACHE and _CACHE[0][0] == key and _CACHE[0][1] is semantic_map:
+        return _CACHE[0][2]
+    index = MapIndex(semantic_map, max_distance=md, **index_params)
+    _CACHE[:] = [(key, semantic_map, index)]
+    return index

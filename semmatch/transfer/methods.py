@@ -1,0 +1,287 @@
+"""The paper's five label-projection methods (§3.2, Alg. 1-3), on a :class:`MapIndex`.
+
+Every method takes a validated frame (:class:`~semmatch.transfer.frames.FrameData`) and an
+index and returns ``(labels, purity)``: ``uint8 (H,W)`` labels (0 = no support) and the
+per-pixel share of its group's votes that agreed (``float32 (H,W)``), which ``fused`` uses.
+
+Common rules: pixels without depth get 0; the group methods look their votes up with the
+index's voxel-centre answers (``exact=False``: a vote within about one voxel of a class edge
+may go to the neighbouring class, which a majority vote absorbs; ``exact=True`` resolves them); a pixel whose own 3D point is farther than the
+index's ``max_distance`` from the map gets 0 even when its group has a label (the group vote
+fills label gaps and fixes edges, it never extends the map to unmapped geometry).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..geometry import pixel_rays
+from .frames import FrameData
+from .index import MapIndex
+from .superpixels import superpixels
+from .voting import paint, vote
+
+__all__ = ["slic_2d", "projected_sp_3d", "slic_3d", "dbscan", "neighborhood_3d", "render_labels"]
+
+
+def _finish(fd: FrameData, index: MapIndex, labels: np.ndarray, purity: np.ndarray):
+    """Apply the per-pixel support mask shared by the group methods."""
+    support = index.support_depth(fd.depth, fd.pose, fd.intrinsics)
+    labels = np.where(support, labels, 0).astype(np.uint8)
+    purity = np.where(support, purity, 0).astype(np.float32)
+    return labels, purity
+
+
+def render_labels(index: MapIndex, fd: FrameData, stride: int = 1) -> tuple[np.ndarray, np.ndarray]:
+    """Render the upper map into the lower camera at every ``stride``-th pixel.
+
+    Meshes are ray cast with Open3D ``RaycastingScene`` (label of the hit triangle's vertex
+    nearest to the hit point); point maps are projected with a z-buffer (the nearest point per
+    pixel wins; pixels no point falls into stay empty).
+
+    Returns
+    -------
+    labels : uint8 (h,w)
+        Rendered label (0 where nothing was hit).
+    depth : float32 (h,w)
+        Rendered z-depth (0 where nothing was hit).
+    """
+    intr, T = fd.intrinsics, fd.pose
+    rays = pixel_rays(intr, stride)
+    h, w = rays.shape[:2]
+    if index.is_mesh:
+        import open3d as o3d
+
+        d = rays.reshape(-1, 3) @ T[:3, :3].T.astype(np.float32)
+        o = np.broadcast_to(T[:3, 3].astype(np.float32), d.shape)
+        ans = index.raycasting_scene.cast_rays(
+            o3d.core.Tensor(np.ascontiguousarray(np.concatenate([o, d], axis=1))), nthreads=index.workers
+        )
+        t = ans["t_hit"].numpy()
+        hit = np.isfinite(t)
+        prim = np.where(hit, ans["primitive_ids"].numpy().astype(np.int64), 0)
+        uv = ans["primitive_uvs"].numpy()
+        bary = np.stack([1.0 - uv[:, 0] - uv[:, 1], uv[:, 0], uv[:, 1]], axis=1)
+        vert = index.map.faces[prim, np.argmax(bary, axis=1)]
+        lab = np.where(hit, index.map.labels[vert], 0).astype(np.uint8)
+        return lab.reshape(h, w), np.where(hit, t, 0).astype(np.float32).reshape(h, w)
+    pts = index.map.points
+    Tinv = np.linalg.inv(T)
+    cam = pts @ Tinv[:3, :3].T.astype(np.float32) + Tinv[:3, 3].astype(np.float32)
+    z = cam[:, 2]
+    front = z > 1e-6
+    cam, z, lab = cam[front], z[front], index.map.labels[front]
+    u = np.floor((intr.fx * cam[:, 0] / z + intr.cx + 0.5) / stride).astype(np.int64)
+    v = np.floor((intr.fy * cam[:, 1] / z + intr.cy + 0.5) / stride).astype(np.int64)
+    inside = (u >= 0) & (u < w) & (v >= 0) & (v < h)
+    pix, z, lab = v[inside] * w + u[inside], z[inside], lab[inside]
+    order = np.lexsort((z, pix))  # by pixel, nearest first
+    pix, z, lab = pix[order], z[order], lab[order]
+    first = np.r_[True, pix[1:] != pix[:-1]] if len(pix) else np.zeros(0, bool)
+    out_l = np.zeros(h * w, np.uint8)
+    out_z = np.zeros(h * w, np.float32)
+    out_l[pix[first]] = lab[first]
+    out_z[pix[first]] = z[first]
+    return out_l.reshape(h, w), out_z.reshape(h, w)
+
+
+def slic_2d(
+    fd: FrameData,
+    index: MapIndex,
+    *,
+    n_segments: int = 512,
+    backend: str = "cv2-slic",
+    render_stride: int = 2,
+    **sp_params,
+):
+    """``2d-slic``: render the upper map into the lower camera, vote per 2D superpixel.
+
+    A rendered pixel votes with its rendered label when the rendered surface lies within
+    ``max_distance`` of the observed point along the ray, with void when it does not (the map
+    shows something else there: occlusion or unmapped geometry); pixels without depth or
+    without a rendered surface do not vote. ``render_stride`` renders every n-th pixel (the
+    votes of a 512-superpixel image barely change; 2 = 4x fewer rays).
+    """
+    seg = superpixels(fd.rgb, n_segments, backend=backend, **sp_params)
+    s = int(render_stride)
+    if s < 1:
+        raise ValueError(f"render_stride must be >= 1, got {render_stride}")
+    rl, rz = render_labels(index, fd, s)
+    obs = fd.depth[::s, ::s]
+    ray_len = np.linalg.norm(pixel_rays(fd.intrinsics, s), axis=2)
+    rendered = (rz > 0) & (obs > 0)
+    agree = np.abs(rz - obs) * ray_len <= index.max_distance
+    votes = np.where(agree, rl, 0)
+    g = seg[::s, ::s][rendered]
+    n = int(seg.max()) + 1
+    winner, purity = vote(g, votes[rendered], n)
+    return _finish(fd, index, paint(seg, winner), paint(seg, purity, 0.0))
+
+
+def projected_sp_3d(
+    fd: FrameData,
+    index: MapIndex,
+    *,
+    n_segments: int = 512,
+    backend: str = "cv2-slic",
+    subsample: int = 4,
+    exact: bool = False,
+    **sp_params,
+):
+    """``3d-projected-sp`` (Alg. 1): superpixels on RGB, back-project with depth, keep every
+    ``subsample``-th point, look labels up in 3D, vote per superpixel."""
+    if int(subsample) < 1:
+        raise ValueError(f"subsample must be >= 1, got {subsample}")
+    seg = superpixels(fd.rgb, n_segments, backend=backend, **sp_params)
+    pts, pix = fd.points()
+    pts, pix = pts[:: int(subsample)], pix[:: int(subsample)]
+    lab = index.lookup(pts, exact=exact)
+    winner, purity = vote(seg.reshape(-1)[pix], lab, int(seg.max()) + 1)
+    return _finish(fd, index, paint(seg, winner), paint(seg, purity, 0.0))
+
+
+def _voxel_downsample(points: np.ndarray, voxel_size: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Voxel keys ``floor((P - mean(P)) / voxel)`` (the paper's grid), per-voxel centroids and
+    the voxel of every point (the trace back to pixels)."""
+    if not voxel_size > 0:
+        raise ValueError(f"voxel_size must be > 0, got {voxel_size}")
+    keys = np.floor((points - points.mean(axis=0)) / voxel_size).astype(np.int64)
+    keys -= keys.min(axis=0)
+    dims = keys.max(axis=0) + 1
+    lin = np.ravel_multi_index(keys.T, dims)
+    uniq, inv = np.unique(lin, return_inverse=True)
+    cnt = np.bincount(inv).astype(np.float64)
+    cen = np.stack([np.bincount(inv, points[:, a].astype(np.float64)) / cnt for a in range(3)], axis=1)
+    vkeys = np.stack(np.unravel_index(uniq, dims), axis=1)
+    return vkeys, cen.astype(np.float32), inv
+
+
+def slic_3d(
+    fd: FrameData,
+    index: MapIndex,
+    *,
+    voxel_size: float = 0.10,
+    n_segments: int = 128,
+    compactness: float = 10.0,
+    iterations: int = 5,
+    exact: bool = False,
+):
+    """``3d-slic`` (Alg. 2): voxelise the coloured lower point cloud (``voxel_size``), run
+    maskSLIC (scikit-image ``slic`` with the occupied voxels as mask) on the voxel grid for
+    ``n_segments`` supervoxels, label each voxel centroid from the map, vote per supervoxel."""
+    from skimage.segmentation import slic
+
+    out = np.zeros(fd.shape, np.uint8), np.zeros(fd.shape, np.float32)
+    pts, pix = fd.points()
+    if len(pts) == 0:
+        return out
+    vkeys, cen, inv = _voxel_downsample(pts, voxel_size)
+    dims = tuple(vkeys.max(axis=0) + 1)
+    rgb = fd.rgb.reshape(-1, 3)[pix].astype(np.float64) / 255.0
+    cnt = np.bincount(inv).astype(np.float64)
+    col = np.stack([np.bincount(inv, rgb[:, c]) / cnt for c in range(3)], axis=1)
+    grid = np.zeros(dims + (3,), np.float64)
+    mask = np.zeros(dims, bool)
+    grid[tuple(vkeys.T)] = col
+    mask[tuple(vkeys.T)] = True
+    if len(vkeys) < 2:
+        sv = np.zeros(len(vkeys), np.int64)
+    else:
+        sv_grid = slic(grid, n_segments=int(n_segments), compactness=float(compactness),
+                       max_num_iter=int(iterations), mask=mask, channel_axis=-1, start_label=1)
+        sv = sv_grid[tuple(vkeys.T)].astype(np.int64) - 1
+    winner, purity = vote(sv, index.lookup(cen, exact=exact), int(sv.max()) + 1)
+    labels = np.zeros(fd.shape, np.uint8)
+    pur = np.zeros(fd.shape, np.float32)
+    labels.reshape(-1)[pix] = paint(sv[inv], winner)
+    pur.reshape(-1)[pix] = paint(sv[inv], purity, 0.0)
+    return _finish(fd, index, labels, pur)
+
+
+def _peel_planes(pcd, *, distance: float, iterations: int, max_planes: int, eps: float, min_points: int):
+    """RANSAC planes, each cut to its largest DBSCAN cluster (Alg. 3 step 4).
+
+    Returns the cluster id of every point (planes first) and the number of clusters; points of
+    no plane get -1.
+    """
+    n = len(pcd.points)
+    cluster = np.full(n, -1, np.int64)
+    remaining = np.arange(n)
+    k = 0
+    for _ in range(int(max_planes)):
+        if len(remaining) < max(3, int(min_points)):
+            break
+        rest = pcd.select_by_index(remaining)
+        _, inliers = rest.segment_plane(float(distance), 3, int(iterations))
+        inliers = np.asarray(inliers, dtype=np.int64)
+        if len(inliers) < int(min_points):
+            break
+        lab = np.asarray(rest.select_by_index(inliers).cluster_dbscan(float(eps), int(min_points)))
+        if (lab >= 0).sum() == 0:
+            break  # too much noise: stop peeling (as the authors' code)
+        best = np.bincount(lab[lab >= 0]).argmax()
+        take = remaining[inliers[lab == best]]
+        cluster[take] = k
+        k += 1
+        remaining = np.setdiff1d(remaining, take, assume_unique=True)
+    return cluster, k, remaining
+
+
+def dbscan(
+    fd: FrameData,
+    index: MapIndex,
+    *,
+    voxel_size: float = 0.04,
+    eps: float = 0.10,
+    min_points: int = 10,
+    ransac_distance: float = 0.03,
+    ransac_iterations: int = 300,
+    max_planes: int = 5,
+    seed: int = 0,
+    exact: bool = False,
+):
+    """``dbscan`` (Alg. 3): voxel-downsample the lower cloud, peel up to ``max_planes`` RANSAC
+    planes (each cut to its largest DBSCAN cluster), cluster the rest with DBSCAN (Open3D),
+    label each voxel centroid from the map and vote per cluster. DBSCAN noise stays void."""
+    import open3d as o3d
+
+    out = np.zeros(fd.shape, np.uint8), np.zeros(fd.shape, np.float32)
+    pts, pix = fd.points()
+    if len(pts) == 0:
+        return out
+    _, cen, inv = _voxel_downsample(pts, voxel_size)
+    o3d.utility.random.seed(int(seed))
+    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(cen.astype(np.float64)))
+    cluster, k, remaining = _peel_planes(
+        pcd, distance=ransac_distance, iterations=ransac_iterations, max_planes=max_planes,
+        eps=eps, min_points=min_points,
+    )
+    if len(remaining):
+        lab = np.asarray(pcd.select_by_index(remaining).cluster_dbscan(float(eps), int(min_points)))
+        cluster[remaining] = np.where(lab >= 0, lab + k, -1)
+    n = int(cluster.max()) + 1
+    winner, purity = vote(cluster, index.lookup(cen, exact=exact), n)
+    labels = np.zeros(fd.shape, np.uint8)
+    pur = np.zeros(fd.shape, np.float32)
+    labels.reshape(-1)[pix] = paint(cluster[inv], winner)
+    pur.reshape(-1)[pix] = paint(cluster[inv], purity, 0.0)
+    return _finish(fd, index, labels, pur)
+
+
+def neighborhood_3d(fd: FrameData, index: MapIndex, *, exact: bool = True, backend: str = "grid"):
+    """``3d-neighborhood``: each lower point takes the label of the nearest upper-map surface.
+
+    ``backend="grid"`` (default): the index's voxel label grid with exact queries where a voxel
+    is ambiguous (``exact=False``: the voxel-centre answer everywhere, faster).
+    ``backend="reference"``: the published approach, a closest-point query per pixel
+    (:func:`semmatch.transfer.reference.reference_neighborhood`).
+    """
+    if backend == "reference":
+        from .reference import reference_neighborhood
+
+        labels = reference_neighborhood(fd, index)
+    elif backend == "grid":
+        labels = index.lookup_depth(fd.depth, fd.pose, fd.intrinsics, exact=exact)
+    else:
+        raise ValueError(f"unknown 3d-neighborhood backend {backend!r}; valid: grid, reference")
+    return labels, (labels > 0).astype(np.float32)

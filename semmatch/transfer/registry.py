@@ -1,0 +1,173 @@
+"""One interface over the transfer methods: ``transfer(name, frame, map_or_index, **params)``."""
+
+from __future__ import annotations
+
+import inspect
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..io import Frame, SemanticMap
+from . import methods as _m
+from .frames import check_frame
+from .fused import fuse
+from .index import MapIndex, prepare
+
+__all__ = ["METHODS", "ALL_METHODS", "PAPER_FPS", "TransferResult", "transfer", "transfer_frame", "method_params"]
+
+_FUNCS: dict[str, Callable] = {
+    "2d-slic": _m.slic_2d,
+    "3d-projected-sp": _m.projected_sp_3d,
+    "3d-slic": _m.slic_3d,
+    "dbscan": _m.dbscan,
+    "3d-neighborhood": _m.neighborhood_3d,
+}
+
+#: The paper's five methods (DESIGN.md §1), in the order of its Table 1.
+METHODS: tuple[str, ...] = ("2d-slic", "3d-slic", "3d-projected-sp", "dbscan", "3d-neighborhood")
+
+#: The paper's methods plus ``fused`` (transfer + a network's probabilities).
+ALL_METHODS: tuple[str, ...] = METHODS + ("fused",)
+
+#: Paper Table 1 (FPS on an AMD EPYC 7401P server).
+PAPER_FPS: dict[str, float] = {
+    "2d-slic": 2.29, "3d-slic": 1.04, "3d-projected-sp": 9.57, "dbscan": 0.84, "3d-neighborhood": 20.06,
+}
+
+_RGB_FREE = {"dbscan", "3d-neighborhood"}
+
+
+@dataclass
+class TransferResult:
+    """Labels of one frame with its statistics.
+
+    Attributes
+    ----------
+    labels : uint8 (H,W)
+        Category ids, 0 = no support in the map.
+    coverage : float
+        Share of the pixels with depth that got a label (0 when no pixel has depth).
+    seconds : float
+        Wall time of the method on this frame (the map index excluded when prebuilt).
+    purity : float32 (H,W)
+        Share of the pixel's group votes that agreed with its label (1 for ``3d-neighborhood``,
+        0 for void pixels).
+    method : str
+    """
+
+    labels: np.ndarray
+    coverage: float
+    seconds: float
+    purity: np.ndarray
+    method: str
+
+
+def method_params(name: str) -> dict:
+    """Parameters of method ``name`` and their defaults (``max_distance`` included)."""
+    if name == "fused":
+        return {"probs": None, "base": "3d-projected-sp", "min_purity": 0.5, "max_distance": None}
+    fn = _check_name(name)
+    sig = inspect.signature(fn)
+    out = {k: p.default for k, p in list(sig.parameters.items())[2:] if p.kind == p.KEYWORD_ONLY}
+    out["max_distance"] = None
+    return out
+
+
+def _check_name(name: str) -> Callable:
+    if name not in _FUNCS:
+        raise ValueError(f"unknown transfer method {name!r}; valid: {', '.join(ALL_METHODS)}")
+    return _FUNCS[name]
+
+
+def _call(name: str, fd, index: MapIndex, params: dict):
+    fn = _check_name(name)
+    sig = inspect.signature(fn)
+    takes_any = any(p.kind == p.VAR_KEYWORD for p in sig.parameters.values())
+    if not takes_any:
+        bad = sorted(set(params) - set(sig.parameters))
+        if bad:
+            valid = ", ".join(k for k in method_params(name))
+            raise ValueError(f"{name}: unknown parameter(s) {', '.join(bad)}; valid: {valid}")
+    return fn(fd, index, **params)
+
+
+def transfer_frame(
+    name: str,
+    frame: Frame,
+    semantic_map: SemanticMap | MapIndex,
+    *,
+    max_distance: float | None = None,
+    **params,
+) -> TransferResult:
+    """Transfer the labels of an upper map into one lower frame, with statistics.
+
+    Parameters
+    ----------
+    name : str
+        One of :data:`ALL_METHODS`.
+    frame : Frame
+        RGB (not needed by ``dbscan``/``3d-neighborhood``), metric depth, pose, intrinsics.
+    semantic_map : SemanticMap or MapIndex
+        The upper map, or its prebuilt :class:`MapIndex` (``prepare(map)``) to index it once
+        for a whole sequence.
+    max_distance : float, optional
+        Distance threshold (metres) beyond which a pixel's 3D point has no support (label 0);
+        default :data:`~semmatch.transfer.index.DEFAULT_MAX_DISTANCE` (0.10 m) or the index's.
+    **params
+        Method parameters (:func:`method_params`). ``fused`` takes ``probs`` (H,W,C) (or reads
+        ``frame.extras["probs"]``), ``base`` (a method name, default ``3d-projected-sp``),
+        ``min_purity`` and the base method's parameters.
+
+    Returns
+    -------
+    TransferResult
+
+    Raises
+    ------
+    ValueError
+        Unknown method or parameter, bad frame (size, pose), empty map, index built for
+        another ``max_distance``.
+    """
+    _check_name(name) if name != "fused" else None
+    t0 = time.perf_counter()
+    index = prepare(semantic_map, max_distance=max_distance)
+    t1 = time.perf_counter()
+    if name == "fused":
+        probs = params.pop("probs", None)
+        if probs is None:
+            probs = getattr(frame, "extras", {}).get("probs")
+        if probs is None:
+            raise ValueError("fused needs probs=(H,W,C) class probabilities (or frame.extras['probs'])")
+        base = params.pop("base", "3d-projected-sp")
+        min_purity = params.pop("min_purity", 0.5)
+        if base == "fused" or base not in _FUNCS:
+            raise ValueError(f"fused: base must be one of {', '.join(METHODS)}, got {base!r}")
+        fd = check_frame(frame, need_rgb=base not in _RGB_FREE)
+        labels, purity = _call(base, fd, index, params)
+        labels = fuse(labels, probs, purity=purity, min_purity=min_purity)
+        purity = np.where(labels == 0, 0, purity).astype(np.float32)
+    else:
+        fd = check_frame(frame, need_rgb=name not in _RGB_FREE)
+        labels, purity = _call(name, fd, index, params)
+    seconds = time.perf_counter() - t0 - (t1 - t0 if isinstance(semantic_map, MapIndex) else 0.0)
+    n_valid = fd.n_valid
+    coverage = float((labels[fd.valid] > 0).sum() / n_valid) if n_valid else 0.0
+    return TransferResult(labels, coverage, seconds, purity, name)
+
+
+def transfer(
+    name: str, frame: Frame, semantic_map: SemanticMap | MapIndex, **params
+) -> np.ndarray:
+    """Transfer labels into one frame: ``(H,W) uint8``, 0 = no support in the map.
+
+    Same arguments as :func:`transfer_frame`, which also returns coverage and time.
+
+    Examples
+    --------
+    >>> from semmatch.io import read_map, read_sequence        # doctest: +SKIP
+    >>> m, seq = read_map("upper.ply"), read_sequence("lower")  # doctest: +SKIP
+    >>> lab = transfer("3d-neighborhood", seq[0], m)            # doctest: +SKIP
+    """
+    return transfer_frame(name, frame, semantic_map, **params).labels

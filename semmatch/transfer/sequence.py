@@ -1,0 +1,114 @@
+"""Transfer a whole sequence into a labels folder (atomic), optionally with several processes."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from ..io import SemanticMap, read_sequence, write_labels_folder
+from .index import MapIndex, prepare
+from .registry import ALL_METHODS, transfer_frame
+
+__all__ = ["transfer_sequence"]
+
+_WORKER: dict = {}
+
+
+def _init_worker(index: MapIndex, seq_path, method: str, params: dict) -> None:
+    _WORKER.update(index=index, seq=read_sequence(seq_path), method=method, params=params)
+
+
+def _run_one(i: int):
+    w = _WORKER
+    r = transfer_frame(w["method"], w["seq"][i], w["index"], **w["params"])
+    return i, r.labels, r.coverage, r.seconds
+
+
+def transfer_sequence(
+    method: str,
+    sequence,
+    semantic_map: SemanticMap | MapIndex,
+    out_dir,
+    *,
+    jobs: int = 1,
+    progress: bool = True,
+    max_distance: float | None = None,
+    **params,
+) -> dict:
+    """Transfer labels into every frame of a sequence and write a labels folder.
+
+    Parameters
+    ----------
+    method : str
+        A name of :data:`~semmatch.transfer.ALL_METHODS`.
+    sequence : path or sequence of Frame
+        A sequence folder (or :class:`~semmatch.io.SequenceReader`, or a list of frames).
+    semantic_map : SemanticMap or MapIndex
+        The upper map (indexed once here) or a prebuilt index.
+    out_dir : path
+        Labels folder ``000000.png ...``; written to a temporary folder and renamed when
+        complete (:func:`semmatch.io.write_labels_folder`), so an interrupted run leaves no
+        partial folder.
+    jobs : int
+        Worker processes (needs a sequence folder; 1 = in this process).
+    progress : bool
+        Show a tqdm progress bar.
+    max_distance : float, optional
+        Distance threshold (see :func:`~semmatch.transfer.transfer_frame`).
+    **params
+        Method parameters.
+
+    Returns
+    -------
+    dict
+        ``frames``, ``coverage`` (mean), ``coverage_per_frame``, ``ms_median``, ``fps``
+        (1000 / median ms), ``out`` (the folder).
+    """
+    if method not in ALL_METHODS:
+        raise ValueError(f"unknown transfer method {method!r}; valid: {', '.join(ALL_METHODS)}")
+    if int(jobs) < 1:
+        raise ValueError(f"jobs must be >= 1, got {jobs}")
+    seq_path = None
+    if isinstance(sequence, (str, os.PathLike)):
+        seq_path = Path(sequence)
+        frames: Sequence = read_sequence(seq_path)
+    else:
+        frames = sequence
+        seq_path = getattr(sequence, "path", None)
+    n = len(frames)
+    if n == 0:
+        raise ValueError("the sequence has no frames")
+    index = prepare(semantic_map, max_distance=max_distance)
+    labels: list = [None] * n
+    cov = np.zeros(n)
+    secs = np.zeros(n)
+    bar = tqdm(total=n, desc=f"transfer {method}", disable=not progress, unit="frame")
+    if int(jobs) > 1 and seq_path is not None:
+        with ProcessPoolExecutor(
+            max_workers=int(jobs), initializer=_init_worker, initargs=(index, seq_path, method, params)
+        ) as ex:
+            for i, lab, c, s in ex.map(_run_one, range(n), chunksize=max(1, n // (4 * int(jobs)))):
+                labels[i], cov[i], secs[i] = lab, c, s
+                bar.update()
+    else:
+        for i in range(n):
+            r = transfer_frame(method, frames[i], index, **params)
+            labels[i], cov[i], secs[i] = r.labels, r.coverage, r.seconds
+            bar.update()
+    bar.close()
+    out = write_labels_folder(out_dir, labels)
+    ms = float(np.median(secs) * 1000)
+    return {
+        "method": method,
+        "frames": n,
+        "coverage": float(cov.mean()),
+        "coverage_per_frame": cov.round(6).tolist(),
+        "ms_median": ms,
+        "fps": 1000.0 / ms if ms > 0 else float("inf"),
+        "out": str(out),
+    }
