@@ -1,0 +1,48 @@
+"""Semantic segmentation: two trained networks, a (noisy) ground-truth oracle, a detectron2 adapter
+and the viewpoint-gap study.
+
+Public surface (DESIGN.md §8)::
+
+    from semmatch.segment import load_model
+    net = load_model(checkpoint); probs = net.predict(rgb)  # (H,W,21) float32, sums to 1
+
+Submodules: :mod:`~semmatch.segment.models` (architectures), :mod:`~semmatch.segment.data`
+(rendered views), :mod:`~semmatch.segment.training`, :mod:`~semmatch.segment.predict`,
+:mod:`~semmatch.segment.oracle`, :mod:`~semmatch.segment.detectron2`,
+:mod:`~semmatch.segment.viewpoint`. Names are imported lazily so that ``import
+semmatch.segment`` does not import PyTorch.
+"""
+
+from __future__ import annotations
+
+import importlib
+
+_EXPORTS = {
+    "load_model": "predict",
+    "predict_sequence": "predict",
+    "Segmenter": "predict",
+    "train": "training",
+    "make_config": "training",
+    "TrainConfig": "training",
+    "PROFILES": "training",
+    "ModelConfig": "models",
+    "ARCHITECTURES": "models",
+    "OracleSegmenter": "oracle",
+    "NoisyOracle": "oracle",
+    "noisy_labels": "oracle",
+    "viewpoint_gap": "viewpoint",
+    "plot_viewpoint_gap": "viewpoint",
+    "plot_training_curves": "viewpoint",
+}
+
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str):
+    if name in _EXPORTS:
+        return getattr(importlib.import_module(f".{_EXPORTS[name]}", __name__), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_EXPORTS))

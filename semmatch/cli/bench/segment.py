@@ -1,0 +1,72 @@
+"""``semmatch bench segment``: inference speed of the segmentation networks on this machine."""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+from . import add_json_flag, emit
+
+
+def register(sub) -> None:
+    """Add ``semmatch bench segment``."""
+    p = sub.add_parser("segment", help="segmentation networks: frames per second at 320x240 and 640x480")
+    p.add_argument("--model", nargs="*", default=[],
+                   help="checkpoints to time (default: untrained compact and strong networks; speed does "
+                        "not depend on the weights)")
+    p.add_argument("--frames", type=int, default=20, help="timed frames per size (default 20)")
+    p.add_argument("--threads", type=int, help="torch threads (default: torch's choice)")
+    p.add_argument("--device", choices=("auto", "cpu", "cuda"), default="cpu")
+    add_json_flag(p)
+    p.set_defaults(func=run)
+
+
+def time_predict(segmenter, width: int, height: int, frames: int, *, seed: int = 0) -> float:
+    """Frames per second of ``segmenter.predict`` on random ``width`` x ``height`` RGB(-D) images."""
+    import numpy as np
+
+    rng = np.random.default_rng(seed)
+    imgs = rng.integers(0, 256, (4, height, width, 3), dtype=np.uint8)
+    depth = rng.uniform(0.5, 5.0, (height, width)).astype(np.float32)
+    for i in range(3):
+        segmenter.predict(imgs[i % 4], depth)
+    t = time.perf_counter()
+    for i in range(frames):
+        segmenter.predict(imgs[i % 4], depth)
+    return frames / (time.perf_counter() - t)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Time every network and print a table or JSON."""
+    import torch
+
+    from semmatch.segment import load_model
+    from semmatch.segment.models import ModelConfig, build_network
+    from semmatch.segment.predict import Segmenter
+
+    if args.frames < 1:
+        raise ValueError("--frames must be >= 1")
+    if args.threads:
+        torch.set_num_threads(args.threads)
+    device = None if args.device == "auto" else args.device
+    nets = {}
+    if args.model:
+        for path in args.model:
+            seg = load_model(path, device=device)
+            nets[seg.name] = seg
+    else:
+        for arch in ("compact", "strong"):
+            torch.manual_seed(0)
+            cfg = ModelConfig(arch=arch, width=320, height=240)
+            nets[arch] = Segmenter(build_network(cfg), cfg, device=device or "cpu")
+    result = {"networks": {}, "threads": torch.get_num_threads(), "frames": args.frames}
+    rows = []
+    for name, seg in nets.items():
+        r = {f"fps_{w}x{h}": round(time_predict(seg, w, h, args.frames), 2) for w, h in ((320, 240), (640, 480))}
+        r["input"] = f"{seg.config.width}x{seg.config.height}"
+        r["device"] = str(seg.device)
+        result["networks"][name] = r
+        rows.append(f"{name:<12} {r['input']:>9} {r['fps_320x240']:>12.1f} {r['fps_640x480']:>12.1f}")
+    table = "\n".join([f"{'network':<12} {'runs at':>9} {'FPS 320x240':>12} {'FPS 640x480':>12}", *rows,
+                       f"(torch threads: {result['threads']}, {args.frames} frames per size)"])
+    return emit(result, args.json, table)

@@ -1,0 +1,52 @@
+"""``semmatch predict``: label a sequence with a trained network or the (noisy) oracle."""
+
+from __future__ import annotations
+
+import argparse
+
+
+def register(sub) -> None:
+    """Add ``semmatch predict``."""
+    p = sub.add_parser(
+        "predict",
+        help="write a labels folder for a sequence (network checkpoint, oracle or noisy oracle)",
+        description="Label every frame of SEQ and write a labels folder (000000.png ...) to --out.",
+    )
+    p.add_argument("sequence", metavar="SEQ", help="sequence folder")
+    p.add_argument("--model", required=True,
+                   help="checkpoint (.pt), 'oracle' (ground truth) or 'noisy:RATE' (noisy oracle, e.g. noisy:0.2)")
+    p.add_argument("--out", required=True, help="labels folder to write")
+    p.add_argument("--probs", action="store_true", help="also write probabilities to OUT/probs/*.npy (float16)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the noisy oracle")
+    p.add_argument("--device", choices=("auto", "cpu", "cuda"), default="auto")
+    p.add_argument("--quiet", action="store_true")
+    p.set_defaults(func=run)
+
+
+def make_segmenter(spec: str, *, seed: int = 0, device: str = "auto"):
+    """A segmenter from a ``--model`` value: checkpoint path, ``oracle`` or ``noisy:RATE``."""
+    from semmatch.segment.oracle import NoisyOracle, OracleSegmenter
+
+    if spec == "oracle":
+        return OracleSegmenter()
+    if spec.startswith("noisy:"):
+        try:
+            rate = float(spec.split(":", 1)[1])
+        except ValueError:
+            raise ValueError(f"--model {spec!r}: expected noisy:RATE with RATE a number in [0, 1]") from None
+        return NoisyOracle(rate, seed=seed)
+    from semmatch.segment import load_model
+
+    return load_model(spec, device=None if device == "auto" else device)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Predict and print where the labels went."""
+    from semmatch.io import read_sequence
+    from semmatch.segment import predict_sequence
+
+    seq = read_sequence(args.sequence)
+    model = make_segmenter(args.model, seed=args.seed, device=args.device)
+    out = predict_sequence(model, seq, args.out, probs=args.probs, progress=not args.quiet)
+    print(f"{out}: {len(seq)} label images from {getattr(model, 'name', args.model)}")
+    return 0

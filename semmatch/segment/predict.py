@@ -1,0 +1,291 @@
+"""Load a trained network and predict per-class probabilities for images and sequences.
+
+Input conventions (documented conversions, everything else is a ``ValueError``):
+
+- ``rgb``: ``uint8 (H,W,3)``; floating point images in [0, 1] are accepted as they are.
+  Other dtypes, other shapes, NaN/inf or float values outside [0, 1] are refused.
+- ``depth`` (networks with a depth channel): float metres ``(H,W)``; NaN/inf and values <= 0
+  read as "no measurement" (0), as in the data contract; ``uint16`` is refused (convert with
+  the sequence's ``depth_scale`` first).
+- An image of another size than the network's is resized to it (area interpolation; depth
+  nearest) and the probabilities are restored to the input size (bilinear on the logits).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterable
+from pathlib import Path
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from tqdm.auto import tqdm
+
+from ..io import Frame, read_sequence, write_labels_folder
+from ..labels import NUM_CLASSES, table_fingerprint
+from .models import ModelConfig, build_network, normalise_inputs
+
+__all__ = ["Segmenter", "load_model", "predict_sequence", "check_rgb", "check_depth"]
+
+
+def check_rgb(rgb: np.ndarray, what: str = "rgb") -> np.ndarray:
+    """Validate an RGB image and return it as float32 in [0, 1] (see the module notes)."""
+    a = np.asarray(rgb)
+    if a.ndim != 3 or a.shape[2] != 3:
+        raise ValueError(f"{what}: expected an (H,W,3) RGB image, got shape {a.shape}")
+    if a.dtype == np.uint8:
+        return a.astype(np.float32) / np.float32(255.0)
+    if np.issubdtype(a.dtype, np.floating):
+        if not np.isfinite(a).all():
+            raise ValueError(f"{what}: holds NaN or inf")
+        if a.size and (a.min() < 0.0 or a.max() > 1.0):
+            raise ValueError(f"{what}: float images must lie in [0, 1], got {a.min():.3g}..{a.max():.3g}")
+        return a.astype(np.float32)
+    raise ValueError(f"{what}: expected uint8 (or float in [0, 1]) RGB, got dtype {a.dtype}")
+
+
+def check_depth(depth: np.ndarray, shape: tuple[int, int], what: str = "depth") -> np.ndarray:
+    """Validate metric depth and return float32 with non-finite / non-positive values set to 0."""
+    d = np.asarray(depth)
+    if d.shape != shape:
+        raise ValueError(f"{what}: shape {d.shape} does not match the RGB image {shape}")
+    if not np.issubdtype(d.dtype, np.floating):
+        raise ValueError(f"{what}: expected float metres, got dtype {d.dtype} (divide by depth_scale first)")
+    d = d.astype(np.float32)
+    return np.where(np.isfinite(d) & (d > 0), d, np.float32(0.0))
+
+
+class Segmenter:
+    """A trained network with a NumPy interface.
+
+    Parameters
+    ----------
+    net : torch.nn.Module
+    config : ModelConfig
+    device : torch.device or str, optional
+        Default: CUDA when present, else CPU.
+    info : dict, optional
+        Checkpoint metadata (``metrics``, ``history``, ``train_config``...).
+    name : str, optional
+    """
+
+    def __init__(self, net: torch.nn.Module, config: ModelConfig, *, device=None, info: dict | None = None,
+                 name: str | None = None) -> None:
+        if device is None:
+            device = "cuda" if torch.cuda.is_available() else "cpu"
+        self.device = torch.device(device)
+        self.net = net.to(self.device)
+        self.config = config
+        self.info = dict(info or {})
+        self.name = name or config.arch
+
+    @property
+    def metrics(self) -> dict:
+        """Validation metrics stored in the checkpoint (empty when untrained)."""
+        return self.info.get("metrics", {})
+
+    @property
+    def uses_depth(self) -> bool:
+        """True when the network takes a depth channel."""
+        return self.config.use_depth
+
+    def __repr__(self) -> str:
+        return f"Segmenter({self.name!r}, arch={self.config.arch}, {self.config.width}x{self.config.height}, depth={self.uses_depth})"
+
+    def _inputs(self, rgbs: np.ndarray, depths) -> tuple[torch.Tensor, tuple[int, int]]:
+        rgbs = np.asarray(rgbs)
+        if rgbs.ndim == 3:
+            rgbs = rgbs[None]
+        if rgbs.ndim != 4:
+            raise ValueError(f"rgb: expected (H,W,3) or (N,H,W,3), got shape {rgbs.shape}")
+        shape = rgbs.shape[1:3]
+        if self.uses_depth and depths is None:
+            raise ValueError(f"network {self.name!r} uses depth: pass depth (float metres)")
+        imgs = [check_rgb(r, f"rgb[{i}]") for i, r in enumerate(rgbs)]
+        x = torch.from_numpy(np.stack(imgs)).permute(0, 3, 1, 2)
+        dep = None
+        if self.uses_depth:
+            d = np.asarray(depths)
+            d = d[None] if d.ndim == 2 else d
+            if len(d) != len(rgbs):
+                raise ValueError(f"depth: {len(d)} images for {len(rgbs)} RGB images")
+            dep = torch.from_numpy(np.stack([check_depth(di, shape, f"depth[{i}]") for i, di in enumerate(d)]))[:, None]
+        x = x.to(self.device)
+        net_hw = (self.config.height, self.config.width)
+        if tuple(shape) != net_hw:
+            x = F.interpolate(x, size=net_hw, mode="area")
+            if dep is not None:
+                dep = F.interpolate(dep, size=net_hw, mode="nearest")
+        if dep is not None:
+            dep = dep.to(self.device)
+        return normalise_inputs(x, dep), tuple(shape)
+
+    @torch.inference_mode()
+    def _logits(self, rgbs, depths) -> torch.Tensor:
+        x, shape = self._inputs(rgbs, depths)
+        self.net.eval()
+        logits = self.net(x).float()
+        if tuple(logits.shape[-2:]) != shape:
+            logits = F.interpolate(logits, size=shape, mode="bilinear", align_corners=False)
+        return logits
+
+    def predict_batch(self, rgbs: np.ndarray, depths: np.ndarray | None = None) -> np.ndarray:
+        """Probabilities of a batch: ``(N,H,W,3)`` -> ``(N,H,W,C)`` float32, summing to 1."""
+        p = torch.softmax(self._logits(rgbs, depths), dim=1).permute(0, 2, 3, 1).cpu().numpy()
+        return p / p.sum(axis=-1, keepdims=True)
+
+    def predict(self, rgb: np.ndarray, depth: np.ndarray | None = None) -> np.ndarray:
+        """Per-class probabilities of one image.
+
+        Parameters
+        ----------
+        rgb : uint8 (H,W,3)
+            Any size; see the module notes for accepted dtypes.
+        depth : float32 (H,W), optional
+            Metres; required when the network uses depth, ignored otherwise.
+
+        Returns
+        -------
+        ndarray float32 (H,W,NUM_CLASSES)
+            Probabilities over the categories of :mod:`semmatch.labels`, summing to 1 per pixel.
+
+        Raises
+        ------
+        ValueError
+            Wrong shape or dtype, NaN/inf, float values outside [0, 1], missing depth.
+        """
+        if np.asarray(rgb).ndim != 3:
+            raise ValueError(f"rgb: expected one (H,W,3) image, got shape {np.shape(rgb)}")
+        return self.predict_batch(rgb, None if depth is None else np.asarray(depth)[None])[0]
+
+    def predict_labels_batch(self, rgbs: np.ndarray, depths: np.ndarray | None = None) -> np.ndarray:
+        """Arg-max category ids ``(N,H,W)`` uint8 of a batch."""
+        return self._logits(rgbs, depths).argmax(dim=1).to(torch.uint8).cpu().numpy()
+
+    def predict_labels(self, rgb: np.ndarray, depth: np.ndarray | None = None) -> np.ndarray:
+        """Arg-max category ids ``(H,W)`` uint8 of one image."""
+        return self.predict_labels_batch(rgb, None if depth is None else np.asarray(depth)[None])[0]
+
+    def predict_frame(self, frame: Frame) -> np.ndarray:
+        """Probabilities of a :class:`semmatch.io.Frame` (its depth is used when needed)."""
+        return self.predict(frame.rgb, frame.depth if self.uses_depth else None)
+
+
+def _check_table(found, path: Path) -> None:
+    want = table_fingerprint()
+    if found != want:
+        diff = "different number of categories" if len(found or []) != len(want) else next(
+            f"id {w[0]}: checkpoint has {f[1]!r} {f[2]}, semmatch has {w[1]!r} {w[2]}"
+            for f, w in zip(found, want, strict=True) if list(f) != list(w)
+        )
+        raise ValueError(f"{path}: checkpoint was trained for another category table ({diff}); retrain it")
+
+
+def load_model(checkpoint: str | os.PathLike, *, arch: str | None = None, device=None) -> Segmenter:
+    """Load a network saved by :func:`semmatch.segment.train`.
+
+    Parameters
+    ----------
+    checkpoint : path
+        A ``.pt`` checkpoint.
+    arch : {"compact", "strong"}, optional
+        Expected architecture; a checkpoint of another one is refused.
+    device : str or torch.device, optional
+        Default: CUDA when present, else CPU.
+
+    Returns
+    -------
+    Segmenter
+        ``.predict(rgb[, depth]) -> (H,W,21)`` float32 probabilities summing to 1.
+
+    Raises
+    ------
+    FileNotFoundError
+        No such file.
+    ValueError
+        Not a semmatch checkpoint, made for another category table or another architecture,
+        or weights that do not fit the stored architecture.
+    """
+    from .training import CHECKPOINT_FORMAT
+
+    path = Path(checkpoint)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such checkpoint")
+    try:
+        ckpt = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as e:  # torch raises many types for a corrupt file
+        raise ValueError(f"{path}: not a readable PyTorch checkpoint ({type(e).__name__}: {e})") from None
+    if not isinstance(ckpt, dict) or ckpt.get("format") != CHECKPOINT_FORMAT:
+        raise ValueError(f"{path}: not a semmatch segmentation checkpoint (expected format {CHECKPOINT_FORMAT})")
+    _check_table(ckpt.get("categories"), path)
+    try:
+        config = ModelConfig.from_dict(ckpt["model"])
+    except (KeyError, TypeError, ValueError) as e:
+        raise ValueError(f"{path}: bad architecture config ({e})") from None
+    if config.num_classes != NUM_CLASSES:
+        raise ValueError(f"{path}: network has {config.num_classes} outputs, the category table {NUM_CLASSES}")
+    if arch is not None and arch != config.arch:
+        raise ValueError(f"{path}: checkpoint holds a {config.arch!r} network, not {arch!r}")
+    net = build_network(config)
+    try:
+        net.load_state_dict(ckpt["state_dict"])
+    except (KeyError, RuntimeError) as e:
+        raise ValueError(f"{path}: weights do not fit the {config.arch!r} architecture ({str(e)[:300]})") from None
+    info = {k: v for k, v in ckpt.items() if k != "state_dict"}
+    return Segmenter(net, config, device=device, info=info, name=path.stem)
+
+
+def predict_sequence(
+    model,
+    seq,
+    out_dir: str | os.PathLike,
+    *,
+    probs: bool = False,
+    progress: bool = True,
+) -> Path:
+    """Label every frame of a sequence and write a labels folder per the data contract.
+
+    Parameters
+    ----------
+    model : Segmenter or oracle
+        Anything with ``predict_frame(frame) -> (H,W,C)`` probabilities.
+    seq : path, SequenceReader or iterable of Frame
+    out_dir : path
+        The labels folder (``000000.png`` ... uint8 category ids), written into a temporary
+        folder and renamed when complete.
+    probs : bool
+        Also write the probabilities as ``out_dir/probs/000000.npy`` (float16 (H,W,C)).
+    progress : bool
+
+    Returns
+    -------
+    Path
+        ``out_dir``.
+    """
+    import shutil
+    import tempfile
+
+    frames: Iterable[Frame] = read_sequence(seq) if isinstance(seq, str | os.PathLike) else seq
+    out_dir = Path(out_dir)
+    out_dir.parent.mkdir(parents=True, exist_ok=True)
+    tmp_probs = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.probs.", dir=out_dir.parent)) if probs else None
+    total = len(frames) if hasattr(frames, "__len__") else None
+
+    def labels():
+        for k, frame in enumerate(tqdm(frames, total=total, desc="predict", disable=not progress, leave=False)):
+            p = model.predict_frame(frame)
+            if p.shape[:2] != frame.rgb.shape[:2]:
+                raise ValueError(f"frame {k}: prediction is {p.shape[:2]}, image {frame.rgb.shape[:2]}")
+            if tmp_probs is not None:
+                np.save(tmp_probs / f"{k:06d}.npy", p.astype(np.float16))
+            yield p.argmax(axis=-1).astype(np.uint8)
+
+    try:
+        write_labels_folder(out_dir, labels())
+        if tmp_probs is not None:
+            os.replace(tmp_probs, out_dir / "probs")
+    finally:
+        if tmp_probs is not None:
+            shutil.rmtree(tmp_probs, ignore_errors=True)
+    return out_dir

@@ -1,0 +1,419 @@
+"""Train a segmentation network on simulated human-height views.
+
+Training views are upper views (camera 1.2-1.8 m, tilting +-20 deg) of training scenes only;
+validation uses held-out scenes. Augmentations: horizontal flip, colour jitter and a random
+scale/crop window (depth rescaled with the zoom). The loss is cross-entropy with
+median-frequency class weights (void ignored). The best validation checkpoint (mIoU over
+classes 1..10) is kept. Everything is seeded: the same config gives the same weights on the
+same machine (``torch.use_deterministic_algorithms``; data rendered single-threaded).
+"""
+
+from __future__ import annotations
+
+import copy
+import os
+import time
+from dataclasses import asdict, dataclass, field, fields, replace
+from pathlib import Path
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from tqdm.auto import tqdm
+
+from ..geometry import DEFAULT_INTRINSICS
+from ..io import atomic_path
+from ..labels import table_fingerprint
+from . import data as D
+from .models import ModelConfig, build_network, count_parameters
+from .scores import confusion, scores
+
+__all__ = ["TrainConfig", "PROFILES", "make_config", "train", "augment", "evaluate_views", "CHECKPOINT_FORMAT"]
+
+CHECKPOINT_FORMAT = "semmatch-segment/1"
+
+
+@dataclass
+class TrainConfig:
+    """Everything that decides a trained network (stored in its checkpoint).
+
+    Parameters
+    ----------
+    out : str
+        Checkpoint path (``.pt``).
+    arch : {"compact", "strong"}
+    use_depth : bool
+        Feed depth as a fourth channel.
+    width, height : int
+        Render and network resolution.
+    crop_width, crop_height : int or None
+        Training crop size (None = the full ``width`` x ``height``).
+    kinds : tuple of str
+        Scene kinds; scene ``i`` has kind ``kinds[i % len(kinds)]``.
+    train_seeds, val_seeds : tuple of int
+        Training and validation scenes (must be disjoint, and disjoint from ``eval_seeds``).
+    eval_seeds : tuple of int
+        Evaluation scenes, only checked for disjointness.
+    heights : (float, float)
+        Camera height range of training views (metres).
+    n_heights : int
+        Trajectories per training scene, at heights spread over ``heights``.
+    frames : int
+        Frames per training trajectory.
+    val_frames : int
+        Frames per validation scene (one trajectory at the middle of ``heights``).
+    tilt_deg : float
+        Tilt amplitude of the trajectories.
+    steps, batch_size, lr, weight_decay : training schedule (AdamW + one-cycle).
+    eval_every : int
+        Validate every this many steps (and at the end).
+    zoom : (float, float)
+        Range of the scale augmentation (>1 zooms out).
+    jitter : float
+        Colour-jitter strength.
+    seed : int
+    device : str
+        ``"auto"`` (CUDA when present, else CPU), ``"cpu"`` or ``"cuda"``.
+    threads : int or None
+        ``torch.set_num_threads`` for the run (None = leave as is).
+    cache_dir : str or None
+        Cache rendered views here (``.npz``).
+    progress : bool
+    """
+
+    out: str = "data/models/compact.pt"
+    arch: str = "compact"
+    use_depth: bool = False
+    width: int = 160
+    height: int = 120
+    crop_width: int | None = None
+    crop_height: int | None = None
+    kinds: tuple[str, ...] = ("living_room", "bedroom", "office", "apartment")
+    train_seeds: tuple[int, ...] = (1, 2)
+    val_seeds: tuple[int, ...] = (501,)
+    eval_seeds: tuple[int, ...] = (1001, 1002, 1003)
+    heights: tuple[float, float] = (1.2, 1.8)
+    n_heights: int = 3
+    frames: int = 6
+    val_frames: int = 8
+    tilt_deg: float = 20.0
+    steps: int = 120
+    batch_size: int = 8
+    lr: float = 4e-3
+    weight_decay: float = 1e-4
+    eval_every: int = 40
+    zoom: tuple[float, float] = (0.75, 1.5)
+    jitter: float = 0.25
+    seed: int = 0
+    device: str = "auto"
+    threads: int | None = None
+    cache_dir: str | None = None
+    progress: bool = True
+    extra: dict = field(default_factory=dict)
+
+    def model_config(self) -> ModelConfig:
+        """The architecture this config trains."""
+        return ModelConfig(arch=self.arch, use_depth=self.use_depth, width=self.width, height=self.height)
+
+    def validate(self) -> TrainConfig:
+        """Raise ``ValueError`` for an inconsistent config; return self."""
+        self.model_config()
+        D.check_disjoint(train=self.train_seeds, val=self.val_seeds, eval=self.eval_seeds)
+        if not self.train_seeds or not self.val_seeds:
+            raise ValueError("train_seeds and val_seeds must not be empty")
+        cw, ch = self.crop_size
+        if not (16 <= cw <= self.width and 16 <= ch <= self.height):
+            raise ValueError(f"crop {cw}x{ch} must lie within 16x16 .. {self.width}x{self.height}")
+        for name in ("steps", "batch_size", "eval_every", "frames", "val_frames", "n_heights"):
+            if int(getattr(self, name)) < 1:
+                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+        if not 0 < self.zoom[0] <= self.zoom[1]:
+            raise ValueError(f"zoom range must satisfy 0 < lo <= hi, got {self.zoom}")
+        if self.device not in ("auto", "cpu", "cuda"):
+            raise ValueError(f"device must be auto, cpu or cuda, got {self.device!r}")
+        return self
+
+    @property
+    def crop_size(self) -> tuple[int, int]:
+        """``(crop_width, crop_height)``."""
+        return int(self.crop_width or self.width), int(self.crop_height or self.height)
+
+
+#: named training profiles (``semmatch train --profile``); ``smoke`` is CI sized
+PROFILES: dict[str, dict] = {
+    "smoke": dict(width=160, height=120, n_heights=2, frames=6, val_frames=6, steps=100, batch_size=8,
+                  eval_every=50),
+    "full": dict(width=320, height=240, crop_width=160, crop_height=120, n_heights=4, frames=24,
+                 val_frames=30, steps=2400, batch_size=16, eval_every=200,
+                 train_seeds=tuple(range(1, 13)), val_seeds=(501, 502)),
+}
+
+
+def make_config(profile: str = "smoke", **overrides) -> TrainConfig:
+    """A :class:`TrainConfig` from a named profile plus overrides (None values are ignored).
+
+    Raises
+    ------
+    ValueError
+        Unknown profile or unknown override key.
+    """
+    if profile not in PROFILES:
+        raise ValueError(f"unknown training profile {profile!r}; valid: {', '.join(PROFILES)}")
+    names = {f.name for f in fields(TrainConfig)}
+    unknown = set(overrides) - names
+    if unknown:
+        raise ValueError(f"unknown training option(s): {', '.join(sorted(unknown))}")
+    kw = dict(PROFILES[profile])
+    kw.update({k: v for k, v in overrides.items() if v is not None})
+    for k in ("kinds", "train_seeds", "val_seeds", "eval_seeds", "heights", "zoom"):
+        if k in kw:
+            kw[k] = tuple(kw[k])
+    kw["extra"] = dict(kw.get("extra") or {}, profile=profile)
+    return TrainConfig(**kw).validate()
+
+
+def _device(name: str) -> torch.device:
+    if name == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    if name == "cuda" and not torch.cuda.is_available():
+        raise ValueError("device 'cuda' requested but CUDA is not available")
+    return torch.device(name)
+
+
+def augment(
+    rgb: np.ndarray,
+    depth: np.ndarray,
+    labels: np.ndarray,
+    rng: np.random.Generator,
+    *,
+    crop: tuple[int, int],
+    zoom: tuple[float, float] = (0.75, 1.5),
+    jitter: float = 0.25,
+    flip: bool = True,
+    use_depth: bool = False,
+    device: torch.device | str = "cpu",
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Augment a batch: random scale/crop window, horizontal flip and colour jitter.
+
+    Parameters
+    ----------
+    rgb : uint8 (B,H,W,3)
+    depth : float32 (B,H,W)
+    labels : uint8 (B,H,W)
+    rng : numpy Generator
+        All random draws come from it (repeatable).
+    crop : (width, height)
+        Output size.
+    zoom : (lo, hi)
+        The window covers ``zoom * crop`` input pixels (clipped to the image): > 1 zooms out.
+        Depth is multiplied by the zoom (a smaller object looks farther away).
+    jitter : float
+        Brightness, contrast, saturation (+-jitter) and per-channel gain (+-jitter/3).
+    flip : bool
+    use_depth : bool
+        Append depth as a fourth input channel.
+    device : torch device
+
+    Returns
+    -------
+    x : float32 tensor (B, 3 or 4, crop_h, crop_w)
+        Normalised network input (:func:`semmatch.segment.models.normalise_inputs`).
+    y : int64 tensor (B, crop_h, crop_w)
+    """
+    from .models import normalise_inputs
+
+    B, H, W = labels.shape
+    cw, ch = crop
+    zmax = min(W / cw, H / ch)
+    z = np.minimum(rng.uniform(zoom[0], zoom[1], B), zmax)
+    ww, wh = cw * z, ch * z
+    cx = rng.uniform(ww / 2, W - ww / 2)
+    cy = rng.uniform(wh / 2, H - wh / 2)
+    sign = np.where(rng.uniform(size=B) < 0.5, -1.0, 1.0) if flip else np.ones(B)
+    theta = np.zeros((B, 2, 3), np.float32)
+    theta[:, 0, 0] = sign * ww / W
+    theta[:, 0, 2] = 2 * cx / W - 1
+    theta[:, 1, 1] = wh / H
+    theta[:, 1, 2] = 2 * cy / H - 1
+    grid = F.affine_grid(torch.from_numpy(theta).to(device), [B, 1, ch, cw], align_corners=False)
+
+    img = torch.from_numpy(rgb).to(device).permute(0, 3, 1, 2).float() / 255.0
+    img = F.grid_sample(img, grid, mode="bilinear", padding_mode="border", align_corners=False)
+    lab = torch.from_numpy(labels).to(device)[:, None].float()
+    y = F.grid_sample(lab, grid, mode="nearest", padding_mode="border", align_corners=False)[:, 0].long()
+
+    if jitter > 0:
+        j = float(jitter)
+        bright = torch.from_numpy(rng.uniform(1 - j, 1 + j, (B, 1, 1, 1)).astype(np.float32)).to(device)
+        contrast = torch.from_numpy(rng.uniform(1 - j, 1 + j, (B, 1, 1, 1)).astype(np.float32)).to(device)
+        sat = torch.from_numpy(rng.uniform(1 - j, 1 + j, (B, 1, 1, 1)).astype(np.float32)).to(device)
+        gain = torch.from_numpy(rng.uniform(1 - j / 3, 1 + j / 3, (B, 3, 1, 1)).astype(np.float32)).to(device)
+        img = img * bright * gain
+        mean = img.mean(dim=(1, 2, 3), keepdim=True)
+        img = (img - mean) * contrast + mean
+        gray = img.mean(dim=1, keepdim=True)
+        img = ((img - gray) * sat + gray).clamp(0.0, 1.0)
+    dep = None
+    if use_depth:
+        d = torch.from_numpy(depth).to(device)[:, None].float()
+        d = F.grid_sample(d, grid, mode="nearest", padding_mode="border", align_corners=False)
+        dep = d * torch.from_numpy(z.astype(np.float32)).to(device)[:, None, None, None]
+    return normalise_inputs(img, dep), y
+
+
+def evaluate_views(segmenter, views: D.Views, *, batch_size: int = 16) -> dict:
+    """Pixel scores (:func:`semmatch.segment.scores.scores`) of a segmenter on rendered views.
+
+    Parameters
+    ----------
+    segmenter : Segmenter-like
+        Has ``predict_batch(rgb, depth) -> (N,H,W,C)`` probabilities.
+    views : Views
+    batch_size : int
+
+    Returns
+    -------
+    dict
+        ``miou``, ``pixel_acc``, ``jaccard``, ``sorensen``, ``color_acc``, ``mean_acc``,
+        ``per_class_iou`` and the raw ``confusion`` (list of lists).
+    """
+    conf = None
+    for i in range(0, len(views), batch_size):
+        sl = slice(i, i + batch_size)
+        pred = segmenter.predict_labels_batch(views.rgb[sl], views.depth[sl])
+        c = confusion(views.labels[sl], pred)
+        conf = c if conf is None else conf + c
+    if conf is None:
+        raise ValueError("evaluate_views: no views")
+    out = scores(conf)
+    out["confusion"] = conf.tolist()
+    return out
+
+
+def build_views(config: TrainConfig) -> tuple[D.Views, D.Views]:
+    """Render (or load from the cache) the training and validation views of ``config``."""
+    intr = DEFAULT_INTRINSICS.scaled(config.width, config.height)
+    rng = np.random.default_rng(config.seed)
+    train_heights = np.stack(
+        [D.sample_heights(rng, config.heights[0], config.heights[1], config.n_heights) for _ in config.train_seeds]
+    )
+    val_h = [0.5 * (config.heights[0] + config.heights[1])]
+    common = dict(tilt_deg=config.tilt_deg, intrinsics=intr, progress=config.progress)
+
+    def make_train() -> D.Views:
+        scenes = D.make_scenes(config.kinds, config.train_seeds)
+        return D.render_views(scenes, train_heights, config.frames, seed=config.seed, **common)
+
+    def make_val() -> D.Views:
+        scenes = D.make_scenes(config.kinds, config.val_seeds)
+        return D.render_views(scenes, val_h, config.val_frames, seed=config.seed + 1, **common)
+
+    key = dict(kinds=config.kinds, width=config.width, height=config.height, tilt=config.tilt_deg)
+    tr = D.cached_views(config.cache_dir, dict(key, seeds=config.train_seeds, h=train_heights.round(4).tolist(),
+                                               frames=config.frames, seed=config.seed), make_train)
+    va = D.cached_views(config.cache_dir, dict(key, seeds=config.val_seeds, h=val_h, frames=config.val_frames,
+                                               seed=config.seed + 1), make_val)
+    return tr, va
+
+
+def train(config: TrainConfig, *, views: tuple[D.Views, D.Views] | None = None) -> Path:
+    """Train a network and write its checkpoint; return the checkpoint path.
+
+    Parameters
+    ----------
+    config : TrainConfig
+        See :func:`make_config` for the named profiles.
+    views : (Views, Views), optional
+        Training and validation views to use instead of rendering them from ``config``
+        (tests, notebooks that render once for several networks).
+
+    Returns
+    -------
+    Path
+        The checkpoint: ``format``, ``model`` (architecture config), ``state_dict``,
+        ``categories`` (:func:`semmatch.labels.table_fingerprint`), ``metrics`` (best
+        validation scores), ``history`` (per evaluation: step, train loss, val mIoU/accuracy,
+        learning rate, seconds), ``train_config``, ``class_weights``, ``n_parameters``.
+    """
+    from .predict import Segmenter
+
+    config.validate()
+    if config.threads:
+        torch.set_num_threads(int(config.threads))
+    device = _device(config.device)
+    if device.type == "cuda":
+        os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")
+    torch.manual_seed(config.seed)
+    torch.use_deterministic_algorithms(True, warn_only=device.type == "cuda")
+    t0 = time.perf_counter()
+    train_views, val_views = views if views is not None else build_views(config)
+    if train_views.shape != (config.height, config.width):
+        raise ValueError(f"training views are {train_views.shape}, config says {config.height}x{config.width}")
+    weights = D.class_weights(train_views.labels)
+    mc = config.model_config()
+    net = build_network(mc).to(device)
+    opt = torch.optim.AdamW(net.parameters(), lr=config.lr, weight_decay=config.weight_decay)
+    sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=config.lr, total_steps=config.steps, pct_start=0.1)
+    w_t = torch.from_numpy(weights).to(device)
+    rng = np.random.default_rng(config.seed)
+    n = len(train_views)
+    history: list[dict] = []
+    best: dict | None = None
+    best_state = None
+    running: list[float] = []
+    seg = Segmenter(net, mc, device=device)
+    bar = tqdm(range(config.steps), desc=f"train {config.arch}", disable=not config.progress)
+    for step in bar:
+        net.train()
+        idx = np.sort(rng.choice(n, config.batch_size, replace=n < config.batch_size))
+        x, y = augment(train_views.rgb[idx], train_views.depth[idx], train_views.labels[idx], rng,
+                       crop=config.crop_size, zoom=config.zoom, jitter=config.jitter,
+                       use_depth=config.use_depth, device=device)
+        loss = F.cross_entropy(net(x), y, weight=w_t, ignore_index=0)
+        if not torch.isfinite(loss):
+            raise FloatingPointError(f"training loss became {loss.item()} at step {step}")
+        opt.zero_grad(set_to_none=True)
+        loss.backward()
+        opt.step()
+        sched.step()
+        running.append(float(loss.item()))
+        if (step + 1) % config.eval_every == 0 or step + 1 == config.steps:
+            net.eval()
+            val = evaluate_views(seg, val_views)
+            rec = dict(step=step + 1, train_loss=float(np.mean(running)), val_miou=val["miou"],
+                       val_pixel_acc=val["pixel_acc"], val_mean_acc=val["mean_acc"],
+                       lr=float(sched.get_last_lr()[0]), seconds=time.perf_counter() - t0)
+            history.append(rec)
+            running = []
+            bar.set_postfix(loss=f"{rec['train_loss']:.3f}", miou=f"{val['miou']:.3f}")
+            if best is None or val["miou"] > best["miou"] or np.isnan(best["miou"]):
+                best = dict(val, step=step + 1)
+                best_state = copy.deepcopy({k: v.detach().cpu() for k, v in net.state_dict().items()})
+    bar.close()
+    assert best is not None and best_state is not None
+    ckpt = {
+        "format": CHECKPOINT_FORMAT,
+        "model": mc.to_dict(),
+        "state_dict": best_state,
+        "categories": table_fingerprint(),
+        "metrics": best,
+        "history": history,
+        "train_config": _plain(asdict(replace(config, progress=False))),
+        "class_weights": weights.tolist(),
+        "n_parameters": count_parameters(net),
+        "train_seconds": time.perf_counter() - t0,
+        "device": str(device),
+    }
+    out = Path(config.out)
+    with atomic_path(out) as tmp:
+        torch.save(ckpt, tmp)
+    return out
+
+
+def _plain(obj):
+    """Tuples -> lists, recursively (checkpoints load with ``weights_only=True``)."""
+    if isinstance(obj, dict):
+        return {str(k): _plain(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_plain(v) for v in obj]
+    return obj
