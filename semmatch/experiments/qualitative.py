@@ -1,0 +1,112 @@
+"""Fig. 4: renders of the lower-view semantic maps per method beside the reference (08)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from ..geometry import Intrinsics, look_at
+from ..io import SemanticMap, atomic_path, read_map
+from ..labels import NAMES, PALETTE
+from .layout import GT, Layout
+
+__all__ = ["overview_pose", "render_map", "qualitative_figure"]
+
+
+def overview_pose(m: SemanticMap, *, elevation_deg: float = 55.0, azimuth_deg: float = -60.0) -> np.ndarray:
+    """A camera above and outside the map looking down at its centre (``T_world_camera``)."""
+    lo, hi = m.points.min(axis=0), m.points.max(axis=0)
+    centre = (lo + hi) / 2
+    centre[2] = lo[2]
+    radius = float(np.linalg.norm(hi[:2] - lo[:2])) * 0.85 + 1.0
+    el, az = np.radians(elevation_deg), np.radians(azimuth_deg)
+    eye = centre + radius * np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
+    return look_at(eye, centre)
+
+
+def render_map(
+    m: SemanticMap,
+    pose: np.ndarray,
+    intrinsics: Intrinsics,
+    *,
+    cut_ceiling: float = 0.5,
+    background: int = 255,
+) -> np.ndarray:
+    """Shaded label-colour render of a semantic mesh, with the ceiling cut away.
+
+    Triangles whose vertices all lie within ``cut_ceiling`` metres of the map's top are
+    dropped so that the room can be seen from above.
+    """
+    from ..sim import Renderer, Scene
+    from ..sim.plyscene import triangle_labels
+
+    if not m.is_mesh:
+        raise ValueError(f"{m.source}: rendering needs a mesh (faces)")
+    top = float(m.points[:, 2].max())
+    keep = (m.points[m.faces][:, :, 2] < top - cut_ceiling).any(axis=1)
+    faces = m.faces[keep]
+    if len(faces) == 0:
+        raise ValueError(f"{m.source}: nothing left below the ceiling cut")
+    labels = triangle_labels(faces, m.labels)
+    scene = Scene(m.points, faces, labels, np.zeros(len(faces)), PALETTE[labels] / 255.0, name="map")
+    r = Renderer(scene, intrinsics, ambient=0.55, shadows=False, texture=False).render(pose)
+    rgb = r.rgb.copy()
+    rgb[r.depth <= 0] = background
+    return rgb
+
+
+def qualitative_figure(
+    data_root: str | Path,
+    methods: Sequence[str],
+    path: str | Path,
+    *,
+    scene: int = 0,
+    sources: Sequence[str] = (GT,),
+    size: tuple[int, int] = (480, 360),
+) -> Path:
+    """Render the reference and each method's lower map of one scene into a PNG grid.
+
+    One row per upper-map source (default: ground truth, as the paper's Fig. 4), one column per
+    method, the reference (lower frames fused with ground-truth labels) first.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.patches import Patch
+
+    layout = Layout(data_root)
+    scenes = layout.scene_dirs("eval")
+    if not 0 <= scene < len(scenes):
+        raise ValueError(f"scene index {scene} out of range: {len(scenes)} evaluation scenes")
+    sid = scenes[scene].name
+    ref = read_map(layout.lower_reference(sid))
+    pose = overview_pose(ref)
+    w, h = size
+    intr = Intrinsics(w, h, 0.9 * w, 0.9 * w, w / 2, h / 2)
+    cols = ["reference", *methods]
+    fig, axes = plt.subplots(len(sources), len(cols), figsize=(2.6 * len(cols), 2.2 * len(sources) + 0.6),
+                             squeeze=False)
+    seen: set[int] = set()
+    for r, source in enumerate(sources):
+        for c, name in enumerate(cols):
+            m = ref if name == "reference" else read_map(layout.lower_map(sid, source, name))
+            seen |= set(np.unique(m.labels).tolist())
+            axes[r][c].imshow(render_map(m, pose, intr))
+            axes[r][c].set_xticks([])
+            axes[r][c].set_yticks([])
+            if r == 0:
+                axes[r][c].set_title(name, fontsize=9)
+        axes[r][0].set_ylabel("GT upper map" if source == GT else f"{source} upper map", fontsize=9)
+    handles = [Patch(color=PALETTE[i] / 255.0, label=NAMES[i]) for i in sorted(seen) if i > 0]
+    fig.legend(handles=handles, loc="lower center", ncol=min(len(handles), 8), fontsize=7, frameon=False)
+    fig.suptitle(f"Lower-view semantic maps of {sid}")
+    fig.tight_layout(rect=(0, 0.08, 1, 1))
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110)
+    plt.close(fig)
+    return path

@@ -1,0 +1,77 @@
+"""Table 1: the transfer methods timed on 640x480 lower frames of a generated scene (04)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from ..io import atomic_path, read_map, read_sequence
+from .layout import GT, Layout
+from .tables import speed_table
+
+__all__ = ["measure_speed", "plot_speed"]
+
+
+def measure_speed(data_root: str | Path, methods: Sequence[str], *, n_frames: int = 30, scene: int = 0) -> pd.DataFrame:
+    """Median per-frame time of each method and of the reference backend, in one process.
+
+    The ground-truth upper map of one evaluation scene is indexed once; ``n_frames`` lower
+    frames (evenly spaced) are labelled by each method after one warm-up frame.
+
+    Returns
+    -------
+    DataFrame
+        Table 1: method, fps, ms_per_frame, paper_fps, speedup_vs_paper, speedup_vs_reference
+        (the reference is ``3d-neighborhood`` with Open3D closest-point queries on the mesh,
+        as the authors' code).
+    """
+    from ..transfer import prepare, transfer_frame
+
+    layout = Layout(data_root)
+    sd = layout.scene_dirs("eval")[scene]
+    seq = read_sequence(sd / "lower")
+    idx = np.unique(np.linspace(0, len(seq) - 1, min(n_frames, len(seq))).round().astype(int))
+    frames = [seq[int(i)] for i in idx]
+    index = prepare(read_map(layout.upper_map(sd.name, GT)))
+
+    def median_ms(name: str, **params) -> float:
+        transfer_frame(name, frames[0], index, **params)
+        return float(np.median([transfer_frame(name, f, index, **params).seconds for f in frames]) * 1000)
+
+    ref_fps = 1000.0 / median_ms("3d-neighborhood", backend="reference")
+    fps = {m: 1000.0 / median_ms(m) for m in methods}
+    df = speed_table(fps, ref_fps)
+    df.attrs["reference_fps"] = ref_fps
+    df.attrs["frames"] = len(frames)
+    return df
+
+
+def plot_speed(df: pd.DataFrame, path: str | Path) -> Path:
+    """Bar chart (log scale) of our FPS beside the paper's, per method."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    x = np.arange(len(df))
+    fig, ax = plt.subplots(figsize=(6.5, 3.4))
+    ax.bar(x - 0.2, df["fps"], 0.4, label="semmatch (this machine, 1 process)", color="#3b75af")
+    ax.bar(x + 0.2, df["paper_fps"], 0.4, label="paper Table 1 (server CPU + GPUs)", color="#bbbbbb")
+    ref = df.attrs.get("reference_fps")
+    if ref:
+        ax.axhline(ref, color="k", ls="--", lw=1, label=f"reference closest-point backend ({ref:.1f} FPS)")
+    ax.set_yscale("log")
+    ax.set_xticks(x, df["method"], rotation=20, ha="right")
+    ax.set_ylabel("frames per second (640x480)")
+    ax.legend(fontsize=7)
+    ax.grid(axis="y", alpha=0.3, which="both")
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=120)
+    plt.close(fig)
+    return path
