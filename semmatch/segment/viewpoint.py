@@ -1,0 +1,266 @@
+"""The viewpoint gap (paper Fig. 3): segmentation accuracy against camera height.
+
+One path per evaluation scene is flown at every height (0.2, 0.4, ..., 1.6 m) with the camera
+tilting up and down by 20 deg (:func:`semmatch.sim.make_sweep_trajectories`); every network
+labels the rendered views and is scored against the ground truth with the 2D pixel measures of
+:mod:`semmatch.segment.scores` (mIoU over classes 1..10 and the pixel analogues of the paper's
+Jaccard, Sorensen, Color Acc. and Mean Acc.). Also: the training-curve figure.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterable, Iterator, Mapping, Sequence
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from tqdm.auto import tqdm
+
+from ..geometry import DEFAULT_INTRINSICS, Intrinsics
+from ..io import atomic_path, read_sequence
+from .scores import confusion, scores
+
+__all__ = [
+    "HEIGHTS",
+    "viewpoint_gap",
+    "viewpoint_gap_sequences",
+    "gap_summary",
+    "plot_viewpoint_gap",
+    "plot_training_curves",
+]
+
+#: the paper's camera heights (metres)
+HEIGHTS: tuple[float, ...] = (0.2, 0.4, 0.6, 0.8, 1.0, 1.2, 1.4, 1.6)
+_COLUMNS = ["miou", "pixel_acc", "jaccard", "sorensen", "color_acc", "mean_acc"]
+
+
+def _predict_labels(model, rgb: np.ndarray, depth: np.ndarray) -> np.ndarray:
+    if hasattr(model, "predict_labels_batch"):
+        return model.predict_labels_batch(rgb, depth if getattr(model, "uses_depth", False) else None)
+    return np.stack([np.asarray(model.predict(r)).argmax(-1) for r in rgb]).astype(np.uint8)
+
+
+def _score(models: Mapping, batches: Iterable[tuple[float, str, np.ndarray, np.ndarray, np.ndarray]],
+           per_scene: bool) -> pd.DataFrame:
+    """Accumulate confusion matrices per (model, scene, height) and turn them into rows."""
+    if not models:
+        raise ValueError("viewpoint gap: no models given")
+    conf: dict[tuple[str, str, float], np.ndarray] = {}
+    frames: dict[tuple[str, str, float], int] = {}
+    for height, scene, rgb, depth, labels in batches:
+        for name, model in models.items():
+            pred = _predict_labels(model, rgb, depth)
+            key = (name, scene if per_scene else "all", round(float(height), 3))
+            c = confusion(labels, pred)
+            conf[key] = conf[key] + c if key in conf else c
+            frames[key] = frames.get(key, 0) + len(rgb)
+    rows = []
+    for (name, scene, height), c in conf.items():
+        s = scores(c)
+        rows.append(dict(model=name, scene=scene, height=height, n_frames=frames[(name, scene, height)],
+                         **{k: s[k] for k in _COLUMNS}))
+    return pd.DataFrame(rows).sort_values(["model", "scene", "height"]).reset_index(drop=True)
+
+
+def viewpoint_gap(
+    models: Mapping,
+    scenes: Sequence,
+    *,
+    heights: Sequence[float] = HEIGHTS,
+    n_frames: int = 40,
+    tilt_deg: float = 20.0,
+    intrinsics: Intrinsics | None = None,
+    seed: int = 0,
+    batch_size: int = 8,
+    per_scene: bool = False,
+    progress: bool = True,
+) -> pd.DataFrame:
+    """Accuracy of each network against camera height on (evaluation) scenes.
+
+    Parameters
+    ----------
+    models : mapping name -> Segmenter
+        Networks (anything with ``predict_labels_batch`` or ``predict``).
+    scenes : sequence of Scene
+        Evaluation scenes (their seeds must be disjoint from the training scenes).
+    heights : sequence of float
+        Camera heights in metres (default 0.2, 0.4, ..., 1.6).
+    n_frames : int
+        Frames per (scene, height); the same path at every height.
+    tilt_deg : float
+        Up/down tilt amplitude of the camera.
+    intrinsics : Intrinsics, optional
+        Render camera; default the paper's camera scaled to 320x240.
+    seed : int
+        Trajectory seed (scene ``i`` uses ``seed + i``).
+    batch_size : int
+    per_scene : bool
+        One row per (model, scene, height) instead of pooling the scenes.
+    progress : bool
+
+    Returns
+    -------
+    pandas.DataFrame
+        Columns ``model, scene, height, n_frames, miou, pixel_acc, jaccard, sorensen,
+        color_acc, mean_acc`` (pixel measures over classes 1..10).
+    """
+    from ..sim import Renderer
+    from ..sim.trajectory import make_sweep_trajectories
+
+    if not scenes:
+        raise ValueError("viewpoint_gap: no scenes given")
+    hs = tuple(float(h) for h in heights)
+    if not hs or min(hs) <= 0:
+        raise ValueError(f"heights must be positive, got {heights}")
+    intr = intrinsics or DEFAULT_INTRINSICS.scaled(320, 240)
+
+    def batches() -> Iterator:
+        bar = tqdm(total=len(scenes) * len(hs) * n_frames, desc="viewpoint gap", disable=not progress)
+        for i, scene in enumerate(scenes):
+            sweep = make_sweep_trajectories(scene, hs, n_frames, tilt_deg=tilt_deg, seed=seed + i)
+            renderer = Renderer(scene, intr)
+            for h in hs:
+                poses = np.asarray(sweep[h])
+                for j in range(0, len(poses), batch_size):
+                    rs = [renderer.render(p) for p in poses[j : j + batch_size]]
+                    bar.update(len(rs))
+                    yield (h, scene.name, np.stack([r.rgb for r in rs]), np.stack([r.depth for r in rs]),
+                           np.stack([r.labels for r in rs]))
+        bar.close()
+
+    return _score(models, batches(), per_scene)
+
+
+def viewpoint_gap_sequences(
+    models: Mapping,
+    sweeps: Mapping[float, Sequence[str | os.PathLike]],
+    *,
+    batch_size: int = 8,
+    per_scene: bool = False,
+    progress: bool = True,
+) -> pd.DataFrame:
+    """:func:`viewpoint_gap` on sequence folders written by ``semmatch simulate``.
+
+    Parameters
+    ----------
+    models : mapping name -> Segmenter
+    sweeps : mapping height -> list of sequence folders
+        E.g. ``{0.2: ["data/full/scenes/eval/s1001/h020", ...], ...}``; every frame needs
+        ground-truth labels. The scene name is the folder's parent name.
+    batch_size, per_scene, progress : see :func:`viewpoint_gap`.
+
+    Returns
+    -------
+    pandas.DataFrame
+        As :func:`viewpoint_gap`.
+    """
+
+    def batches() -> Iterator:
+        for h, paths in sweeps.items():
+            for path in tqdm(paths, desc=f"h={h:g} m", disable=not progress, leave=False):
+                seq = read_sequence(path)
+                if not seq.has_labels:
+                    raise ValueError(f"{path}: the sequence has no ground-truth labels")
+                for j in range(0, len(seq), batch_size):
+                    fr = seq[j : j + batch_size]
+                    yield (h, Path(path).parent.name, np.stack([f.rgb for f in fr]),
+                           np.stack([f.depth for f in fr]), np.stack([f.labels for f in fr]))
+
+    return _score(models, batches(), per_scene)
+
+
+def gap_summary(df: pd.DataFrame, *, low: float = 0.2, high: float = 1.6, metric: str = "miou") -> pd.DataFrame:
+    """Per model: ``metric`` at the lowest and highest camera and their difference (the gap)."""
+    pooled = df.groupby(["model", "height"], as_index=False)[metric].mean()
+    piv = pooled.pivot(index="model", columns="height", values=metric)
+    for h in (low, high):
+        if round(h, 3) not in piv.columns:
+            raise ValueError(f"gap_summary: no rows at height {h} m (have {list(piv.columns)})")
+    out = pd.DataFrame({f"{metric}_{low:g}m": piv[round(low, 3)], f"{metric}_{high:g}m": piv[round(high, 3)]})
+    out["gap"] = out.iloc[:, 1] - out.iloc[:, 0]
+    return out.reset_index()
+
+
+def _save(fig, path: str | os.PathLike | None) -> None:
+    if path is not None:
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, dpi=130, bbox_inches="tight")
+
+
+def plot_viewpoint_gap(
+    df: pd.DataFrame,
+    *,
+    metrics: Sequence[str] = ("mean_acc", "miou"),
+    path: str | os.PathLike | None = None,
+):
+    """Figure of the viewpoint gap (paper Fig. 3): each metric against camera height, one line per model.
+
+    Parameters
+    ----------
+    df : DataFrame
+        From :func:`viewpoint_gap` (scenes are averaged).
+    metrics : sequence of str
+        One panel per metric.
+    path : path, optional
+        Also save the figure there (PNG, atomically).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    import matplotlib.pyplot as plt
+
+    names = {"mean_acc": "Mean Acc.", "miou": "mIoU (classes 1..10)", "pixel_acc": "pixel accuracy",
+             "jaccard": "Jaccard", "sorensen": "Sorensen", "color_acc": "Color Acc."}
+    fig, axes = plt.subplots(1, len(metrics), figsize=(4.6 * len(metrics), 3.6), squeeze=False)
+    pooled = df.groupby(["model", "height"], as_index=False)[list(metrics)].mean()
+    for ax, m in zip(axes[0], metrics, strict=True):
+        for model, g in pooled.groupby("model"):
+            ax.plot(g["height"], g[m], marker="o", label=str(model))
+        ax.set_xlabel("camera height [m]")
+        ax.set_ylabel(names.get(m, m))
+        ax.grid(alpha=0.3)
+    axes[0][0].legend(title="network")
+    fig.suptitle("Segmentation accuracy as the camera height changes (tilting +-20 deg)")
+    fig.tight_layout()
+    _save(fig, path)
+    return fig
+
+
+def plot_training_curves(checkpoints: Mapping[str, object], *, path: str | os.PathLike | None = None):
+    """Training loss and validation mIoU against step, one line per network.
+
+    Parameters
+    ----------
+    checkpoints : mapping name -> checkpoint path, Segmenter or history list
+        Histories as stored by :func:`semmatch.segment.train`.
+    path : path, optional
+        Also save the figure there (PNG, atomically).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    import matplotlib.pyplot as plt
+
+    from .predict import load_model
+
+    fig, (a0, a1) = plt.subplots(1, 2, figsize=(9.5, 3.6))
+    for name, src in checkpoints.items():
+        if isinstance(src, str | os.PathLike):
+            src = load_model(src)
+        hist = src if isinstance(src, list) else src.info.get("history", [])
+        if not hist:
+            raise ValueError(f"{name}: no training history")
+        h = pd.DataFrame(hist)
+        a0.plot(h["step"], h["train_loss"], marker=".", label=name)
+        a1.plot(h["step"], h["val_miou"], marker=".", label=name)
+    a0.set(xlabel="step", ylabel="training loss (weighted CE)", yscale="log")
+    a1.set(xlabel="step", ylabel="validation mIoU (classes 1..10)", ylim=(0, 1))
+    for a in (a0, a1):
+        a.grid(alpha=0.3)
+        a.legend()
+    fig.tight_layout()
+    _save(fig, path)
+    return fig

@@ -1,0 +1,237 @@
+"""Segmentation networks: training, checkpoints, prediction, bad input, CLI."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from semmatch.geometry import DEFAULT_INTRINSICS
+from semmatch.io import SequenceWriter, read_image, read_labels_folder, read_sequence
+from semmatch.labels import NUM_CLASSES
+from semmatch.segment import load_model, make_config, predict_sequence, train
+from semmatch.segment.data import Views, class_weights, make_scenes, render_views
+from semmatch.segment.models import ModelConfig, build_network
+from semmatch.segment.predict import Segmenter
+from semmatch.segment.scores import confusion, scores
+
+W, H = 96, 72
+INTR = DEFAULT_INTRINSICS.scaled(W, H)
+
+
+@pytest.fixture(scope="module")
+def views() -> tuple[Views, Views]:
+    """Tiny training (2 scenes) and held-out validation (1 scene) sets from the simulator."""
+    tr = render_views(make_scenes(["living_room", "office"], [11, 12]), [1.4, 1.7], 8, intrinsics=INTR,
+                      seed=0, progress=False)
+    va = render_views(make_scenes(["living_room"], [511]), [1.5], 8, intrinsics=INTR, seed=1, progress=False)
+    return tr, va
+
+
+def _config(tmp, **kw):
+    base = dict(out=str(tmp / "net.pt"), width=W, height=H, kinds=("living_room", "office"), train_seeds=(11, 12),
+                val_seeds=(511,), steps=60, batch_size=6, eval_every=20, lr=5e-3, progress=False)
+    base.update(kw)
+    return make_config("smoke", **base)
+
+
+@pytest.fixture(scope="module")
+def trained(views, tmp_path_factory) -> str:
+    tmp = tmp_path_factory.mktemp("seg")
+    return str(train(_config(tmp), views=views))
+
+
+def test_training_drives_loss_down_and_beats_chance(trained, views):
+    net = load_model(trained)
+    hist = net.info["history"]
+    assert hist[-1]["train_loss"] < 0.7 * hist[0]["train_loss"]
+    _, va = views
+    pred = net.predict_labels_batch(va.rgb)
+    s = scores(confusion(va.labels, pred))
+    present = np.unique(va.labels[va.labels > 0])
+    chance = 1.0 / len(present)  # uniform guessing among the classes that occur
+    assert s["pixel_acc"] > 2 * chance, s
+    assert net.metrics["miou"] > 0 and 0 < net.metrics["pixel_acc"] <= 1
+
+
+def test_checkpoint_contents_and_reload_predicts_identically(trained, views, tmp_path):
+    ckpt = torch.load(trained, weights_only=True)
+    assert ckpt["model"]["arch"] == "compact" and ckpt["categories"][10][1] == "sofa"
+    assert {"miou", "pixel_acc", "per_class_iou"} <= set(ckpt["metrics"])
+    a, b = load_model(trained), load_model(trained)
+    rgb = views[1].rgb[0]
+    pa, pb = a.predict(rgb), b.predict(rgb)
+    assert pa.shape == (H, W, NUM_CLASSES) and pa.dtype == np.float32
+    np.testing.assert_array_equal(pa, pb)
+    np.testing.assert_allclose(pa.sum(-1), 1.0, atol=1e-5)
+    assert (pa >= 0).all()
+
+
+def test_training_is_deterministic(views, tmp_path):
+    tr, va = views
+    small = (tr.subset(np.arange(8)), va.subset(np.arange(2)))
+    p1 = train(_config(tmp_path, out=str(tmp_path / "a.pt"), steps=4, eval_every=4), views=small)
+    p2 = train(_config(tmp_path, out=str(tmp_path / "b.pt"), steps=4, eval_every=4), views=small)
+    s1 = torch.load(p1, weights_only=True)["state_dict"]
+    s2 = torch.load(p2, weights_only=True)["state_dict"]
+    assert all(torch.equal(s1[k], s2[k]) for k in s1)
+    p3 = train(_config(tmp_path, out=str(tmp_path / "c.pt"), steps=4, eval_every=4, seed=1), views=small)
+    s3 = torch.load(p3, weights_only=True)["state_dict"]
+    assert not all(torch.equal(s1[k], s3[k]) for k in s1)
+
+
+def test_other_sizes_are_resized_in_and_restored_out(trained, views):
+    net = load_model(trained)
+    rgb = views[1].rgb[0]
+    big = np.repeat(np.repeat(rgb, 2, axis=0), 2, axis=1)  # 2x the network size
+    p = net.predict(big)
+    assert p.shape == (2 * H, 2 * W, NUM_CLASSES)
+    np.testing.assert_allclose(p.sum(-1), 1.0, atol=1e-5)
+    # same picture at twice the size: labels agree with the native prediction almost everywhere
+    small_lab = net.predict_labels(rgb)
+    assert (p.argmax(-1)[::2, ::2] == small_lab).mean() > 0.9
+    # float input in [0, 1] is the documented equivalent of uint8
+    np.testing.assert_allclose(net.predict(rgb.astype(np.float32) / 255), net.predict(rgb), atol=1e-5)
+
+
+def test_bad_inputs_raise_clear_errors(trained, views):
+    net = load_model(trained)
+    rgb = views[1].rgb[0]
+    bad = rgb.astype(np.float32) / 255
+    bad[3, 4, 1] = np.nan
+    with pytest.raises(ValueError, match="NaN"):
+        net.predict(bad)
+    with pytest.raises(ValueError, match="dtype uint16"):
+        net.predict(rgb.astype(np.uint16))
+    with pytest.raises(ValueError, match=r"\[0, 1\]"):
+        net.predict(rgb.astype(np.float32))
+    with pytest.raises(ValueError, match=r"\(H,W,3\)"):
+        net.predict(rgb[..., 0])
+
+
+def test_checkpoints_for_another_table_or_architecture_are_refused(trained, tmp_path):
+    ckpt = torch.load(trained, weights_only=True)
+    bad = dict(ckpt, categories=[list(c) for c in ckpt["categories"]])
+    bad["categories"][5][1] = "desk"
+    torch.save(bad, tmp_path / "table.pt")
+    with pytest.raises(ValueError, match="another category table.*id 5"):
+        load_model(tmp_path / "table.pt")
+    with pytest.raises(ValueError, match="holds a 'compact' network, not 'strong'"):
+        load_model(trained, arch="strong")
+    wrong = dict(ckpt, model=dict(ckpt["model"], arch="strong"))
+    torch.save(wrong, tmp_path / "arch.pt")
+    with pytest.raises(ValueError, match="weights do not fit the 'strong' architecture"):
+        load_model(tmp_path / "arch.pt")
+    (tmp_path / "junk.pt").write_bytes(b"not a checkpoint")
+    with pytest.raises(ValueError, match="not a readable PyTorch checkpoint"):
+        load_model(tmp_path / "junk.pt")
+    with pytest.raises(FileNotFoundError):
+        load_model(tmp_path / "missing.pt")
+
+
+def test_predict_sequence_writes_labels_and_probabilities(trained, views, tmp_path):
+    _, va = views
+    with SequenceWriter(tmp_path / "seq", INTR) as w:
+        for i in range(3):
+            w.add(va.rgb[i], va.depth[i], np.eye(4), labels=va.labels[i])
+    net = load_model(trained)
+    out = predict_sequence(net, tmp_path / "seq", tmp_path / "pred", probs=True, progress=False)
+    files = read_labels_folder(out)
+    assert [f.name for f in files] == ["000000.png", "000001.png", "000002.png"]
+    lab = read_image(files[1])
+    assert lab.dtype == np.uint8 and lab.shape == (H, W)
+    np.testing.assert_array_equal(lab, net.predict_labels(va.rgb[1]))
+    p = np.load(out / "probs" / "000001.npy")
+    assert p.shape == (H, W, NUM_CLASSES)
+    # the labels folder reads back through the contract's reader
+    assert read_sequence(tmp_path / "seq", labels=out)[2].labels.shape == (H, W)
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no temporary leftovers
+
+
+def test_both_architectures_give_probabilities_with_depth():
+    for arch in ("compact", "strong"):
+        cfg = ModelConfig(arch=arch, use_depth=True, width=64, height=48)
+        torch.manual_seed(0)
+        seg = Segmenter(build_network(cfg), cfg, device="cpu")
+        rgb = np.random.default_rng(0).integers(0, 256, (50, 70, 3), dtype=np.uint8)
+        depth = np.full((50, 70), 2.0, np.float32)
+        depth[0, 0] = np.nan  # documented: reads as no measurement
+        p = seg.predict(rgb, depth)
+        assert p.shape == (50, 70, NUM_CLASSES)
+        np.testing.assert_allclose(p.sum(-1), 1.0, atol=1e-5)
+        with pytest.raises(ValueError, match="uses depth"):
+            seg.predict(rgb)
+        with pytest.raises(ValueError, match="float metres"):
+            seg.predict(rgb, np.full((50, 70), 2000, np.uint16))
+
+
+def test_class_weights_favour_rare_classes():
+    lab = np.zeros((10, 10), np.uint8)
+    lab[:8] = 1
+    lab[8:, :] = 2
+    lab[9, 9] = 4
+    w = class_weights(lab)
+    assert w[0] == 0 and w[3] == 0
+    assert w[4] > w[2] > w[1]
+
+
+def test_config_validation():
+    with pytest.raises(ValueError, match="train and eval scene seeds overlap: \\[1001\\]"):
+        make_config("smoke", train_seeds=(1, 1001))
+    with pytest.raises(ValueError, match="unknown training profile"):
+        make_config("huge")
+    with pytest.raises(ValueError, match="unknown architecture"):
+        make_config("smoke", arch="resnet")
+
+
+def test_cli_predict_with_the_noisy_oracle(views, tmp_path):
+    from semmatch.cli import main
+
+    _, va = views
+    with SequenceWriter(tmp_path / "seq", INTR) as w:
+        for i in range(2):
+            w.add(va.rgb[i], va.depth[i], np.eye(4), labels=va.labels[i])
+    assert main(["predict", str(tmp_path / "seq"), "--model", "noisy:0.25", "--out", str(tmp_path / "lab"),
+                 "--quiet"]) == 0
+    lab = read_image(tmp_path / "lab" / "000001.png")
+    gt = va.labels[1]
+    assert abs((lab != gt)[gt > 0].mean() - 0.25) < 1e-3
+    assert main(["predict", str(tmp_path / "seq"), "--model", "noisy:x", "--out", str(tmp_path / "l2")]) == 2
+
+
+def test_cli_train_and_bench(tmp_path, capsys):
+    import json
+
+    from semmatch.cli import main
+
+    out = tmp_path / "m.pt"
+    assert main(["train", "--profile", "smoke", "--arch", "strong", "--out", str(out), "--steps", "2",
+                 "--width", "64", "--height", "48", "--kinds", "living_room", "--train-seeds", "11",
+                 "--val-seeds", "511", "--quiet"]) == 0
+    assert "val mIoU" in capsys.readouterr().out
+    assert load_model(out, arch="strong").config.width == 64
+    assert main(["train", "--out", str(out), "--train-seeds", "1001"]) == 2  # overlaps the eval scenes
+    assert "overlap" in capsys.readouterr().err
+    assert main(["bench", "segment", "--json", "--frames", "1", "--model", str(out)]) == 0
+    res = json.loads(capsys.readouterr().out)
+    assert res["networks"]["m"]["fps_320x240"] > 0 and res["networks"]["m"]["fps_640x480"] > 0
+
+
+def test_viewpoint_gap_table_and_figure(trained, tmp_path):
+    from semmatch.segment.viewpoint import (
+        gap_summary,
+        plot_training_curves,
+        plot_viewpoint_gap,
+        viewpoint_gap,
+    )
+
+    net = load_model(trained)
+    df = viewpoint_gap({"tiny": net}, make_scenes(["living_room"], [1001]), heights=(0.2, 1.6), n_frames=2,
+                       intrinsics=INTR, progress=False)
+    assert list(df["height"]) == [0.2, 1.6] and (df["n_frames"] == 2).all()
+    assert ((df[["miou", "pixel_acc", "mean_acc"]] >= 0) & (df[["miou", "pixel_acc", "mean_acc"]] <= 1)).all().all()
+    g = gap_summary(df)
+    assert np.isclose(g["gap"].iloc[0], df["miou"].iloc[1] - df["miou"].iloc[0])
+    plot_viewpoint_gap(df, path=tmp_path / "fig3.png")
+    plot_training_curves({"tiny": trained}, path=tmp_path / "curves.png")
+    assert (tmp_path / "fig3.png").stat().st_size > 1000 and (tmp_path / "curves.png").stat().st_size > 1000
