@@ -1,7 +1,42 @@
 """The simulator: scenes (procedural or from a semantic PLY mesh), trajectories, a renderer on
-Open3D's ``RaycastingScene`` and sensor noise."""
+Open3D's ``RaycastingScene`` and sensor noise.
 
+>>> from semmatch.sim import generate_scene, make_trajectory, simulate_sequence
+>>> scene = generate_scene("living_room", seed=0)
+>>> poses = make_trajectory(scene, 1.6, 300, kind="upper")       # doctest: +SKIP
+>>> simulate_sequence(scene, poses, "data/tmp/upper")             # doctest: +SKIP
+"""
+
+from .noise import NoiseConfig
+from .procedural import SCENE_KINDS, box_room, generate_scene
 from .render import Renderer, RenderResult
 from .scene import Scene
+from .sequence import DEFAULT_SWEEP, generate_dataset, simulate_sequence, sweep_name
+from .trajectory import (
+    FreeSpace,
+    camera_elevation_deg,
+    free_space,
+    make_sweep_trajectories,
+    make_trajectory,
+    scene_levels,
+)
 
-__all__ = ["Scene", "Renderer", "RenderResult"]
+__all__ = [
+    "Scene",
+    "Renderer",
+    "RenderResult",
+    "SCENE_KINDS",
+    "generate_scene",
+    "box_room",
+    "FreeSpace",
+    "free_space",
+    "scene_levels",
+    "make_trajectory",
+    "make_sweep_trajectories",
+    "camera_elevation_deg",
+    "NoiseConfig",
+    "simulate_sequence",
+    "generate_dataset",
+    "sweep_name",
+    "DEFAULT_SWEEP",
+]

@@ -1,0 +1,280 @@
+"""Render trajectories into sequence folders and generate the default data set.
+
+Files of a simulated sequence (DESIGN.md §3 plus extras)::
+
+    intrinsics.json, poses.txt, rgb/, depth/, labels/   the data contract
+    instances/NNNNNN.png   16-bit instance ids (ground truth)
+    poses_gt.txt           the true poses (TUM)
+    meta.json              scene, trajectory and noise parameters
+
+For a noise-free sequence ``poses.txt`` and ``poses_gt.txt`` are equal. With pose noise,
+``poses.txt`` holds the *estimated* (drifting, jittered) poses, what a real recording gives,
+while RGB, depth, labels and instances are rendered from the *true* poses of
+``poses_gt.txt``: labels stay aligned with the images, and a method using ``poses.txt``
+sees realistic pose error.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+from tqdm.auto import tqdm
+
+from ..geometry import DEFAULT_INTRINSICS, Intrinsics
+from ..io import SequenceWriter, is_sequence, write_json, write_tum
+from .noise import NoiseConfig, estimated_poses, exposure_gains, noisy_depth, noisy_rgb
+from .procedural import SCENE_KINDS, generate_scene
+from .render import Renderer
+from .scene import Scene
+from .trajectory import make_sweep_trajectories, make_trajectory
+
+__all__ = ["simulate_sequence", "generate_dataset", "sweep_name", "DEFAULT_SWEEP"]
+
+DEFAULT_SWEEP = (0.2, 0.4, 0.6, 0.8, 1.0, 1.2, 1.4, 1.6)
+
+
+def sweep_name(height: float) -> str:
+    """Folder name of a height-sweep sequence: 0.2 m -> ``h020``."""
+    return f"h{round(height * 100):03d}"
+
+
+def simulate_sequence(
+    scene: Scene,
+    poses: np.ndarray,
+    out_dir: str | os.PathLike,
+    *,
+    intrinsics: Intrinsics = DEFAULT_INTRINSICS,
+    noise: NoiseConfig | None = None,
+    overwrite: bool = False,
+    progress: bool = True,
+    renderer: Renderer | None = None,
+    meta: dict | None = None,
+) -> Path:
+    """Render ``poses`` of ``scene`` and stream the frames into a sequence folder.
+
+    Frames are written one by one (memory does not grow with the number of frames) into a
+    hidden temporary folder that is renamed to ``out_dir`` only when complete
+    (:class:`semmatch.io.SequenceWriter`): an interrupted run leaves nothing that reads as a
+    sequence.
+
+    Parameters
+    ----------
+    scene : Scene
+    poses : ndarray (N,4,4)
+        True ``T_world_camera`` poses.
+    out_dir : path
+        The sequence folder to create.
+    intrinsics : Intrinsics
+    noise : NoiseConfig, optional
+        Sensor noise; None or an all-zero config renders clean frames.
+    overwrite : bool
+        Replace an existing sequence at ``out_dir``.
+    progress : bool
+        Show a tqdm progress bar.
+    renderer : Renderer, optional
+        Reuse a renderer of ``scene`` (must have the same intrinsics).
+    meta : dict, optional
+        Extra entries for ``meta.json``.
+
+    Returns
+    -------
+    Path
+        The sequence folder.
+
+    Raises
+    ------
+    FileExistsError
+        ``out_dir`` holds another sequence or other files and ``overwrite`` is False.
+    ValueError
+        Poses that are not (N,4,4) rigid transforms, or a renderer with other intrinsics.
+    """
+    poses = np.asarray(poses, dtype=np.float64)
+    out_dir = Path(out_dir)
+    if poses.ndim != 3 or poses.shape[1:] != (4, 4) or len(poses) == 0:
+        raise ValueError(f"{out_dir}: poses must have shape (N, 4, 4) with N >= 1, got {poses.shape}")
+    if renderer is None:
+        renderer = Renderer(scene, intrinsics)
+    elif renderer.intrinsics != intrinsics:
+        raise ValueError(f"{out_dir}: the renderer's intrinsics differ from the requested ones")
+    cfg = noise or NoiseConfig()
+    rng = np.random.default_rng(cfg.seed)
+    est = estimated_poses(poses, cfg, rng)
+    gains = exposure_gains(len(poses), cfg, rng)
+    info = {
+        "scene": scene.name,
+        "scene_meta": {k: v for k, v in scene.meta.items() if k in ("kind", "seed", "ceiling_height", "floor_z")},
+        "frames": len(poses),
+        "noise": cfg.to_dict() if cfg.enabled else None,
+        "poses": "poses.txt = estimated poses" + (" (noisy)" if cfg.pose_noise else " (= poses_gt.txt)"),
+        **(meta or {}),
+    }
+    with SequenceWriter(out_dir, intrinsics, overwrite=overwrite) as w:
+        for i in tqdm(range(len(poses)), desc=out_dir.name, disable=not progress, leave=False):
+            try:
+                r = renderer.render(poses[i])
+            except ValueError as e:
+                raise ValueError(f"{out_dir}: frame {i}: {e}") from None
+            depth, rgb = r.depth, r.rgb
+            if cfg.enabled:
+                depth = noisy_depth(depth, cfg, rng)
+                rgb = noisy_rgb(rgb, cfg, rng, float(gains[i]))
+            inst = np.clip(r.instances, 0, 65535).astype(np.uint16)
+            w.add(rgb, depth, est[i], labels=r.labels, instances=inst)
+        w.write_extra("poses_gt.txt", _tum_text(poses))
+        w.write_extra("meta.json", json.dumps(info, indent=2) + "\n")
+    return out_dir
+
+
+def _tum_text(poses: np.ndarray) -> str:
+    """TUM text of poses (through :func:`semmatch.io.write_tum`)."""
+    with tempfile.TemporaryDirectory() as d:
+        write_tum(Path(d) / "p.txt", np.arange(len(poses), dtype=np.float64), poses)
+        return (Path(d) / "p.txt").read_text()
+
+
+def _check_seeds(train_seeds: Sequence[int], eval_seeds: Sequence[int]) -> None:
+    both = sorted(set(map(int, train_seeds)) & set(map(int, eval_seeds)))
+    if both:
+        raise ValueError(f"train and eval seeds must be disjoint; both hold {both}")
+
+
+def generate_dataset(
+    root: str | os.PathLike,
+    *,
+    train_seeds: Sequence[int] = (0, 1),
+    eval_seeds: Sequence[int] = (100,),
+    kinds: Sequence[str] = ("living_room", "bedroom", "office"),
+    n_frames_upper: int = 300,
+    n_frames_lower: int = 300,
+    n_frames_train: int | None = None,
+    heights_sweep: Sequence[float] | None = DEFAULT_SWEEP,
+    n_frames_sweep: int = 100,
+    upper_height: float = 1.6,
+    lower_height: float = 0.2,
+    tilt_deg: float = 20.0,
+    noise: NoiseConfig | dict | None = None,
+    intrinsics: Intrinsics = DEFAULT_INTRINSICS,
+    progress: bool = True,
+) -> dict:
+    """Write the generated data layout of DESIGN.md §3 (resumable).
+
+    ::
+
+        <root>/<split>/<scene_id>/scene.ply         GT semantic mesh (split: train | eval)
+        <root>/<split>/<scene_id>/upper/            sequence at ``upper_height``
+        <root>/eval/<scene_id>/lower/               sequence at ``lower_height`` (another path)
+        <root>/eval/<scene_id>/h020 .. h160/        height sweep: one path at every height
+        <root>/eval/<scene_id>/upper_noisy/, lower_noisy/   with ``noise``: the same paths,
+                                                    sensor noise and estimated poses
+
+    ``<scene_id>`` is ``<kind>_<seed:04d>``. A scene file or sequence already complete is
+    skipped, so an interrupted run resumes where it stopped.
+
+    Parameters
+    ----------
+    root : path
+        Usually ``data/scenes``.
+    train_seeds, eval_seeds : sequences of int
+        Scene seeds per split; they must be disjoint.
+    kinds : sequence of str
+        Scene kinds (see :data:`semmatch.sim.procedural.SCENE_KINDS`).
+    n_frames_upper, n_frames_lower, n_frames_train, n_frames_sweep : int
+        Frames per sequence (``n_frames_train`` defaults to ``n_frames_upper``).
+    heights_sweep : sequence of float or None
+        Heights (m) of the sweep sequences of eval scenes; None = no sweep.
+    upper_height, lower_height, tilt_deg : float
+    noise : NoiseConfig or dict, optional
+        Also write noisy ("real-like") copies of the eval upper/lower sequences.
+    intrinsics : Intrinsics
+    progress : bool
+
+    Returns
+    -------
+    dict
+        ``{"written": [paths], "skipped": [paths]}``. ``<root>/manifest.json`` lists the
+        scene ids per split and the parameters.
+
+    Raises
+    ------
+    ValueError
+        Overlapping seeds, an unknown kind, or bad frame counts.
+    """
+    _check_seeds(train_seeds, eval_seeds)
+    for k in kinds:
+        if k not in SCENE_KINDS:
+            raise ValueError(f"unknown scene kind {k!r}; valid: {', '.join(SCENE_KINDS)}")
+    for name, n in (("n_frames_upper", n_frames_upper), ("n_frames_lower", n_frames_lower),
+                    ("n_frames_sweep", n_frames_sweep)):
+        if int(n) < 1:
+            raise ValueError(f"{name} must be >= 1, got {n}")
+    if isinstance(noise, dict):
+        noise = NoiseConfig.from_dict(noise)
+    n_train = int(n_frames_train or n_frames_upper)
+    root = Path(root)
+    written: list[str] = []
+    skipped: list[str] = []
+    jobs = [("train", int(s), k) for s in train_seeds for k in kinds]
+    jobs += [("eval", int(s), k) for s in eval_seeds for k in kinds]
+    for split, seed, kind in tqdm(jobs, desc="scenes", disable=not progress):
+        scene = generate_scene(kind, seed)
+        sdir = root / split / scene.name
+        ply = sdir / "scene.ply"
+        if ply.is_file():
+            skipped.append(str(ply))
+        else:
+            scene.save(ply)
+            write_json(sdir / "scene.json", scene.meta)
+            written.append(str(ply))
+        # (folder, height, frames, trajectory kind, noise)
+        todo: list[tuple[str, float, int, str, NoiseConfig | None]] = []
+        if split == "train":
+            todo.append(("upper", upper_height, n_train, "upper", None))
+        else:
+            todo += [("upper", upper_height, int(n_frames_upper), "upper", None),
+                     ("lower", lower_height, int(n_frames_lower), "lower", None)]
+            if noise is not None and noise.enabled:
+                todo += [("upper_noisy", upper_height, int(n_frames_upper), "upper", noise),
+                         ("lower_noisy", lower_height, int(n_frames_lower), "lower", noise)]
+        pending = [t for t in todo if not is_sequence(sdir / t[0])]
+        skipped += [str(sdir / t[0]) for t in todo if is_sequence(sdir / t[0])]
+        sweep = {}
+        if split == "eval" and heights_sweep:
+            names = {sweep_name(h): float(h) for h in heights_sweep}
+            missing = [n for n in names if not is_sequence(sdir / n)]
+            skipped += [str(sdir / n) for n in names if n not in missing]
+            if missing:
+                traj = make_sweep_trajectories(scene, tuple(names.values()), int(n_frames_sweep),
+                                               tilt_deg=tilt_deg, seed=seed)
+                sweep = {n: traj[names[n]] for n in missing}
+        if not pending and not sweep:
+            continue
+        renderer = Renderer(scene, intrinsics)
+        for name, height, n, tkind, cfg in pending:
+            poses = make_trajectory(scene, height, n, tilt_deg=tilt_deg, seed=seed, kind=tkind)
+            simulate_sequence(scene, poses, sdir / name, intrinsics=intrinsics, noise=cfg, overwrite=True,
+                              progress=progress, renderer=renderer,
+                              meta={"trajectory": name, "seed": seed, "tilt_deg": tilt_deg})
+            written.append(str(sdir / name))
+        for name, poses in sweep.items():
+            simulate_sequence(scene, poses, sdir / name, intrinsics=intrinsics, overwrite=True,
+                              progress=progress, renderer=renderer,
+                              meta={"trajectory": name, "seed": seed, "tilt_deg": tilt_deg,
+                                    "height": float(poses[0, 2, 3])})
+            written.append(str(sdir / name))
+    manifest = {"written": written, "skipped": skipped}
+    write_json(root / "manifest.json", {
+        "train": sorted({f"{k}_{int(s):04d}" for s in train_seeds for k in kinds}),
+        "eval": sorted({f"{k}_{int(s):04d}" for s in eval_seeds for k in kinds}),
+        "params": {"n_frames_upper": n_frames_upper, "n_frames_lower": n_frames_lower,
+                   "n_frames_train": n_train, "heights_sweep": list(heights_sweep or []),
+                   "n_frames_sweep": n_frames_sweep, "upper_height": upper_height,
+                   "lower_height": lower_height, "tilt_deg": tilt_deg,
+                   "noise": noise.to_dict() if noise is not None else None,
+                   "intrinsics": intrinsics.to_dict()},
+    })
+    return manifest

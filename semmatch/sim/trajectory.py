@@ -1,0 +1,412 @@
+"""Camera trajectories through the free space of a scene at a given height.
+
+The carrier of the camera (a person for the upper view, a robot for the lower one) occupies
+the vertical column under the camera, so a floor cell is free at height ``h`` when no
+obstacle (anything but floor and ceiling) lies within ``margin`` of it between the floor
+and ``h + 0.1`` m, the cell is inside the scene (a ray down hits the mesh) and the ceiling
+is above the camera. The path visits waypoints spread over the free space (farthest-point
+sampling), joins them by least-cost grid paths that keep away from obstacles
+(:class:`skimage.graph.MCP_Geometric`), is smoothed and resampled to ``n_frames``. The
+camera looks along the path with a slow side-to-side sweep and tilts periodically by
+``±tilt_deg`` (paper §4.2).
+"""
+
+from __future__ import annotations
+
+import zlib
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..labels import id_of
+from .scene import Scene
+
+__all__ = [
+    "FreeSpace",
+    "scene_levels",
+    "free_space",
+    "make_trajectory",
+    "make_sweep_trajectories",
+    "camera_elevation_deg",
+]
+
+_FLOOR, _CEILING = id_of("floor"), id_of("ceiling")
+
+
+@dataclass
+class FreeSpace:
+    """A floor grid of free cells.
+
+    Attributes
+    ----------
+    free : bool (ny, nx)
+        Cells where the camera may be (largest connected free region).
+    clearance : float (ny, nx)
+        Distance (m) from each cell centre to the nearest obstacle cell.
+    origin : float (2,)
+        World ``(x, y)`` of the centre of cell ``[0, 0]``.
+    resolution : float
+        Cell size (m).
+    floor_z, ceiling_z : float
+        World heights of the floor and the ceiling.
+    """
+
+    free: np.ndarray
+    clearance: np.ndarray
+    origin: np.ndarray
+    resolution: float
+    floor_z: float
+    ceiling_z: float
+
+    def cell_of(self, xy: np.ndarray) -> np.ndarray:
+        """Integer ``(row, col)`` cells of world ``(x, y)`` points, (N,2)."""
+        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        rc = np.rint((xy - self.origin) / self.resolution).astype(np.int64)[:, ::-1]
+        return rc
+
+    def clearance_at(self, xy: np.ndarray) -> np.ndarray:
+        """Clearance (m) at world points; 0 outside the grid or outside free space."""
+        rc = self.cell_of(xy)
+        ok = (rc[:, 0] >= 0) & (rc[:, 0] < self.free.shape[0]) & (rc[:, 1] >= 0) & (rc[:, 1] < self.free.shape[1])
+        out = np.zeros(len(rc))
+        r, c = rc[ok, 0], rc[ok, 1]
+        out[ok] = np.where(self.free[r, c], self.clearance[r, c], 0.0)
+        return out
+
+    def xy_of(self, rc: np.ndarray) -> np.ndarray:
+        """World ``(x, y)`` of cells ``(row, col)``."""
+        rc = np.asarray(rc, dtype=np.float64).reshape(-1, 2)
+        return rc[:, ::-1] * self.resolution + self.origin
+
+
+def scene_levels(scene: Scene) -> tuple[float, float]:
+    """World heights ``(floor_z, ceiling_z)`` of a scene.
+
+    From ``scene.meta`` (``floor_z``, ``ceiling_height``) when present, otherwise the median
+    height of the floor / ceiling triangles, otherwise the scene bounds.
+    """
+    lo, hi = scene.bounds
+    cz = scene.vertices[scene.triangles].mean(axis=1)[:, 2]
+    if "floor_z" in scene.meta:
+        floor = float(scene.meta["floor_z"])
+    else:
+        m = scene.labels == _FLOOR
+        floor = float(np.median(cz[m])) if m.any() else float(lo[2])
+    if "ceiling_height" in scene.meta:
+        ceiling = floor + float(scene.meta["ceiling_height"])
+    else:
+        m = scene.labels == _CEILING
+        ceiling = float(np.median(cz[m])) if m.any() else float(hi[2])
+    return floor, ceiling
+
+
+def _sample_surface(scene: Scene, mask: np.ndarray, density: float, rng: np.random.Generator) -> np.ndarray:
+    """Points on the triangles selected by ``mask``, about ``density`` per m² (at least the corners)."""
+    v = scene.vertices[scene.triangles[mask]].astype(np.float64)
+    if len(v) == 0:
+        return np.zeros((0, 3))
+    area = 0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
+    n = np.floor(area * density + rng.random(len(v))).astype(np.int64)
+    tri = np.repeat(np.arange(len(v)), n)
+    r1, r2 = rng.random(len(tri)), rng.random(len(tri))
+    s = np.sqrt(r1)
+    a, b, c = 1 - s, s * (1 - r2), s * r2
+    pts = a[:, None] * v[tri, 0] + b[:, None] * v[tri, 1] + c[:, None] * v[tri, 2]
+    edges = np.concatenate([0.5 * (v[:, 0] + v[:, 1]), 0.5 * (v[:, 1] + v[:, 2]), 0.5 * (v[:, 0] + v[:, 2])])
+    return np.concatenate([pts, v.reshape(-1, 3), edges])
+
+
+def free_space(
+    scene: Scene,
+    height: float,
+    *,
+    margin: float = 0.3,
+    resolution: float = 0.05,
+) -> FreeSpace:
+    """The floor cells where a camera carried at ``height`` above the floor may be.
+
+    A cell is inside the scene when a ray down from the camera hits the mesh (gaps up to
+    ~0.5 m closed, enclosed holes filled: reconstructed floors have holes).
+
+    Parameters
+    ----------
+    scene : Scene
+    height : float
+        Camera height above the floor (m).
+    margin : float
+        Smallest distance (m) kept from obstacles and walls.
+    resolution : float
+        Grid cell size (m).
+
+    Returns
+    -------
+    FreeSpace
+
+    Raises
+    ------
+    ValueError
+        ``height <= 0``, a camera height at or above the ceiling, or no free cell at all.
+    """
+    import open3d as o3d
+    from scipy import ndimage
+
+    if not np.isfinite(height) or height <= 0:
+        raise ValueError(f"scene {scene.name!r}: camera height must be > 0 m, got {height}")
+    floor_z, ceiling_z = scene_levels(scene)
+    if floor_z + height >= ceiling_z - 0.05:
+        raise ValueError(
+            f"scene {scene.name!r}: camera height {height:.2f} m is above the ceiling "
+            f"({ceiling_z - floor_z:.2f} m above the floor)"
+        )
+    lo, hi = scene.bounds
+    origin = lo[:2].astype(np.float64) + resolution / 2
+    nx = int(np.ceil((hi[0] - lo[0]) / resolution)) + 1
+    ny = int(np.ceil((hi[1] - lo[1]) / resolution)) + 1
+    rng = np.random.default_rng(0)
+    # obstacles in the carrier's column: anything but floor/ceiling between floor+8 cm and h+10 cm
+    obst = (scene.labels != _FLOOR) & (scene.labels != _CEILING)
+    pts = _sample_surface(scene, obst, density=(2.0 / resolution) ** 2, rng=rng)
+    band = (pts[:, 2] > floor_z + 0.08) & (pts[:, 2] < floor_z + height + 0.1)
+    occ = np.zeros((ny, nx), dtype=bool)
+    rc = np.floor((pts[band, :2] - lo[:2]) / resolution).astype(np.int64)
+    rc = np.clip(rc, 0, [nx - 1, ny - 1])
+    occ[rc[:, 1], rc[:, 0]] = True
+    # inside: a ray down from the camera hits the floor (holes in the floor are filled);
+    # the ceiling (or anything) above must leave room for the camera
+    gy, gx = np.mgrid[0:ny, 0:nx]
+    xy = np.stack([gx.ravel(), gy.ravel()], axis=1) * resolution + origin
+    z = floor_z + height
+    rc_scene = o3d.t.geometry.RaycastingScene()
+    rc_scene.add_triangles(o3d.core.Tensor(scene.vertices), o3d.core.Tensor(scene.triangles.astype(np.uint32)))
+    o = np.concatenate([xy, np.full((len(xy), 1), z)], axis=1).astype(np.float32)
+    down = np.concatenate([o, np.tile(np.float32([0, 0, -1]), (len(o), 1))], axis=1)
+    up = np.concatenate([o, np.tile(np.float32([0, 0, 1]), (len(o), 1))], axis=1)
+    ans_d = rc_scene.cast_rays(o3d.core.Tensor(down))
+    ans_u = rc_scene.cast_rays(o3d.core.Tensor(up))
+    td, tu = ans_d["t_hit"].numpy(), ans_u["t_hit"].numpy()
+    # reconstructed meshes have holes in the floor: close gaps up to ~0.5 m, fill enclosed ones
+    below = np.isfinite(td).reshape(ny, nx)
+    k = max(1, int(round(0.25 / resolution)))
+    below = ndimage.binary_closing(np.pad(below, k), structure=np.ones((2 * k + 1, 2 * k + 1)))[k:-k, k:-k]
+    inside = ndimage.binary_fill_holes(below)
+    headroom = (~np.isfinite(tu) | (tu > 0.05)).reshape(ny, nx)
+    blocked = occ | ~inside
+    clearance = ndimage.distance_transform_edt(~blocked) * resolution
+    free = inside & headroom & (clearance >= margin)
+    lab, n = ndimage.label(free)
+    if n == 0:
+        raise ValueError(
+            f"scene {scene.name!r}: no free space at camera height {height:.2f} m with a "
+            f"{margin:.2f} m margin"
+        )
+    sizes = ndimage.sum(free, lab, index=np.arange(1, n + 1))
+    free = lab == (1 + int(np.argmax(sizes)))
+    return FreeSpace(free, clearance, origin, float(resolution), floor_z, ceiling_z)
+
+
+def _waypoints(fs: FreeSpace, rng: np.random.Generator, spacing: float) -> np.ndarray:
+    """Farthest-point sampled free cells, ordered as a greedy tour from a random start."""
+    cells = np.argwhere(fs.free)
+    area = len(cells) * fs.resolution**2
+    k = int(np.clip(round(area / spacing**2), 5, 30))
+    # prefer cells with room around them
+    cl = fs.clearance[cells[:, 0], cells[:, 1]]
+    cand = cells[cl >= np.quantile(cl, 0.3)]
+    chosen = [cand[rng.integers(len(cand))]]
+    d = np.linalg.norm(cand - chosen[0], axis=1)
+    for _ in range(k - 1):
+        nxt = cand[int(np.argmax(d))]
+        chosen.append(nxt)
+        d = np.minimum(d, np.linalg.norm(cand - nxt, axis=1))
+    pts = np.asarray(chosen)
+    order = [0]
+    left = set(range(1, len(pts)))
+    while left:
+        last = pts[order[-1]]
+        j = min(left, key=lambda i: float(np.linalg.norm(pts[i] - last)))
+        order.append(j)
+        left.remove(j)
+    return pts[order]
+
+
+def _grid_path(fs: FreeSpace, waypoints: np.ndarray) -> np.ndarray:
+    from skimage.graph import MCP_Geometric
+
+    cost = np.where(fs.free, 1.0 + 4.0 * np.exp(-fs.clearance / 0.35), np.inf)
+    mcp = MCP_Geometric(cost, fully_connected=True)
+    path = [waypoints[0]]
+    for a, b in zip(waypoints[:-1], waypoints[1:]):
+        mcp.find_costs([tuple(a)], [tuple(b)])
+        seg = np.asarray(mcp.traceback(tuple(b)))
+        path.extend(seg[1:])
+    return np.asarray(path, dtype=np.float64)
+
+
+def _smooth_path(fs: FreeSpace, xy: np.ndarray, margin: float) -> np.ndarray:
+    """Resample to 2 cm steps and smooth as much as the free space allows."""
+    from scipy.ndimage import gaussian_filter1d
+
+    seg = np.linalg.norm(np.diff(xy, axis=0), axis=1)
+    s = np.concatenate([[0], np.cumsum(seg)])
+    if s[-1] < 1e-6:
+        return xy[:1]
+    n = max(2, int(s[-1] / 0.02))
+    si = np.linspace(0, s[-1], n)
+    raw = np.stack([np.interp(si, s, xy[:, 0]), np.interp(si, s, xy[:, 1])], axis=1)
+    for sigma_m in (0.5, 0.3, 0.15, 0.06):
+        sm = gaussian_filter1d(raw, sigma=sigma_m / 0.02, axis=0, mode="nearest")
+        if (fs.clearance_at(sm) >= 0.8 * margin).all():
+            return sm
+    return raw
+
+
+def _resample(xy: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    seg = np.linalg.norm(np.diff(xy, axis=0), axis=1)
+    s = np.concatenate([[0], np.cumsum(seg)])
+    si = np.linspace(0, s[-1], n)
+    out = np.stack([np.interp(si, s, xy[:, 0]), np.interp(si, s, xy[:, 1])], axis=1)
+    return out, si
+
+
+def camera_elevation_deg(poses: np.ndarray) -> np.ndarray:
+    """Elevation (degrees, + = up) of the optical axis of poses (N,4,4)."""
+    z = np.asarray(poses)[:, :3, 2]
+    return np.degrees(np.arcsin(np.clip(z[:, 2], -1, 1)))
+
+
+def _kind_seed(kind: str) -> int:
+    return zlib.crc32(kind.encode()) & 0x7FFFFFFF
+
+
+def make_trajectory(
+    scene: Scene,
+    height: float,
+    n_frames: int,
+    *,
+    tilt_deg: float = 20.0,
+    tilt_period: int = 60,
+    seed: int = 0,
+    kind: str = "upper",
+    margin: float = 0.3,
+    spacing: float = 1.2,
+    plan_height: float | None = None,
+    free: FreeSpace | None = None,
+    max_step: float | None = 0.15,
+) -> np.ndarray:
+    """A smooth, collision-free camera trajectory at ``height`` above the floor.
+
+    Parameters
+    ----------
+    scene : Scene
+    height : float
+        Camera height above the floor (m), e.g. 1.6 (upper, human) or 0.2 (lower, robot).
+    n_frames : int
+        Number of poses.
+    tilt_deg : float
+        Amplitude of the periodic up/down tilt of the camera (degrees).
+    tilt_period : int
+        Frames per tilt cycle.
+    seed : int
+        Same seed (and kind), same trajectory.
+    kind : str
+        Names the path; different kinds (``"upper"``, ``"lower"``, ...) start and run
+        differently through the same scene.
+    margin : float
+        Clearance (m) from obstacles and walls.
+    spacing : float
+        Waypoint spacing (m) used to cover the free space.
+    plan_height : float, optional
+        Plan in the free space of this height instead (the height sweep plans one path at
+        the largest height and flies it at every height).
+    free : FreeSpace, optional
+        Precomputed free space (of ``plan_height`` or ``height``).
+    max_step : float, optional
+        Largest camera step between frames (m): when the tour is longer than
+        ``(n_frames - 1) * max_step`` only its first part is flown. None = no limit (the
+        whole tour, however few the frames).
+
+    Returns
+    -------
+    ndarray (n_frames, 4, 4)
+        ``T_world_camera`` poses (OpenCV camera), camera at ``floor_z + height``.
+
+    Raises
+    ------
+    ValueError
+        Bad ``n_frames``/``tilt_deg``, a height at or above the ceiling, or no free space.
+    """
+    if int(n_frames) < 1:
+        raise ValueError(f"n_frames must be >= 1, got {n_frames}")
+    if not 0 <= tilt_deg < 89:
+        raise ValueError(f"tilt_deg must lie in [0, 89), got {tilt_deg}")
+    if tilt_period < 2:
+        raise ValueError(f"tilt_period must be >= 2 frames, got {tilt_period}")
+    n_frames = int(n_frames)
+    fs = free or free_space(scene, plan_height or height, margin=margin)
+    if plan_height is not None:
+        _f, ceiling = scene_levels(scene)
+        if fs.floor_z + height >= ceiling - 0.05:
+            raise ValueError(
+                f"scene {scene.name!r}: camera height {height:.2f} m is above the ceiling "
+                f"({ceiling - fs.floor_z:.2f} m above the floor)"
+            )
+    rng = np.random.default_rng([int(seed), _kind_seed(kind)])
+    wp = _waypoints(fs, rng, spacing)
+    path = fs.xy_of(_grid_path(fs, wp))
+    path = _smooth_path(fs, path, margin)
+    if len(path) < 2:
+        path = np.concatenate([path, path])
+    if max_step is not None and n_frames > 1:
+        seg = np.linalg.norm(np.diff(path, axis=0), axis=1)
+        keep = np.concatenate([[0.0], np.cumsum(seg)]) <= max_step * (n_frames - 1)
+        path = path[: max(2, int(keep.sum()))]
+    xy, s = _resample(path, n_frames)
+    # heading: along the (heavily smoothed) path, plus a slow look-around sweep
+    from scipy.ndimage import gaussian_filter1d
+
+    dense, _ = _resample(path, max(2, len(path)))
+    tang = np.gradient(gaussian_filter1d(dense, sigma=20, axis=0, mode="nearest"), axis=0)
+    yaw_dense = np.unwrap(np.arctan2(tang[:, 1], tang[:, 0]))
+    s_dense = np.linspace(0, s[-1], len(dense))
+    yaw = np.interp(s, s_dense, yaw_dense)
+    phase = rng.uniform(0, 2 * np.pi)
+    yaw = yaw + np.radians(35.0) * np.sin(2 * np.pi * s / 3.0 + phase)
+    t = np.arange(n_frames)
+    pitch = np.radians(tilt_deg) * np.sin(2 * np.pi * t / tilt_period)
+    fwd = np.stack([np.cos(pitch) * np.cos(yaw), np.cos(pitch) * np.sin(yaw), np.sin(pitch)], axis=1)
+    z_world = np.array([0.0, 0.0, 1.0])
+    x = np.cross(fwd, z_world)
+    x /= np.linalg.norm(x, axis=1, keepdims=True)
+    y = np.cross(fwd, x)
+    poses = np.tile(np.eye(4), (n_frames, 1, 1))
+    poses[:, :3, 0], poses[:, :3, 1], poses[:, :3, 2] = x, y, fwd
+    poses[:, :2, 3] = xy
+    poses[:, 2, 3] = fs.floor_z + height
+    return poses
+
+
+def make_sweep_trajectories(
+    scene: Scene,
+    heights: tuple[float, ...],
+    n_frames: int,
+    **kwargs,
+) -> dict[float, np.ndarray]:
+    """One path flown at several heights (the paper's height sweep, Fig. 3).
+
+    The path is planned in the free space of the largest height (whose carrier column
+    contains those of the smaller heights), so it is collision-free at every height.
+
+    Returns
+    -------
+    dict
+        ``{height: poses (n_frames, 4, 4)}``.
+    """
+    if not heights:
+        raise ValueError("heights must not be empty")
+    top = float(max(heights))
+    kwargs.setdefault("kind", "sweep")
+    fs = free_space(scene, top, margin=kwargs.get("margin", 0.3))
+    return {
+        float(h): make_trajectory(scene, float(h), n_frames, plan_height=top, free=fs, **kwargs)
+        for h in heights
+    }

@@ -1,0 +1,316 @@
+"""The simulator: scenes, renderer, trajectories, noise, sequences and the data set."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from semmatch.geometry import DEFAULT_INTRINSICS, backproject, check_pose, look_at, project
+from semmatch.io import is_sequence, read_map, read_sequence, read_tum
+from semmatch.labels import id_of
+from semmatch.sim import (
+    SCENE_KINDS,
+    NoiseConfig,
+    Renderer,
+    box_room,
+    camera_elevation_deg,
+    free_space,
+    generate_dataset,
+    generate_scene,
+    make_sweep_trajectories,
+    make_trajectory,
+    simulate_sequence,
+)
+
+SMALL = DEFAULT_INTRINSICS.scaled(160, 120)
+
+
+@pytest.fixture(scope="module")
+def living():
+    return generate_scene("living_room", 5)
+
+
+def analytic_box_depth(T: np.ndarray, size, intr) -> tuple[np.ndarray, np.ndarray]:
+    """z-depth and hit plane (0..5: x0, x1, y0, y1, z0, z1) of every pixel in a box room."""
+    v, u = np.mgrid[0 : intr.height, 0 : intr.width].astype(np.float64)
+    d_cam = np.stack([(u - intr.cx) / intr.fx, (v - intr.cy) / intr.fy, np.ones_like(u)], -1).reshape(-1, 3)
+    d = d_cam @ T[:3, :3].T
+    o = T[:3, 3]
+    ts = []
+    for a in range(3):
+        for bound in (0.0, size[a]):
+            with np.errstate(divide="ignore", invalid="ignore"):
+                t = (bound - o[a]) / d[:, a]
+            ts.append(np.where(t > 0, t, np.inf))
+    ts = np.stack(ts, 1)
+    return ts.min(1).reshape(intr.shape), ts.argmin(1).reshape(intr.shape)
+
+
+@pytest.mark.parametrize("pose_args", [((1.3, 1.1, 1.2), (3.5, 2.0, 0.7)), ((3.0, 0.6, 0.3), (0.5, 2.5, 1.9))])
+def test_box_room_depth_is_analytic_within_1mm(pose_args):
+    size = (4.0, 3.0, 2.5)
+    scene = box_room(size)
+    T = look_at(*pose_args)
+    r = Renderer(scene, SMALL).render(T)
+    want, plane = analytic_box_depth(T, size, SMALL)
+    assert (r.depth > 0).all()
+    np.testing.assert_allclose(r.depth, want, atol=1e-3)
+    # labels: the analytic plane's category (away from the edges where two planes tie)
+    ts_sorted = np.sort(np.stack([want]), axis=0)
+    del ts_sorted
+    lab = np.where(plane == 4, id_of("floor"), np.where(plane == 5, id_of("ceiling"), id_of("wall")))
+    agree = (r.labels == lab).mean()
+    assert agree > 0.99
+
+
+def test_backprojected_render_projects_to_its_pixels():
+    scene = box_room((4.0, 3.0, 2.5))
+    T = look_at((1.0, 1.0, 1.5), (3.0, 2.0, 1.0))
+    r = Renderer(scene, SMALL).render(T)
+    pts, idx = backproject(r.depth, SMALL, T)
+    # every point lies on the box surface
+    dist = np.minimum.reduce([np.abs(pts[:, 0]), np.abs(pts[:, 0] - 4), np.abs(pts[:, 1]), np.abs(pts[:, 1] - 3),
+                              np.abs(pts[:, 2]), np.abs(pts[:, 2] - 2.5)])
+    assert dist.max() < 2e-3
+    uv, z = project(pts, SMALL, T)
+    np.testing.assert_allclose(uv[:, 0], idx % SMALL.width, atol=1e-3)
+    np.testing.assert_allclose(uv[:, 1], idx // SMALL.width, atol=1e-3)
+
+
+def test_labels_match_the_hit_triangle(living):
+    intr = SMALL
+    T = make_trajectory(living, 1.6, 12, seed=1)[7]
+    r = Renderer(living, intr).render(T)
+    hit = r.triangle >= 0
+    assert hit.mean() > 0.99
+    np.testing.assert_array_equal(r.labels[hit], living.labels[r.triangle[hit]])
+    np.testing.assert_array_equal(r.instances[hit], living.instances[r.triangle[hit]])
+    assert len(np.unique(r.labels)) >= 3
+    # the hit point lies on the plane of the reported triangle
+    pts, idx = backproject(r.depth, intr, T)
+    tri = r.triangle.reshape(-1)[idx]
+    v = living.vertices[living.triangles[tri]].astype(np.float64)
+    n = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    off = np.abs(np.einsum("ij,ij->i", pts - v[:, 0], n))
+    assert np.quantile(off, 0.999) < 2e-3
+
+
+@pytest.mark.parametrize("kind", ["living_room", "bedroom", "office", "apartment"])
+def test_scene_kinds_have_the_issue_categories(kind):
+    s = generate_scene(kind, 11)
+    present = set(np.unique(s.labels).tolist())
+    for name in ("wall", "floor", "ceiling", "chair", "table", "window"):
+        assert id_of(name) in present, name
+    if kind in ("bedroom", "apartment"):
+        assert id_of("bed") in present and id_of("pillow") in present
+    # colour does not give the label: some material is shared by two categories
+    keys = np.round(s.albedo, 4)
+    shared = {}
+    for k, lab in zip(map(tuple, keys), s.labels):
+        shared.setdefault(k, set()).add(int(lab))
+    assert any(len(v) > 1 for v in shared.values())
+    assert s.texture is not None and s.meta["ceiling_height"] > 2.4
+
+
+def test_same_seed_same_scene_and_frames(tmp_path, living):
+    again = generate_scene("living_room", 5)
+    np.testing.assert_array_equal(living.vertices, again.vertices)
+    np.testing.assert_array_equal(living.labels, again.labels)
+    np.testing.assert_array_equal(living.albedo, again.albedo)
+    other = generate_scene("living_room", 6)
+    assert other.n_triangles != living.n_triangles or not np.array_equal(other.vertices, living.vertices)
+    p1 = make_trajectory(living, 1.6, 6, seed=3)
+    p2 = make_trajectory(again, 1.6, 6, seed=3)
+    np.testing.assert_array_equal(p1, p2)
+    noise = NoiseConfig.kinect(seed=4)
+    a = simulate_sequence(living, p1, tmp_path / "a", intrinsics=SMALL, noise=noise, progress=False)
+    b = simulate_sequence(again, p2, tmp_path / "b", intrinsics=SMALL, noise=noise, progress=False)
+    sa, sb = read_sequence(a), read_sequence(b)
+    for i in (0, 5):
+        np.testing.assert_array_equal(sa[i].rgb, sb[i].rgb)
+        np.testing.assert_array_equal(sa[i].depth, sb[i].depth)
+        np.testing.assert_array_equal(sa[i].labels, sb[i].labels)
+    np.testing.assert_array_equal(sa.poses, sb.poses)
+
+
+def _obstacle_distance(scene, points):
+    import open3d as o3d
+
+    keep = ~np.isin(scene.labels, [id_of("floor"), id_of("ceiling")])
+    rc = o3d.t.geometry.RaycastingScene()
+    rc.add_triangles(o3d.core.Tensor(scene.vertices), o3d.core.Tensor(scene.triangles[keep].astype(np.uint32)))
+    return rc.compute_distance(o3d.core.Tensor(points.astype(np.float32))).numpy()
+
+
+@pytest.mark.parametrize("kind,height", [("living_room", 1.6), ("office", 0.2), ("apartment", 0.2),
+                                         ("bedroom", 1.6)])
+def test_trajectory_free_space_height_and_tilt(kind, height):
+    scene = generate_scene(kind, 21)
+    n = 150
+    poses = make_trajectory(scene, height, n, tilt_deg=20.0, seed=2, kind="upper" if height > 1 else "lower")
+    assert poses.shape == (n, 4, 4)
+    for T in poses[::10]:
+        check_pose(T)
+    z = poses[:, 2, 3]
+    assert np.abs(z - height).max() <= 0.02
+    el = camera_elevation_deg(poses)
+    assert np.abs(el).max() <= 20.0 + 1e-6 and el.max() > 15 and el.min() < -15  # tilts both ways
+    # collision-free: keep (most of) the margin from everything but floor and ceiling
+    assert _obstacle_distance(scene, poses[:, :3, 3]).min() > 0.2
+    fs = free_space(scene, height)
+    assert (fs.clearance_at(poses[:, :2, 3]) > 0).all()
+    # inside the rooms and below the ceiling
+    lo = np.min([r[:2] for r in scene.meta["rooms"]], axis=0)
+    hi = np.max([r[2:] for r in scene.meta["rooms"]], axis=0)
+    assert ((poses[:, :2, 3] > lo) & (poses[:, :2, 3] < hi)).all()
+    # smooth: small steps, and it moves through the room
+    step = np.linalg.norm(np.diff(poses[:, :3, 3], axis=0), axis=1)
+    assert step.max() <= 0.15 + 1e-6 and step.max() < 1.5 * np.median(step)
+    span = poses[:, :2, 3].max(0) - poses[:, :2, 3].min(0)
+    assert (span > 1.0).all()
+
+
+def test_upper_and_lower_paths_differ_and_sweep_shares_one_path(living):
+    up = make_trajectory(living, 1.6, 50, kind="upper")
+    low = make_trajectory(living, 0.2, 50, kind="lower")
+    assert np.linalg.norm(up[:, :2, 3] - low[:, :2, 3], axis=1).mean() > 0.3
+    sw = make_sweep_trajectories(living, (0.2, 0.8, 1.6), 30)
+    assert sorted(sw) == [0.2, 0.8, 1.6]
+    np.testing.assert_allclose(sw[0.2][:, :2, 3], sw[1.6][:, :2, 3])
+    np.testing.assert_allclose(sw[0.8][:, 2, 3], 0.8)
+
+
+def test_bad_heights_and_intrinsics(living):
+    with pytest.raises(ValueError, match="above the ceiling"):
+        make_trajectory(living, 3.5, 10)
+    with pytest.raises(ValueError, match="height must be > 0"):
+        make_trajectory(living, -0.1, 10)
+    with pytest.raises(ValueError, match="tilt_deg"):
+        make_trajectory(living, 1.6, 10, tilt_deg=120)
+    with pytest.raises(ValueError, match="focal length"):
+        Renderer(living, DEFAULT_INTRINSICS.__class__(fx=0.0))
+    with pytest.raises(ValueError, match="unknown scene kind"):
+        generate_scene("castle", 0)
+
+
+def test_sequence_files_poses_and_refusals(tmp_path, living):
+    poses = make_trajectory(living, 1.6, 4, seed=0)
+    out = simulate_sequence(living, poses, tmp_path / "seq", intrinsics=SMALL, progress=False)
+    seq = read_sequence(out)
+    assert len(seq) == 4 and seq.has_labels
+    f = seq[2]
+    assert f.rgb.shape == (120, 160, 3) and f.labels.dtype == np.uint8
+    np.testing.assert_allclose(f.pose, poses[2], atol=1e-6)
+    _t, gt = read_tum(out / "poses_gt.txt")
+    np.testing.assert_allclose(gt, poses, atol=1e-6)
+    assert (out / "instances" / "000002.png").is_file()
+    with pytest.raises(FileExistsError, match="already holds another sequence"):
+        simulate_sequence(living, poses, out, intrinsics=SMALL, progress=False)
+    # overwrite replaces it
+    simulate_sequence(living, poses[:2], out, intrinsics=SMALL, progress=False, overwrite=True)
+    assert len(read_sequence(out)) == 2
+
+
+def test_interrupted_simulate_leaves_no_sequence(tmp_path, living):
+    poses = make_trajectory(living, 1.6, 6, seed=0)
+
+    class Boom(Renderer):
+        calls = 0
+
+        def render(self, pose):
+            Boom.calls += 1
+            if Boom.calls == 4:
+                raise KeyboardInterrupt
+            return super().render(pose)
+
+    with pytest.raises(KeyboardInterrupt):
+        simulate_sequence(living, poses, tmp_path / "seq", intrinsics=SMALL, progress=False,
+                          renderer=Boom(living, SMALL))
+    assert not (tmp_path / "seq").exists()
+    assert not is_sequence(tmp_path / "seq")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_noise_is_off_by_default_and_grows_with_distance(tmp_path, living):
+    from semmatch.sim.noise import estimated_poses, noisy_depth, noisy_rgb
+
+    rng = np.random.default_rng(0)
+    assert not NoiseConfig().enabled
+    d = np.full((200, 200), 1.0, np.float32)
+    d[:, 100:] = 4.0
+    np.testing.assert_array_equal(noisy_depth(d, NoiseConfig(), rng), d)
+    cfg = NoiseConfig(depth_a=0.001, depth_b=0.002)
+    nd = noisy_depth(d, cfg, rng)
+    near, far = (nd - d)[:, 5:95].std(), (nd - d)[:, 105:195].std()
+    assert far > 4 * near
+    assert abs(far - (0.001 + 0.002 * 16)) < 0.005
+    # edge and far dropouts
+    drop = noisy_depth(d, NoiseConfig(edge_dropout=1.0), rng)
+    assert (drop[:, 99:101] == 0).all() and (drop[:, :98] > 0).all()
+    far_drop = noisy_depth(d, NoiseConfig(far_start=2.0, max_range=3.5), rng)
+    assert (far_drop[:, 100:] == 0).all() and (far_drop[:, :100] > 0).all()
+    rgb = np.full((10, 10, 3), 100, np.uint8)
+    assert noisy_rgb(rgb, NoiseConfig(), rng) is rgb
+    assert noisy_rgb(rgb, NoiseConfig(rgb_sigma=5), rng).std() > 2
+    poses = make_trajectory(living, 1.6, 40, seed=0)
+    est = estimated_poses(poses, NoiseConfig(drift_t=0.05, drift_r=1.0), rng)
+    err = np.linalg.norm(est[:, :3, 3] - poses[:, :3, 3], axis=1)
+    assert err[0] < 1e-9 and err[-1] > 0
+    with pytest.raises(ValueError, match="depth_a"):
+        NoiseConfig(depth_a=-1)
+    # a noisy sequence: poses.txt = estimate, poses_gt.txt = truth, labels from the true pose
+    noisy = simulate_sequence(living, poses[:3], tmp_path / "n", intrinsics=SMALL,
+                              noise=NoiseConfig.kinect(), progress=False)
+    clean = simulate_sequence(living, poses[:3], tmp_path / "c", intrinsics=SMALL, progress=False)
+    sn, sc = read_sequence(noisy), read_sequence(clean)
+    np.testing.assert_array_equal(sn[2].labels, sc[2].labels)
+    assert not np.allclose(sn.poses, sc.poses)
+    np.testing.assert_allclose(read_tum(noisy / "poses_gt.txt")[1], sc.poses, atol=1e-6)
+    assert not np.array_equal(sn[2].rgb, sc[2].rgb)
+
+
+def test_generate_dataset_layout_and_resume(tmp_path):
+    kw = dict(train_seeds=[1], eval_seeds=[2], kinds=["bedroom"], n_frames_upper=3, n_frames_lower=3,
+              heights_sweep=(0.2, 1.6), n_frames_sweep=2, intrinsics=DEFAULT_INTRINSICS.scaled(80, 60),
+              progress=False)
+    res = generate_dataset(tmp_path, **kw)
+    ev = tmp_path / "eval" / "bedroom_0002"
+    for sub in ("upper", "lower", "h020", "h160"):
+        assert is_sequence(ev / sub), sub
+    assert is_sequence(tmp_path / "train" / "bedroom_0001" / "upper")
+    assert not (tmp_path / "train" / "bedroom_0001" / "lower").exists()
+    m = read_map(ev / "scene.ply")
+    assert m.is_mesh and id_of("bed") in m.labels
+    np.testing.assert_allclose(read_sequence(ev / "h020").poses[:, 2, 3], 0.2, atol=1e-6)
+    assert len(res["written"]) == 7
+    again = generate_dataset(tmp_path, **kw)
+    assert again["written"] == [] and len(again["skipped"]) == 7
+    with pytest.raises(ValueError, match="disjoint"):
+        generate_dataset(tmp_path, train_seeds=[1, 2], eval_seeds=[2], kinds=["bedroom"])
+
+
+def test_scene_generation_all_kinds_and_save(tmp_path):
+    for kind in SCENE_KINDS:
+        s = generate_scene(kind, 0)
+        assert s.n_triangles > 100
+    p = s.save(tmp_path / "scene.ply")
+    m = read_map(p)
+    assert m.is_mesh and len(m.faces) == s.n_triangles
+
+
+def test_cli_simulate(tmp_path, capsys):
+    from semmatch.cli import main
+
+    out = tmp_path / "cli"
+    rc = main(["simulate", "--kind", "office", "--seed", "1", "--height", "0.2", "--frames", "3",
+               "--size", "80x60", "--out", str(out), "--no-progress", "--noise", "kinect"])
+    assert rc == 0 and len(read_sequence(out)) == 3
+    assert main(["simulate", "--kind", "office", "--frames", "3", "--size", "80x60", "--out", str(out),
+                 "--no-progress"]) == 2
+    assert "already holds another sequence" in capsys.readouterr().err
+    assert main(["simulate", "--kind", "office", "--height", "9", "--frames", "3", "--out",
+                 str(tmp_path / "x")]) == 2
+    assert "above the ceiling" in capsys.readouterr().err
+    assert main(["simulate", "--fx", "0", "--frames", "3", "--out", str(tmp_path / "y")]) == 2
+    assert "focal length" in capsys.readouterr().err
