@@ -1,0 +1,123 @@
+"""``semmatch evaluate GT.ply PRED.ply [PRED.ply ...]``: the paper's measures as a table."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+
+
+def register(sub) -> None:
+    """Add ``semmatch evaluate``."""
+    p = sub.add_parser(
+        "evaluate",
+        help="compare semantic maps with ground truth (Jaccard, Sorensen, Color Acc., Mean Acc.)",
+        description="Voxelise ground truth and predictions (majority label per voxel) and print "
+        "the paper's measures per prediction; optionally write CSV/Markdown tables and a "
+        "confusion-matrix figure.",
+    )
+    p.add_argument("gt", help="ground-truth semantic PLY (mesh or point cloud)")
+    p.add_argument("pred", nargs="+", help="predicted semantic PLY files")
+    p.add_argument("--voxel-size", type=float, default=0.05, help="voxel edge in metres (default 0.05)")
+    p.add_argument("--union", choices=("restrict", "plain"), default="restrict",
+                   help="Jaccard union: the authors' 'restrict' (default) or plain |G u P|")
+    p.add_argument("--min-overlap", type=float, default=0.1,
+                   help="refuse maps whose occupied voxels overlap less than this (default 0.1)")
+    p.add_argument("--transform", help="4x4 rigid transform (text/.npy) applied to every prediction")
+    p.add_argument("--per-class", action="store_true", help="add per-class IoU columns")
+    p.add_argument("--csv", help="write the table as CSV")
+    p.add_argument("--markdown", help="write the table as Markdown")
+    p.add_argument("--figure", help="write the confusion matrix (of the first prediction, or one "
+                   "panel per prediction) as an image (PNG/PDF/SVG)")
+    p.set_defaults(func=run)
+
+
+def _load_transform(path: str) -> np.ndarray:
+    from semmatch.geometry import check_pose
+
+    T = np.load(path) if path.endswith(".npy") else np.loadtxt(path)
+    return check_pose(T, what=path)
+
+
+def results_table(results: dict[str, dict], *, per_class: bool = False):
+    """A pandas DataFrame (one row per prediction) from :func:`semmatch.metrics.compare` results."""
+    import pandas as pd
+
+    from semmatch.metrics import MEASURES
+
+    rows = []
+    for name, s in results.items():
+        row = {"prediction": name, **{k: s[k] for k in MEASURES}}
+        row.update({"gt_voxels": s["counts"]["gt"], "pred_voxels": s["counts"]["pred"],
+                    "overlap": s["overlap"]})
+        if per_class:
+            row.update({f"iou_{k}": v for k, v in s["per_class_iou"].items()})
+        rows.append(row)
+    return pd.DataFrame(rows).set_index("prediction")
+
+
+def confusion_figure(results: dict[str, dict], path: str | Path) -> Path:
+    """Row-normalised confusion matrices (one panel per prediction), written atomically."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from semmatch.io import atomic_path
+    from semmatch.labels import NAMES
+
+    n = len(results)
+    fig, axes = plt.subplots(1, n, figsize=(5.2 * n, 4.8), squeeze=False)
+    for ax, (name, s) in zip(axes[0], results.items()):
+        conf = np.asarray(s["confusion"], dtype=np.float64)
+        rows = conf.sum(axis=1, keepdims=True)
+        norm = np.divide(conf, rows, out=np.zeros_like(conf), where=rows > 0)
+        names = [NAMES[c] for c in s["classes"]]
+        im = ax.imshow(norm, vmin=0, vmax=1, cmap="Blues")
+        ax.set_xticks(range(len(names)), names, rotation=60, ha="right", fontsize=8)
+        ax.set_yticks(range(len(names)), names, fontsize=8)
+        ax.set_xlabel("predicted")
+        ax.set_ylabel("ground truth")
+        ax.set_title(f"{name}\nMean Acc. {s['mean_acc']:.3f}", fontsize=9)
+        for (i, j), v in np.ndenumerate(norm):
+            if conf[i, j]:
+                ax.text(j, i, f"{v:.2f}", ha="center", va="center", fontsize=6,
+                        color="white" if v > 0.5 else "black")
+        fig.colorbar(im, ax=ax, fraction=0.046)
+    fig.tight_layout()
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def run(args: argparse.Namespace) -> int:
+    """Evaluate every prediction and print the table."""
+    import pandas as pd
+
+    from semmatch.io import atomic_write_text
+    from semmatch.metrics import compare, voxelize
+
+    T = _load_transform(args.transform) if args.transform else None
+    gt = voxelize(args.gt, args.voxel_size)
+    results = {}
+    for pred in args.pred:
+        results[pred] = compare(gt, voxelize(pred, args.voxel_size, transform_matrix=T),
+                                args.voxel_size, union=args.union, min_overlap=args.min_overlap)
+    # short unique names: file names when they are unique
+    names = [Path(p).name for p in results]
+    if len(set(names)) == len(names):
+        results = dict(zip(names, results.values()))
+    df = results_table(results, per_class=args.per_class)
+    with pd.option_context("display.width", 200, "display.max_columns", 50):
+        print(df.to_string(float_format=lambda v: f"{v:.4f}"))
+    if args.csv:
+        atomic_write_text(args.csv, df.to_csv(float_format="%.6f"))
+    if args.markdown:
+        fmt = ["g"] + [".4f" if df[c].dtype.kind == "f" else ".0f" for c in df.columns]
+        atomic_write_text(args.markdown, df.to_markdown(floatfmt=fmt) + "\n")
+    if args.figure:
+        confusion_figure(results, args.figure)
+    return 0
