@@ -80,18 +80,19 @@ def box_room(seed: int = 0, size: tuple[float, float, float] = (5.0, 4.0, 2.6)) 
     return Scene.merge(parts, name=f"box_room_{seed}", meta={"size": list(size), "obstacles": obstacles})
 
 
-def bench_scene(seed: int = 0) -> Scene:
-    """A generated scene: ``semmatch.sim.generate_scene`` when available, else :func:`box_room`."""
+def bench_scene(seed: int = 0, n_frames: int = 10, height: float = 0.25) -> tuple[Scene, np.ndarray]:
+    """A generated scene and lower-view poses for benchmarks.
+
+    Uses the simulator's ``generate_scene("living_room", seed)`` and ``make_trajectory`` when
+    they are available, else :func:`box_room` and :func:`orbit_poses`.
+    """
     try:
-        from ..sim import generate_scene  # type: ignore[attr-defined]
+        from ..sim import generate_scene, make_trajectory  # type: ignore[attr-defined]
     except ImportError:
-        return box_room(seed)
-    for kind in ("bedroom", "living", "office", "room"):
-        try:
-            return generate_scene(kind, seed)
-        except (KeyError, ValueError):
-            continue
-    return box_room(seed)
+        scene = box_room(seed)
+        return scene, orbit_poses(scene, n_frames, height, seed)
+    scene = generate_scene("living_room", seed)
+    return scene, make_trajectory(scene, height, n_frames, seed=seed, kind="lower")
 
 
 def orbit_poses(scene: Scene, n: int, height: float, seed: int = 0, *, margin: float = 0.6) -> np.ndarray:

@@ -168,16 +168,19 @@ class MapIndex:
         self.origin = lo - margin
         shape = np.ceil(extent / s).astype(np.int64) + 1
         self.shape = tuple(int(x) for x in shape)
-        # label of every occupied voxel; voxels holding samples of several labels are "mixed"
+        # label of every occupied voxel: that of its sample nearest to the voxel centre (does
+        # not depend on the label ids); voxels holding samples of several labels are "mixed"
         k = np.floor((self.samples - self.origin) / s).astype(np.int64)
         lin = np.ravel_multi_index(k.T, self.shape)
-        pair = np.unique(lin * 256 + self.sample_labels)
-        vox, lab = pair >> 8, (pair & 255).astype(np.uint8)
-        first = np.r_[True, vox[1:] != vox[:-1]]
-        n_lab = np.diff(np.r_[np.flatnonzero(first), len(vox)])
-        occ_lin = vox[first]
+        off = np.linalg.norm((self.samples - self.origin) / s - k - 0.5, axis=1)
+        order = np.lexsort((off, lin))
+        lin_o, lab_o = lin[order], self.sample_labels[order]
+        first = np.r_[True, lin_o[1:] != lin_o[:-1]]
+        lab_min = np.minimum.reduceat(lab_o, np.flatnonzero(first))
+        lab_max = np.maximum.reduceat(lab_o, np.flatnonzero(first))
+        occ_lin = lin_o[first]
         label_of = np.zeros(self.shape, dtype=np.uint8)
-        label_of.ravel()[occ_lin] = lab[first] | np.where(n_lab > 1, _MIXED, 0).astype(np.uint8)
+        label_of.ravel()[occ_lin] = lab_o[first] | np.where(lab_min != lab_max, _MIXED, 0).astype(np.uint8)
         # nearest occupied voxel of every voxel (Euclidean distance transform)
         empty = np.ones(self.shape, dtype=bool)
         empty.ravel()[occ_lin] = False

@@ -32,12 +32,14 @@ def _finish(fd: FrameData, index: MapIndex, labels: np.ndarray, purity: np.ndarr
     return labels, purity
 
 
-def render_labels(index: MapIndex, fd: FrameData, stride: int = 1) -> tuple[np.ndarray, np.ndarray]:
+def render_labels(
+    index: MapIndex, fd: FrameData, stride: int = 1, splat_radius: float = 3.0
+) -> tuple[np.ndarray, np.ndarray]:
     """Render the upper map into the lower camera at every ``stride``-th pixel.
 
     Meshes are ray cast with Open3D ``RaycastingScene`` (label of the hit triangle's vertex
     nearest to the hit point); point maps are projected with a z-buffer (the nearest point per
-    pixel wins; pixels no point falls into stay empty).
+    pixel wins) and gaps up to ``splat_radius`` pixels take their nearest rendered pixel.
 
     Returns
     -------
@@ -82,7 +84,17 @@ def render_labels(index: MapIndex, fd: FrameData, stride: int = 1) -> tuple[np.n
     out_z = np.zeros(h * w, np.float32)
     out_l[pix[first]] = lab[first]
     out_z[pix[first]] = z[first]
-    return out_l.reshape(h, w), out_z.reshape(h, w)
+    out_l, out_z = out_l.reshape(h, w), out_z.reshape(h, w)
+    if splat_radius > 0 and (out_z == 0).any() and (out_z > 0).any():
+        # close the gaps between projected points: an empty pixel takes its nearest rendered
+        # pixel within splat_radius (the depth test of the caller rejects wrong fills)
+        from scipy import ndimage
+
+        dist, (iy, ix) = ndimage.distance_transform_edt(out_z == 0, return_indices=True)
+        fill = (out_z == 0) & (dist <= splat_radius)
+        out_l[fill] = out_l[iy[fill], ix[fill]]
+        out_z[fill] = out_z[iy[fill], ix[fill]]
+    return out_l, out_z
 
 
 def slic_2d(
@@ -91,26 +103,40 @@ def slic_2d(
     *,
     n_segments: int = 512,
     backend: str = "cv2-slic",
+    compactness: float = 10.0,
+    iterations: int = 4,
+    scale: float = 0.5,
     render_stride: int = 2,
-    **sp_params,
+    occlusion_votes: bool | None = None,
 ):
     """``2d-slic``: render the upper map into the lower camera, vote per 2D superpixel.
 
     A rendered pixel votes with its rendered label when the rendered surface lies within
-    ``max_distance`` of the observed point along the ray, with void when it does not (the map
-    shows something else there: occlusion or unmapped geometry); pixels without depth or
-    without a rendered surface do not vote. ``render_stride`` renders every n-th pixel (the
-    votes of a 512-superpixel image barely change; 2 = 4x fewer rays).
+    ``max_distance`` of the observed point along the ray, and with void when the rendered
+    surface lies in front of the observed point (the map has another surface there, e.g. a
+    table top the robot looks under). Pixels without depth, without a rendered surface, or whose
+    rendered surface lies behind the observed point (a gap between splatted map points, or
+    geometry the map lacks: the per-pixel support mask decides those) do not vote.
+    ``render_stride`` renders every n-th pixel (the votes of a 512-superpixel image barely
+    change; 2 = 4x fewer rays). ``occlusion_votes`` (default: True for meshes, False for point
+    maps) turns the void votes of a map surface in front of the observed point on or off: a
+    splatted point map seen at a grazing angle (the floor from a robot) puts points in front of
+    the observed surface in one pixel although nothing occludes it.
+    Superpixel parameters: see :func:`superpixels`.
     """
-    seg = superpixels(fd.rgb, n_segments, backend=backend, **sp_params)
+    seg = superpixels(fd.rgb, n_segments, backend=backend, compactness=compactness,
+                      iterations=iterations, scale=scale)
     s = int(render_stride)
     if s < 1:
         raise ValueError(f"render_stride must be >= 1, got {render_stride}")
     rl, rz = render_labels(index, fd, s)
     obs = fd.depth[::s, ::s]
     ray_len = np.linalg.norm(pixel_rays(fd.intrinsics, s), axis=2)
-    rendered = (rz > 0) & (obs > 0)
-    agree = np.abs(rz - obs) * ray_len <= index.max_distance
+    gap = (rz - obs) * ray_len  # > 0: the map surface lies behind the observed point
+    agree = np.abs(gap) <= index.max_distance
+    if occlusion_votes is None:
+        occlusion_votes = index.is_mesh
+    rendered = (rz > 0) & (obs > 0) & (agree | ((gap < 0) & bool(occlusion_votes)))
     votes = np.where(agree, rl, 0)
     g = seg[::s, ::s][rendered]
     n = int(seg.max()) + 1
@@ -124,15 +150,20 @@ def projected_sp_3d(
     *,
     n_segments: int = 512,
     backend: str = "cv2-slic",
+    compactness: float = 10.0,
+    iterations: int = 4,
+    scale: float = 0.5,
     subsample: int = 4,
     exact: bool = False,
-    **sp_params,
 ):
     """``3d-projected-sp`` (Alg. 1): superpixels on RGB, back-project with depth, keep every
-    ``subsample``-th point, look labels up in 3D, vote per superpixel."""
+    ``subsample``-th point, look labels up in 3D, vote per superpixel.
+
+    Superpixel parameters: see :func:`superpixels`."""
     if int(subsample) < 1:
         raise ValueError(f"subsample must be >= 1, got {subsample}")
-    seg = superpixels(fd.rgb, n_segments, backend=backend, **sp_params)
+    seg = superpixels(fd.rgb, n_segments, backend=backend, compactness=compactness,
+                      iterations=iterations, scale=scale)
     pts, pix = fd.points()
     pts, pix = pts[:: int(subsample)], pix[:: int(subsample)]
     lab = index.lookup(pts, exact=exact)

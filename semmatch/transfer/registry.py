@@ -15,7 +15,10 @@ from .frames import check_frame
 from .fused import fuse
 from .index import MapIndex, prepare
 
-__all__ = ["METHODS", "ALL_METHODS", "PAPER_FPS", "TransferResult", "transfer", "transfer_frame", "method_params"]
+__all__ = [
+    "METHODS", "ALL_METHODS", "PAPER_FPS", "TransferResult", "transfer", "transfer_frame",
+    "method_params", "check_params",
+]
 
 _FUNCS: dict[str, Callable] = {
     "2d-slic": _m.slic_2d,
@@ -81,16 +84,21 @@ def _check_name(name: str) -> Callable:
     return _FUNCS[name]
 
 
+def check_params(name: str, params: dict) -> None:
+    """Raise ``ValueError`` naming the valid parameters when ``params`` has unknown keys."""
+    valid = method_params(name)
+    if name == "fused":
+        base = params.get("base", "3d-projected-sp")
+        if base in _FUNCS:
+            valid = {**valid, **method_params(base)}
+    bad = sorted(set(params) - set(valid))
+    if bad:
+        raise ValueError(f"{name}: unknown parameter(s) {', '.join(bad)}; valid: {', '.join(valid)}")
+
+
 def _call(name: str, fd, index: MapIndex, params: dict):
-    fn = _check_name(name)
-    sig = inspect.signature(fn)
-    takes_any = any(p.kind == p.VAR_KEYWORD for p in sig.parameters.values())
-    if not takes_any:
-        bad = sorted(set(params) - set(sig.parameters))
-        if bad:
-            valid = ", ".join(k for k in method_params(name))
-            raise ValueError(f"{name}: unknown parameter(s) {', '.join(bad)}; valid: {valid}")
-    return fn(fd, index, **params)
+    check_params(name, params)
+    return _check_name(name)(fd, index, **params)
 
 
 def transfer_frame(
@@ -130,7 +138,9 @@ def transfer_frame(
         Unknown method or parameter, bad frame (size, pose), empty map, index built for
         another ``max_distance``.
     """
-    _check_name(name) if name != "fused" else None
+    if name != "fused":
+        _check_name(name)
+    check_params(name, {"max_distance": max_distance, **params})
     t0 = time.perf_counter()
     index = prepare(semantic_map, max_distance=max_distance)
     t1 = time.perf_counter()

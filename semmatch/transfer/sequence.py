@@ -12,7 +12,7 @@ from tqdm import tqdm
 
 from ..io import SemanticMap, read_sequence, write_labels_folder
 from .index import MapIndex, prepare
-from .registry import ALL_METHODS, transfer_frame
+from .registry import ALL_METHODS, check_params, transfer_frame
 
 __all__ = ["transfer_sequence"]
 
@@ -73,6 +73,7 @@ def transfer_sequence(
         raise ValueError(f"unknown transfer method {method!r}; valid: {', '.join(ALL_METHODS)}")
     if int(jobs) < 1:
         raise ValueError(f"jobs must be >= 1, got {jobs}")
+    check_params(method, params)
     seq_path = None
     if isinstance(sequence, (str, os.PathLike)):
         seq_path = Path(sequence)

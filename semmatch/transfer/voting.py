@@ -16,8 +16,9 @@ def vote(
 
     Every observation votes with its label; void (0) is a candidate like any other, so a group
     whose observations are mostly unsupported by the map stays void (the authors' mode of the
-    projected labels). Ties go to the smallest id (void first). Entries with a negative group
-    do not vote.
+    projected labels). Ties: void wins a tie it is part of; otherwise the tied label observed
+    first wins (so the result does not depend on how label ids are numbered). Entries with a
+    negative group do not vote.
 
     Parameters
     ----------
@@ -47,6 +48,18 @@ def vote(
     counts = np.bincount(g * NUM_CLASSES + lab.astype(np.int64), minlength=n_groups * NUM_CLASSES)
     counts = counts[: n_groups * NUM_CLASSES].reshape(n_groups, NUM_CLASSES)
     winner = counts.argmax(axis=1)
+    best = counts[np.arange(n_groups), winner]
+    tied = (counts == best[:, None]).sum(axis=1) > 1
+    tied &= (counts[:, 0] < best) & (best > 0)
+    if tied.any():
+        sel = np.flatnonzero(tied[g])
+        key = g[sel] * NUM_CLASSES + lab[sel].astype(np.int64)
+        uniq, first = np.unique(key, return_index=True)
+        order = np.full(n_groups * NUM_CLASSES, np.iinfo(np.int64).max)
+        order[uniq] = first
+        order = order.reshape(n_groups, NUM_CLASSES)
+        cand = np.where(counts == best[:, None], order, np.iinfo(np.int64).max)
+        winner = np.where(tied, cand.argmin(axis=1), winner)
     total = counts.sum(axis=1)
     purity = np.where(total > 0, counts[np.arange(n_groups), winner] / np.maximum(total, 1), 0.0)
     return winner.astype(np.uint8), purity.astype(np.float32)
