@@ -314,3 +314,28 @@ def test_cli_simulate(tmp_path, capsys):
     assert "above the ceiling" in capsys.readouterr().err
     assert main(["simulate", "--fx", "0", "--frames", "3", "--out", str(tmp_path / "y")]) == 2
     assert "focal length" in capsys.readouterr().err
+
+
+def test_fast_mode_matches_exact_rendering(living):
+    poses = make_trajectory(living, 0.2, 8, seed=4, kind="lower")
+    exact, fast = Renderer(living, SMALL), Renderer(living, SMALL, fast=True)
+    for T in poses[::3]:
+        a, b = exact.render(T), fast.render(T)
+        assert (a.labels == b.labels).mean() > 0.995
+        close = np.abs(a.depth - b.depth) < 1e-3
+        assert close.mean() > 0.99
+        assert np.abs(a.rgb.astype(int) - b.rgb).mean() < 3
+        assert fast.last_cast_fraction < 0.6
+
+
+def test_bench_render_json(capsys):
+    import json
+
+    from semmatch.cli import main
+
+    assert main(["bench", "render", "--json", "--frames", "2", "--size", "80x60", "--triangles", "5000",
+                 "--kind", "bedroom", "--stream", "3"]) == 0
+    res = json.loads(capsys.readouterr().out)
+    for key in ("fps", "width", "height", "triangles", "fps_fast", "rss_mb_at_end"):
+        assert key in res
+    assert res["width"] == 80 and res["triangles"] >= 5000 and res["fps"] > 0

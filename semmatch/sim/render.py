@@ -56,6 +56,12 @@ class Renderer:
         Apply the procedural material textures (``scene.texture``).
     nthreads : int
         Ray-casting threads (0 = all cores).
+    fast : bool
+        Coarse-to-fine rendering: cast every second pixel and fill the pixels between
+        samples on one plane group without casting (exact depth, same category; colour
+        interpolated; thin objects under two pixels wide can be missed, and ``triangle``
+        there names a neighbouring triangle of the same plane). Default: every pixel is
+        ray cast (exact).
 
     Raises
     ------
@@ -73,6 +79,7 @@ class Renderer:
         shadows: bool = True,
         texture: bool = True,
         nthreads: int = 1,
+        fast: bool = False,
     ) -> None:
         import open3d as o3d
 
@@ -99,27 +106,42 @@ class Renderer:
             raise ValueError(f"scene {scene.name!r}: light positions hold NaN or inf")
         self.ambient = float(ambient)
         self.shadows = bool(shadows)
+        self.fast = bool(fast)
+        self._groups: np.ndarray | None = None
+        self.last_cast_fraction = 1.0
         self.use_texture = bool(texture) and scene.texture is not None
-        # (2, T, 3): irradiance at the three corners of each triangle, front (0) and back (1)
-        self._irradiance = np.stack([self._corner_irradiance(side) for side in (1.0, -1.0)])
+        # (2T, 3): irradiance at the three corners of each triangle, front sides then back sides
+        self._irradiance = np.concatenate([self._corner_irradiance(side) for side in (1.0, -1.0)])
+        self._plane_d = np.einsum("ij,ij->i", self._normals, scene.vertices[scene.triangles[:, 0]])
         # 12-bit linear -> 8-bit sRGB-like display curve
         self._lut = np.clip(np.rint(255.0 * np.linspace(0, 1, 4096) ** (1 / 2.2)), 0, 255).astype(np.uint8)
 
     def _corner_irradiance(self, side: float) -> np.ndarray:
-        """Lambert irradiance (with shadows) at the corners of each triangle, one side."""
+        """Lambert irradiance (with shadows) at the corners of each triangle, one side.
+
+        Computed per vertex with the area-weighted vertex normal (smooth shading on curved
+        meshes; the procedural scenes give each face its own vertices) and gathered to the
+        triangle corners.
+        """
         import open3d as o3d
 
-        v = self.scene.vertices[self.scene.triangles]  # (T,3,3)
-        n = self._normals * np.float32(side)
-        centre = v.mean(axis=1, keepdims=True)
-        p = (0.97 * v + 0.03 * centre + 0.004 * n[:, None, :]).reshape(-1, 3).astype(np.float32)
-        n3 = np.repeat(n, 3, axis=0)
+        sc = self.scene
+        tri = sc.triangles
+        v = sc.vertices[tri]
+        area_n = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]) * np.float32(side)
+        vn = np.zeros_like(sc.vertices)
+        for k in range(3):
+            np.add.at(vn, tri[:, k], area_n)
+        vn /= np.maximum(np.linalg.norm(vn, axis=1, keepdims=True), 1e-12)
+        used = np.zeros(len(sc.vertices), dtype=bool)
+        used[tri.reshape(-1)] = True
+        p = (sc.vertices + 0.004 * vn).astype(np.float32)
         shade = np.full(len(p), self.ambient, dtype=np.float32)
         for light in self.lights:
             d = light[None, :] - p
             dist = np.linalg.norm(d, axis=1)
-            lam = np.einsum("ij,ij->i", n3, d) / np.maximum(dist, 1e-6)
-            lit = lam > 0
+            lam = np.einsum("ij,ij->i", vn, d) / np.maximum(dist, 1e-6)
+            lit = (lam > 0) & used
             if self.shadows and lit.any():
                 rays = np.concatenate([p[lit], d[lit]], axis=1).astype(np.float32)
                 occ = self._rc.test_occlusions(
@@ -129,15 +151,17 @@ class Renderer:
                 lit[idx[occ]] = False
             gain = 1.6 / (1.0 + 0.08 * dist * dist) / np.sqrt(len(self.lights))
             shade += np.where(lit, lam * gain, 0.0).astype(np.float32)
-        return shade.reshape(-1, 3)
+        return shade[tri]
 
-    def rays(self, pose: np.ndarray) -> np.ndarray:
-        """World rays ``(H*W, 6)`` of a pose, direction scaled so that t = z-depth."""
+    def rays(self, pose: np.ndarray, index: np.ndarray | None = None) -> np.ndarray:
+        """World rays ``(N, 6)`` of a pose (all pixels, or the flat pixel ``index``);
+        directions are scaled so that the ray parameter t is the z-depth."""
         T = check_pose(pose)
-        R = T[:3, :3].astype(np.float32)
-        d = self._rays_cam @ R.T
-        o = np.broadcast_to(T[:3, 3].astype(np.float32), d.shape)
-        return np.concatenate([o, d], axis=1)
+        cam = self._rays_cam if index is None else self._rays_cam[index]
+        out = np.empty((len(cam), 6), dtype=np.float32)
+        out[:, :3] = T[:3, 3].astype(np.float32)
+        out[:, 3:] = cam @ T[:3, :3].T.astype(np.float32)
+        return out
 
     def render(self, pose: np.ndarray) -> RenderResult:
         """Render the view of camera pose ``pose`` (``T_world_camera``).
@@ -147,20 +171,15 @@ class Renderer:
         ValueError
             If ``pose`` is not a 4x4 rigid transform.
         """
-        import open3d as o3d
-
         H, W = self.intrinsics.shape
-        rays = self.rays(pose)
-        ans = self._rc.cast_rays(o3d.core.Tensor(rays), nthreads=self.nthreads)
-        t = ans["t_hit"].numpy()
-        hit = np.isfinite(t)
-        prim = np.where(hit, ans["primitive_ids"].numpy().astype(np.int64), -1)
-        tri = np.maximum(prim, 0)
-        depth = np.where(hit, t, 0.0).astype(np.float32)
-        labels = np.where(hit, self.scene.labels[tri], 0).astype(np.uint8)
-        instances = np.where(hit, self.scene.instances[tri], 0).astype(np.int32)
-        rgb = self._shade(rays, np.where(hit, t, 0.0), tri, hit, ans["primitive_uvs"].numpy(),
-                          ans["primitive_normals"].numpy())
+        T = check_pose(pose)
+        # index offset into the irradiance table: back sides for triangles facing away
+        self._side = np.where(self._normals @ T[:3, 3].astype(np.float32) < self._plane_d,
+                              len(self._normals), 0)
+        if self.fast and H >= 4 and W >= 4:
+            depth, prim, labels, instances, rgb = self._render_fast(T)
+        else:
+            depth, prim, labels, instances, rgb = self._cast(self.rays(T))
         return RenderResult(
             rgb=rgb.reshape(H, W, 3),
             depth=depth.reshape(H, W),
@@ -169,12 +188,111 @@ class Renderer:
             triangle=prim.reshape(H, W),
         )
 
-    def _shade(self, rays, t, tri, hit, uv, normals) -> np.ndarray:
+    def _cast(self, rays: np.ndarray):
+        """Exact ray cast of (N,6) rays: depth, triangle, labels, instances, rgb (flat)."""
+        import open3d as o3d
+
+        ans = self._rc.cast_rays(o3d.core.Tensor(np.ascontiguousarray(rays)), nthreads=self.nthreads)
+        t = ans["t_hit"].numpy()
+        hit = np.isfinite(t)
+        prim = np.where(hit, ans["primitive_ids"].numpy().astype(np.int64), -1)
+        tri = np.maximum(prim, 0)
+        depth = np.where(hit, t, 0.0).astype(np.float32)
+        labels = np.where(hit, self.scene.labels[tri], 0).astype(np.uint8)
+        instances = np.where(hit, self.scene.instances[tri], 0).astype(np.int32)
+        rgb = self._shade(rays, np.where(hit, t, 0.0), tri, hit, ans["primitive_uvs"].numpy())
+        return depth, prim, labels, instances, rgb
+
+    def _plane_groups(self) -> np.ndarray:
+        """Id per triangle of its group: same plane, category, instance and material."""
+        sc = self.scene
+        key = np.concatenate(
+            [
+                np.rint(self._normals * 1e3),
+                np.rint(self._plane_d * 1e3)[:, None],
+                sc.labels[:, None], sc.instances[:, None],
+                np.rint(sc.albedo * 1e3),
+                (sc.texture if sc.texture is not None else np.zeros(len(sc.labels)))[:, None],
+            ],
+            axis=1,
+        ).astype(np.int64)
+        _u, inv = np.unique(key, axis=0, return_inverse=True)
+        return inv.reshape(-1)
+
+    def _render_fast(self, pose: np.ndarray):
+        """Coarse-to-fine rendering (``fast=True``).
+
+        Every second pixel in both directions is ray cast. A pixel between coarse samples
+        that all hit the same plane group (same plane, category, instance, material) takes
+        their category and instance, the exact depth of that plane (1/z is affine in the
+        pixel coordinates on a plane, so averaging the samples' 1/z is exact) and their mean
+        colour; every other pixel is ray cast. Objects thinner than two pixels that fall
+        entirely between samples can be missed.
+        """
+        H, W = self.intrinsics.shape
+        if self._groups is None:
+            self._groups = self._plane_groups()
+            self._coarse_index = np.arange(H * W).reshape(H, W)[0::2, 0::2].reshape(-1)
+        hc, wc = (H + 1) // 2, (W + 1) // 2
+        d_c, p_c, l_c, i_c, rgb_c = self._cast(self.rays(pose, self._coarse_index))
+        shape = (hc, wc)
+        g = np.where(p_c >= 0, self._groups[np.maximum(p_c, 0)], -1).reshape(shape)
+        inv = (1.0 / np.maximum(d_c, np.float32(1e-9))).reshape(shape)
+        p_c, l_c, i_c = p_c.reshape(shape), l_c.reshape(shape), i_c.reshape(shape)
+        rgb_c = rgb_c.reshape(hc, wc, 3).astype(np.float32)
+        depth = np.zeros((H, W), np.float32)
+        prim = np.full((H, W), -1, np.int64)
+        labels = np.zeros((H, W), np.uint8)
+        inst = np.zeros((H, W), np.int32)
+        rgb = np.zeros((H, W, 3), np.uint8)
+        todo = np.ones((H, W), dtype=bool)
+        depth[0::2, 0::2], prim[0::2, 0::2], labels[0::2, 0::2] = d_c.reshape(shape), p_c, l_c
+        inst[0::2, 0::2], rgb[0::2, 0::2] = i_c, rgb_c.astype(np.uint8)
+        todo[0::2, 0::2] = False
+
+        def fill(rs, cs, neighbours):
+            # neighbours: coarse (row slice, col slice) pairs of equal shape; only pixels
+            # whose samples share one plane group are filled, the others stay to do
+            g0 = g[neighbours[0]]
+            ok = g0 >= 0
+            for nb in neighbours[1:]:
+                ok &= g[nb] == g0
+            k = np.float32(1.0 / len(neighbours))
+            sub = (slice(rs.start, rs.start + 2 * ok.shape[0] - 1, 2),
+                   slice(cs.start, cs.start + 2 * ok.shape[1] - 1, 2))
+            first = neighbours[0]
+            iz = inv[first][ok]
+            col = rgb_c[first][ok]
+            for nb in neighbours[1:]:
+                iz = iz + inv[nb][ok]
+                col = col + rgb_c[nb][ok]
+            depth[sub][ok] = 1.0 / (iz * k)
+            prim[sub][ok] = p_c[first][ok]
+            labels[sub][ok] = l_c[first][ok]
+            inst[sub][ok] = i_c[first][ok]
+            rgb[sub][ok] = (col * k + np.float32(0.5)).astype(np.uint8)
+            todo[sub] = ~ok
+
+        a, b_ = slice(None, -1), slice(1, None)
+        full_r, full_c = slice(0, hc), slice(0, wc)
+        fill(slice(0, None), slice(1, None), [(full_r, a), (full_r, b_)])  # even rows, odd cols
+        fill(slice(1, None), slice(0, None), [(a, full_c), (b_, full_c)])  # odd rows, even cols
+        fill(slice(1, None), slice(1, None), [(a, a), (a, b_), (b_, a), (b_, b_)])  # odd, odd
+        idx = np.flatnonzero(todo)
+        if len(idx):
+            d2, p2, l2, i2, rgb2 = self._cast(self.rays(pose, idx))
+            depth.reshape(-1)[idx], prim.reshape(-1)[idx], labels.reshape(-1)[idx] = d2, p2, l2
+            inst.reshape(-1)[idx] = i2
+            rgb.reshape(-1, 3)[idx] = rgb2
+        self.last_cast_fraction = (hc * wc + len(idx)) / (H * W)
+        return depth, prim, labels, inst, rgb
+
+    def _shade(self, rays, t, tri, hit, uv) -> np.ndarray:
         d = rays[:, 3:]
-        back = np.einsum("ij,ij->i", normals, d) > 0
-        corners = np.where(back[:, None], self._irradiance[1][tri], self._irradiance[0][tri])
-        w0 = 1.0 - uv[:, 0] - uv[:, 1]
-        shade = corners[:, 0] * w0 + corners[:, 1] * uv[:, 0] + corners[:, 2] * uv[:, 1]
+        # the camera sees the back side of triangles whose plane it is behind (self._side)
+        corners = self._irradiance[tri + self._side[tri]]
+        u, v = uv[:, 0], uv[:, 1]
+        shade = corners[:, 0] + (corners[:, 1] - corners[:, 0]) * u + (corners[:, 2] - corners[:, 0]) * v
         if self.use_texture:
             p = rays[:, :3] + d * t[:, None].astype(np.float32)
             shade *= texture_factor(p, self.scene.texture[tri])
