@@ -540,10 +540,15 @@ def read_map(path: PathLike, *, require_labels: bool = True) -> SemanticMap:
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such map file")
+    errors = (PlyParseError, ValueError, IndexError, EOFError, TypeError)
     try:
-        ply = PlyData.read(str(path))
-    except (PlyParseError, ValueError, IndexError, EOFError) as e:
-        raise ValueError(f"{path}: not a readable PLY file ({e})") from None
+        # fast path for triangle meshes: fixed-length face lists read as one array
+        ply = PlyData.read(str(path), known_list_len={"face": {"vertex_indices": 3}})
+    except errors:
+        try:
+            ply = PlyData.read(str(path))
+        except errors as e:
+            raise ValueError(f"{path}: not a readable PLY file ({e})") from None
     if "vertex" not in ply:
         raise ValueError(f"{path}: PLY has no vertex element")
     v = ply["vertex"].data
@@ -579,7 +584,7 @@ def read_map(path: PathLike, *, require_labels: bool = True) -> SemanticMap:
         key = "vertex_indices" if "vertex_indices" in fd.dtype.names else fd.dtype.names[0]
         col = fd[key]
         try:
-            faces = np.stack(col).astype(np.int32)
+            faces = (np.stack(col) if col.dtype == object else np.asarray(col)).astype(np.int32)
         except ValueError:
             raise ValueError(f"{path}: only triangle faces are supported") from None
         if faces.ndim != 2 or faces.shape[1] != 3:
