@@ -17,6 +17,7 @@ from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import torch
 import torch.nn.functional as F
 from tqdm.auto import tqdm
@@ -28,7 +29,10 @@ from . import data as D
 from .models import ModelConfig, build_network, count_parameters
 from .scores import confusion, scores
 
-__all__ = ["TrainConfig", "PROFILES", "make_config", "train", "augment", "evaluate_views", "CHECKPOINT_FORMAT"]
+__all__ = [
+    "TrainConfig", "PROFILES", "make_config", "train", "train_or_load", "validation_table", "augment",
+    "evaluate_views", "build_views", "CHECKPOINT_FORMAT",
+]
 
 CHECKPOINT_FORMAT = "semmatch-segment/1"
 
@@ -398,7 +402,7 @@ def train(config: TrainConfig, *, views: tuple[D.Views, D.Views] | None = None) 
         "categories": table_fingerprint(),
         "metrics": best,
         "history": history,
-        "train_config": _plain(asdict(replace(config, progress=False))),
+        "train_config": _config_record(config),
         "class_weights": weights.tolist(),
         "n_parameters": count_parameters(net),
         "train_seconds": time.perf_counter() - t0,
@@ -408,6 +412,80 @@ def train(config: TrainConfig, *, views: tuple[D.Views, D.Views] | None = None) 
     with atomic_path(out) as tmp:
         torch.save(ckpt, tmp)
     return out
+
+
+def _config_record(config: TrainConfig) -> dict:
+    """The ``train_config`` entry a checkpoint stores for ``config``."""
+    return _plain(asdict(replace(config, progress=False)))
+
+
+#: config fields that do not change the trained weights (ignored when matching checkpoints)
+_NOT_IDENTITY = ("out", "progress", "threads", "cache_dir", "device")
+
+
+def _same_run(a: dict, b: dict) -> bool:
+    return {k: v for k, v in a.items() if k not in _NOT_IDENTITY} == {
+        k: v for k, v in b.items() if k not in _NOT_IDENTITY
+    }
+
+
+def train_or_load(config: TrainConfig, *, retrain: bool = False,
+                  views: tuple[D.Views, D.Views] | None = None) -> Path:
+    """Return ``config.out`` when it holds a checkpoint trained with the same config, else train.
+
+    Parameters
+    ----------
+    config : TrainConfig
+    retrain : bool
+        Train even when a matching checkpoint exists.
+    views : (Views, Views), optional
+        Passed to :func:`train`.
+
+    Returns
+    -------
+    Path
+        The checkpoint.
+    """
+    out = Path(config.out)
+    if out.is_file() and not retrain:
+        from .predict import load_model
+
+        try:
+            stored = load_model(out).info.get("train_config")
+        except ValueError:
+            stored = None
+        if stored is not None and _same_run(stored, _config_record(config)):
+            return out
+    return train(config, views=views)
+
+
+def validation_table(checkpoints: dict) -> pd.DataFrame:
+    """One row per checkpoint: validation scores on held-out scenes, size and training time.
+
+    Parameters
+    ----------
+    checkpoints : mapping name -> checkpoint path
+
+    Returns
+    -------
+    pandas.DataFrame
+        ``network, arch, parameters, steps, best_step, train_minutes, val_miou, val_pixel_acc,
+        val_mean_acc`` and ``iou_<class>`` for classes 1..10.
+    """
+    from ..labels import EVAL_CLASSES, NAMES
+    from .predict import load_model
+
+    rows = []
+    for name, path in checkpoints.items():
+        info = load_model(path).info
+        m = info["metrics"]
+        row = dict(network=name, arch=info["model"]["arch"], parameters=info["n_parameters"],
+                   steps=info["train_config"]["steps"], best_step=m["step"],
+                   train_minutes=info["train_seconds"] / 60, val_miou=m["miou"],
+                   val_pixel_acc=m["pixel_acc"], val_mean_acc=m["mean_acc"])
+        row.update({f"iou_{NAMES[c]}": m["per_class_iou"][c] for c in EVAL_CLASSES})
+        rows.append(row)
+    return pd.DataFrame(rows)
 
 
 def _plain(obj):
