@@ -36,17 +36,34 @@ def test_notebooks_are_committed_clean_with_a_parameters_cell(name):
 def test_failing_notebook_names_cell_and_parameters(tmp_path):
     nb = nbformat.v4.new_notebook()
     nb.metadata["kernelspec"] = {"name": "python3", "display_name": "Python 3", "language": "python"}
-    params = nbformat.v4.new_code_cell("seed = 0")
+    params = nbformat.v4.new_code_cell("seed = 1\nprofile = \"full\"")
     params.metadata["tags"] = ["parameters"]
     nb.cells = [params, nbformat.v4.new_code_cell("x = 1"), nbformat.v4.new_code_cell("raise RuntimeError('boom')")]
     (tmp_path / "nb").mkdir()
     nbformat.write(nb, tmp_path / "nb" / "01_simulate.ipynb")
+    (tmp_path / "params.yaml").write_text(
+        "profile: smoke\nprofiles:\n  smoke:\n    common: {seed: 0, unused: 3}\n    simulate: {}\n"
+    )
     with pytest.raises(pipeline.NotebookFailed) as e:
-        pipeline.run_notebook("01_simulate", "smoke", notebooks_dir=tmp_path / "nb",
+        pipeline.run_notebook("01_simulate", "smoke", notebooks_dir=tmp_path / "nb", params_file=tmp_path / "params.yaml",
                               reports_dir=tmp_path / "rep", cwd=tmp_path)
     msg = str(e.value)
     assert "01_simulate failed in cell" in msg and "RuntimeError: boom" in msg
-    assert "'profile': 'smoke'" in msg and "'seed': 0" in msg
+    assert "'profile': 'smoke'" in msg and "'seed': 0" in msg and "unused" not in msg
+
+
+def test_parameter_the_notebook_does_not_declare_is_refused(tmp_path):
+    nb = nbformat.v4.new_notebook()
+    nb.metadata["kernelspec"] = {"name": "python3", "display_name": "Python 3", "language": "python"}
+    params = nbformat.v4.new_code_cell("seed = 1")
+    params.metadata["tags"] = ["parameters"]
+    nb.cells = [params]
+    (tmp_path / "nb").mkdir()
+    nbformat.write(nb, tmp_path / "nb" / "01_simulate.ipynb")
+    (tmp_path / "params.yaml").write_text("profiles:\n  smoke:\n    simulate: {n_framez: 3}\n")
+    with pytest.raises(ValueError, match="gives n_framez, which the notebook's parameters cell does not declare"):
+        pipeline.run_notebook("01_simulate", "smoke", notebooks_dir=tmp_path / "nb",
+                              params_file=tmp_path / "params.yaml", reports_dir=tmp_path / "rep", cwd=tmp_path)
 
 
 def test_findings_are_checked_on_numbers():

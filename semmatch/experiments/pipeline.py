@@ -103,6 +103,19 @@ def notebook_parameters(
     return params
 
 
+def _declared(src: Path, params: dict, own: dict) -> dict:
+    """Keep the parameters the notebook declares; a key of its own section it does not declare
+    is an error (a typo in params.yaml must not pass silently), common keys are optional."""
+    import papermill as pm
+
+    declared = set(pm.inspect_notebook(str(src)))
+    unknown = sorted(set(own) - declared)
+    if unknown:
+        raise ValueError(f"{src}: params.yaml gives {', '.join(unknown)}, which the notebook's parameters "
+                         f"cell does not declare (declared: {', '.join(sorted(declared))})")
+    return {k: v for k, v in params.items() if k in declared}
+
+
 def run_notebook(
     notebook: str,
     profile: str | None = None,
@@ -130,6 +143,7 @@ def run_notebook(
     src = Path(notebooks_dir) / f"{notebook}.ipynb"
     if not src.is_file():
         raise FileNotFoundError(f"{src}: no such notebook")
+    params = _declared(src, params, load_params(params_file, params["profile"]).get(section_of(notebook)) or {})
     out_dir = Path(reports_dir) if reports_dir is not None else Path(cwd) / "reports" / params["profile"]
     out_dir.mkdir(parents=True, exist_ok=True)
     out = out_dir / f"{notebook}.ipynb"

@@ -10,8 +10,8 @@ so the upper map and the lower frames drift independently, as in a real recordin
 
 from __future__ import annotations
 
-from collections.abc import Sequence as _SequenceABC
 from collections.abc import Sequence
+from collections.abc import Sequence as _SequenceABC
 from dataclasses import replace
 from pathlib import Path
 
