@@ -26,7 +26,8 @@ from semmatch.transfer.index import sample_mesh
 
 INTR = DEFAULT_INTRINSICS.scaled(160, 120)
 # superpixel methods on 160x120 frames: superpixels are ~37 px, so a few straddle class edges
-TOLERANCE = {"3d-neighborhood": 0.999, "2d-slic": 0.95, "3d-projected-sp": 0.95, "3d-slic": 0.93, "dbscan": 0.90}
+# 3d-neighborhood: voxel-centre answers (4 cm voxels here) near class edges; exact=True is exact
+TOLERANCE = {"3d-neighborhood": 0.97, "2d-slic": 0.95, "3d-projected-sp": 0.95, "3d-slic": 0.93, "dbscan": 0.90}
 FAST = {"voxel_size": 0.04}
 
 
@@ -66,6 +67,8 @@ def test_exact_map_gives_exact_transfer(method, frames, index):
         assert r.coverage > (0.75 if method == "dbscan" else 0.9)
         assert abs(r.coverage - cov) < 1e-9  # every pixel has depth here
         assert r.seconds > 0 and r.purity.shape == f.depth.shape
+        if method == "3d-neighborhood":
+            assert _acc(transfer(method, f, index, exact=True), f.labels)[0] >= 0.999
 
 
 @pytest.mark.parametrize("method", METHODS)
@@ -114,12 +117,13 @@ def test_reference_and_fast_agree_on_generated_frame():
     idx = MapIndex(sc.to_semantic_map(), **FAST)
     for f in frs:
         ref = transfer("3d-neighborhood", f, idx, backend="reference")
+        exact = transfer("3d-neighborhood", f, idx, exact=True)
         fast = transfer("3d-neighborhood", f, idx)
-        grid = transfer("3d-neighborhood", f, idx, exact=False)
-        assert (ref == fast).mean() >= 0.999
-        assert (ref == grid).mean() >= 0.95  # voxel-centre answers differ only near class edges
-        acc, cov = _acc(fast, f.labels)
-        assert acc >= 0.97 and cov > 0.95
+        assert (ref == exact).mean() >= 0.999
+        assert (ref == fast).mean() >= 0.95  # voxel-centre answers differ only near class edges
+        for lab in (fast, exact):
+            acc, cov = _acc(lab, f.labels)
+            assert acc >= 0.97 and cov > 0.95
 
 
 def test_point_map(frames, gt_map):

@@ -4,9 +4,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import cv2
 import numpy as np
 
-from ..geometry import Intrinsics, backproject, check_pose
+from ..geometry import Intrinsics, check_pose
 from ..io import Frame
 
 __all__ = ["FrameData", "check_frame"]
@@ -45,11 +46,37 @@ class FrameData:
         """Pixels with a depth measurement."""
         return int(self.valid.sum())
 
-    def points(self) -> tuple[np.ndarray, np.ndarray]:
-        """World points of the valid pixels and their flat pixel indices (computed once)."""
+    def points(self, stride: int = 1) -> tuple[np.ndarray, np.ndarray]:
+        """World points of the valid pixels and their flat pixel indices (raster order).
+
+        Parameters
+        ----------
+        stride : int
+            Keep every ``stride``-th valid pixel (raster order), the paper's "every 4th point".
+
+        Returns
+        -------
+        points : float32 (N,3)
+        pixels : int64 (N,)
+        """
         if self._points is None:
-            self._points = backproject(self.depth, self.intrinsics, self.pose)
-        return self._points
+            self._points = (np.flatnonzero(self.valid),)
+        pix = self._points[0][:: int(stride)]
+        return self.world_points(pix), pix
+
+    def world_points(self, pixels: np.ndarray) -> np.ndarray:
+        """World coordinates of the given flat pixel indices (float32 (N,3))."""
+        W = self.intrinsics.width
+        v, u = np.divmod(np.asarray(pixels, dtype=np.int64), W)
+        z = self.depth.reshape(-1)[pixels]
+        intr = self.intrinsics
+        cam = np.empty((len(z), 1, 3), np.float32)
+        cam[:, 0, 0] = (u.astype(np.float32) - np.float32(intr.cx)) * (z / np.float32(intr.fx))
+        cam[:, 0, 1] = (v.astype(np.float32) - np.float32(intr.cy)) * (z / np.float32(intr.fy))
+        cam[:, 0, 2] = z
+        if len(z) == 0:
+            return cam.reshape(0, 3)
+        return cv2.transform(cam, self.pose[:3].astype(np.float32)).reshape(-1, 3)
 
 
 def check_frame(frame: Frame, *, need_rgb: bool = True) -> FrameData:

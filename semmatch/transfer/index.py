@@ -11,8 +11,11 @@ into
   mesh (Open3D ``RaycastingScene.compute_closest_points``, what the authors' code does) or the
   nearest map point (SciPy ``cKDTree``) for point maps.
 
-So :meth:`MapIndex.lookup` returns exactly the nearest-surface label wherever the answer can
-differ inside a voxel, and the grid answer elsewhere.
+:meth:`MapIndex.lookup` (``exact=True``) thus returns exactly the nearest-surface label
+wherever the answer can differ inside a voxel and the grid answer elsewhere; with
+``exact=False`` it returns the voxel-centre answer everywhere (one gather per point: the fast
+path of ``3d-neighborhood``; a point within about one voxel of a class edge may take the
+neighbouring class).
 """
 
 from __future__ import annotations
@@ -148,6 +151,14 @@ class MapIndex:
         self._rc = None
         self._rays: dict[Intrinsics, tuple[np.ndarray, np.ndarray]] = {}
         self._build_grid(float(voxel_size), int(max_voxels))
+        self.n_samples = len(self.samples)
+        if self.is_mesh:  # mesh samples only serve the grid; exact queries use the triangles
+            self.samples = self.sample_labels = None
+
+    def __getstate__(self) -> dict:
+        state = self.__dict__.copy()
+        state["_rc"] = None  # Open3D scenes do not pickle; rebuilt on first use
+        return state
 
     # ------------------------------------------------------------------ construction
     def _build_grid(self, voxel_size: float, max_voxels: int) -> None:

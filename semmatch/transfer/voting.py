@@ -68,7 +68,9 @@ def vote(
 def paint(groups: np.ndarray, values: np.ndarray, fill=0) -> np.ndarray:
     """Per-element ``values[groups]``, ``fill`` where the group is negative."""
     g = np.asarray(groups)
-    out = np.asarray(values)[np.clip(g, 0, None)]
-    if (g < 0).any():
-        out = np.where(g < 0, fill, out).astype(np.asarray(values).dtype)
+    values = np.asarray(values)
+    if g.size == 0 or g.min() >= 0:
+        return values[g]
+    out = values[np.maximum(g, 0)]
+    out[g < 0] = fill
     return out

@@ -64,7 +64,7 @@ def run(args) -> int:
               "scene": scene.name}
     variants = [(m, m, {}) for m in methods]
     if "3d-neighborhood" in methods:
-        variants.append(("3d-neighborhood (grid only)", "3d-neighborhood", {"exact": False}))
+        variants.append(("3d-neighborhood (exact)", "3d-neighborhood", {"exact": True}))
     for key, name, params in variants:
         r = bench(name, **params)
         labels = r.pop("labels")
