@@ -122,18 +122,22 @@ class Segmenter:
         return normalise_inputs(x, dep), tuple(shape)
 
     @torch.inference_mode()
-    def _logits(self, rgbs, depths) -> torch.Tensor:
+    def _probs(self, rgbs, depths) -> torch.Tensor:
+        """Softmax at the network's resolution, bilinearly restored to the input size.
+
+        Interpolating probabilities (convex weights) keeps them summing to 1; the result is
+        channels-last so that the NumPy ``(N,H,W,C)`` view needs no copy.
+        """
         x, shape = self._inputs(rgbs, depths)
         self.net.eval()
-        logits = self.net(x).float()
-        if tuple(logits.shape[-2:]) != shape:
-            logits = F.interpolate(logits, size=shape, mode="bilinear", align_corners=False)
-        return logits
+        p = torch.softmax(self.net(x).float(), dim=1).contiguous(memory_format=torch.channels_last)
+        if tuple(p.shape[-2:]) != shape:
+            p = F.interpolate(p, size=shape, mode="bilinear", align_corners=False)
+        return p
 
     def predict_batch(self, rgbs: np.ndarray, depths: np.ndarray | None = None) -> np.ndarray:
         """Probabilities of a batch: ``(N,H,W,3)`` -> ``(N,H,W,C)`` float32, summing to 1."""
-        p = torch.softmax(self._logits(rgbs, depths), dim=1).permute(0, 2, 3, 1).cpu().numpy()
-        return p / p.sum(axis=-1, keepdims=True)
+        return self._probs(rgbs, depths).permute(0, 2, 3, 1).cpu().numpy()
 
     def predict(self, rgb: np.ndarray, depth: np.ndarray | None = None) -> np.ndarray:
         """Per-class probabilities of one image.
@@ -161,7 +165,7 @@ class Segmenter:
 
     def predict_labels_batch(self, rgbs: np.ndarray, depths: np.ndarray | None = None) -> np.ndarray:
         """Arg-max category ids ``(N,H,W)`` uint8 of a batch."""
-        return self._logits(rgbs, depths).argmax(dim=1).to(torch.uint8).cpu().numpy()
+        return self._probs(rgbs, depths).argmax(dim=1).to(torch.uint8).cpu().numpy()
 
     def predict_labels(self, rgb: np.ndarray, depth: np.ndarray | None = None) -> np.ndarray:
         """Arg-max category ids ``(H,W)`` uint8 of one image."""
