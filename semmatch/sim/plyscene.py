@@ -76,12 +76,17 @@ def up_rotation(vertices: np.ndarray, faces: np.ndarray, labels: np.ndarray) -> 
     return R, name
 
 
-def _components(faces: np.ndarray, labels: np.ndarray, n_vertices: int) -> np.ndarray:
-    """Connected parts of same-label triangles: component id per face."""
+def _components(faces: np.ndarray, labels: np.ndarray, vertices: np.ndarray, weld: float = 2e-3) -> np.ndarray:
+    """Connected parts of same-label triangles: component id per face.
+
+    Vertices closer than ``weld`` are merged first (TSDF meshes such as voxblox's repeat the
+    vertices on block borders).
+    """
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
-    node = faces.astype(np.int64) * NUM_CLASSES + labels[:, None]
+    _u, welded = np.unique(np.floor(vertices / weld).astype(np.int64), axis=0, return_inverse=True)
+    node = welded.reshape(-1)[faces].astype(np.int64) * NUM_CLASSES + labels[:, None]
     a = np.concatenate([node[:, 0], node[:, 1]])
     b = np.concatenate([node[:, 1], node[:, 2]])
     uniq, inv = np.unique(np.concatenate([a, b, node[:, 0]]), return_inverse=True)
@@ -132,7 +137,7 @@ def scene_from_ply(path: str | os.PathLike, *, seed: int = 0, min_part: int = 20
         warnings.warn(f"{path}: the floor says the up axis is {up_name}, not +z; rotating the mesh",
                       UserWarning, stacklevel=2)
     v = v @ R.T
-    comp = _components(faces, tri_lab, len(v))
+    comp = _components(faces, tri_lab, v)
     rng = np.random.default_rng(seed)
     names = list(MATERIALS)
     n_comp = int(comp.max()) + 1

@@ -149,7 +149,7 @@ class Renderer:
                 ).numpy()
                 idx = np.nonzero(lit)[0]
                 lit[idx[occ]] = False
-            gain = 1.6 / (1.0 + 0.08 * dist * dist) / np.sqrt(len(self.lights))
+            gain = 1.15 / (1.0 + 0.08 * dist * dist) / np.sqrt(len(self.lights))
             shade += np.where(lit, lam * gain, 0.0).astype(np.float32)
         return shade[tri]
 

@@ -3,7 +3,7 @@
 The carrier of the camera (a person for the upper view, a robot for the lower one) occupies
 the vertical column under the camera, so a floor cell is free at height ``h`` when no
 obstacle (anything but floor and ceiling) lies within ``margin`` of it between the floor
-and ``h + 0.1`` m, the cell is inside the scene (a ray down hits the mesh) and the ceiling
+and ``h + 0.1`` m, the cell is inside the scene (a ray down or up hits the mesh) and the ceiling
 is above the camera. The path visits waypoints spread over the free space (farthest-point
 sampling), joins them by least-cost grid paths that keep away from obstacles
 (:class:`skimage.graph.MCP_Geometric`), is smoothed and resampled to ``n_frames``. The
@@ -122,11 +122,12 @@ def free_space(
     *,
     margin: float = 0.3,
     resolution: float = 0.05,
+    min_enclosure: int = 3,
 ) -> FreeSpace:
     """The floor cells where a camera carried at ``height`` above the floor may be.
 
-    A cell is inside the scene when a ray down from the camera hits the mesh (gaps up to
-    ~0.5 m closed, enclosed holes filled: reconstructed floors have holes).
+    A cell is inside the scene when a ray down or up from the camera hits the mesh (gaps
+    up to ~0.5 m closed, enclosed holes filled: reconstructed floors have holes).
 
     Parameters
     ----------
@@ -137,6 +138,10 @@ def free_space(
         Smallest distance (m) kept from obstacles and walls.
     resolution : float
         Grid cell size (m).
+    min_enclosure : int
+        Of 8 horizontal rays from the camera, how many must hit the mesh (closed rooms:
+        all 8; partial reconstructions such as the Replica meshes of ``../shared`` have
+        few walls).
 
     Returns
     -------
@@ -171,8 +176,8 @@ def free_space(
     rc = np.floor((pts[band, :2] - lo[:2]) / resolution).astype(np.int64)
     rc = np.clip(rc, 0, [nx - 1, ny - 1])
     occ[rc[:, 1], rc[:, 0]] = True
-    # inside: a ray down from the camera hits the floor (holes in the floor are filled);
-    # the ceiling (or anything) above must leave room for the camera
+    # inside: mesh below or above the camera, and the camera enclosed by the mesh (at
+    # least min_enclosure of 8 horizontal rays hit it); the ceiling must leave room
     gy, gx = np.mgrid[0:ny, 0:nx]
     xy = np.stack([gx.ravel(), gy.ravel()], axis=1) * resolution + origin
     z = floor_z + height
@@ -184,8 +189,14 @@ def free_space(
     ans_d = rc_scene.cast_rays(o3d.core.Tensor(down))
     ans_u = rc_scene.cast_rays(o3d.core.Tensor(up))
     td, tu = ans_d["t_hit"].numpy(), ans_u["t_hit"].numpy()
-    # reconstructed meshes have holes in the floor: close gaps up to ~0.5 m, fill enclosed ones
-    below = np.isfinite(td).reshape(ny, nx)
+    # reconstructed meshes have holes in the floor (or no floor at all): a cell with mesh
+    # below or above is inside; gaps up to ~0.5 m are closed, enclosed holes filled
+    below = np.isfinite(td) | np.isfinite(tu)
+    ang = np.arange(8) * (np.pi / 4)
+    dirs = np.stack([np.cos(ang), np.sin(ang), np.zeros(8)], axis=1).astype(np.float32)
+    horiz = np.concatenate([np.repeat(o, 8, axis=0), np.tile(dirs, (len(o), 1))], axis=1)
+    t_h = rc_scene.cast_rays(o3d.core.Tensor(horiz))["t_hit"].numpy().reshape(-1, 8)
+    below = (below & (np.isfinite(t_h).sum(axis=1) >= min_enclosure)).reshape(ny, nx)
     k = max(1, int(round(0.25 / resolution)))
     below = ndimage.binary_closing(np.pad(below, k), structure=np.ones((2 * k + 1, 2 * k + 1)))[k:-k, k:-k]
     inside = ndimage.binary_fill_holes(below)

@@ -1,0 +1,136 @@
+"""Figures of simulated frames: the README figure of an upper and a lower frame."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from ..io import atomic_path
+from ..labels import EVAL_CLASSES, NAMES, PALETTE, labels_to_colors
+
+__all__ = ["frame_figure", "scene_frames_figure"]
+
+
+def frame_figure(
+    frames: Sequence,
+    path: str | os.PathLike,
+    *,
+    titles: Sequence[str] | None = None,
+    max_depth: float | None = None,
+    dpi: int = 110,
+) -> Path:
+    """Save a grid of frames, one row each: RGB, depth, labels (with a category legend).
+
+    Parameters
+    ----------
+    frames : sequence
+        Objects with ``rgb``, ``depth`` and ``labels`` attributes
+        (:class:`semmatch.io.Frame` or :class:`semmatch.sim.RenderResult`).
+    path : path
+        PNG to write (atomically).
+    titles : sequence of str, optional
+        Row titles (e.g. "upper 1.6 m", "lower 0.2 m").
+    max_depth : float, optional
+        Top of the depth colour scale (default: the largest depth shown).
+    dpi : int
+
+    Returns
+    -------
+    Path
+
+    Raises
+    ------
+    ValueError
+        No frames, a frame without labels, or titles that do not match the frames.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.patches import Patch
+
+    frames = list(frames)
+    if not frames:
+        raise ValueError("frame_figure: no frames given")
+    if titles is not None and len(titles) != len(frames):
+        raise ValueError(f"frame_figure: {len(titles)} titles for {len(frames)} frames")
+    for i, f in enumerate(frames):
+        if getattr(f, "labels", None) is None:
+            raise ValueError(f"frame_figure: frame {i} has no labels")
+    vmax = max_depth or max(float(np.max(f.depth)) for f in frames) or 1.0
+    h, w = frames[0].rgb.shape[:2]
+    fig, axes = plt.subplots(len(frames), 3, figsize=(3 * 3.2, len(frames) * 3.2 * h / w + 0.9), squeeze=False)
+    present = sorted(set().union(*[np.unique(f.labels).tolist() for f in frames]) - {0})
+    for r, f in enumerate(frames):
+        d = np.where(f.depth > 0, f.depth, np.nan)
+        axes[r, 0].imshow(f.rgb)
+        im = axes[r, 1].imshow(d, cmap="turbo", vmin=0, vmax=vmax)
+        axes[r, 2].imshow(labels_to_colors(f.labels))
+        for c, name in enumerate(("RGB", "depth (m)", "labels")):
+            axes[r, c].set_xticks([])
+            axes[r, c].set_yticks([])
+            if r == 0:
+                axes[r, c].set_title(name, fontsize=10)
+        if titles is not None:
+            axes[r, 0].set_ylabel(titles[r], fontsize=10)
+        fig.colorbar(im, ax=axes[r, 1], fraction=0.035, pad=0.02)
+    handles = [
+        Patch(color=PALETTE[i] / 255.0, label=NAMES[i] + ("" if i in EVAL_CLASSES else "*")) for i in present
+    ]
+    fig.legend(handles=handles, loc="lower center", ncol=min(8, len(handles)), fontsize=8, frameon=False)
+    fig.tight_layout(rect=(0, 0.08, 1, 1))
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=dpi)
+    plt.close(fig)
+    return path
+
+
+def scene_frames_figure(
+    scene,
+    path: str | os.PathLike,
+    *,
+    heights: Sequence[float] = (1.6, 0.2),
+    frame: int | None = None,
+    n_frames: int = 60,
+    seed: int = 0,
+    intrinsics=None,
+) -> Path:
+    """Render one frame per height (upper and lower trajectories) of a scene and save
+    :func:`frame_figure` of them (the README figure).
+
+    Parameters
+    ----------
+    scene : Scene
+    path : path
+    heights : sequence of float
+        Camera heights; the first is flown as the "upper", the others as "lower" paths.
+    frame : int, optional
+        Which frame of each ``n_frames`` trajectory to show; default: the one showing the
+        most evaluation categories (of every 5th frame).
+    n_frames, seed : int
+    intrinsics : Intrinsics, optional
+    """
+    from ..geometry import DEFAULT_INTRINSICS
+    from .render import Renderer
+    from .trajectory import make_trajectory
+
+    intr = intrinsics or DEFAULT_INTRINSICS
+    if frame is not None and not 0 <= frame < n_frames:
+        raise ValueError(f"frame {frame} outside 0..{n_frames - 1}")
+    r = Renderer(scene, intr)
+    frames, titles = [], []
+    for i, h in enumerate(heights):
+        kind = "upper" if i == 0 else "lower"
+        poses = make_trajectory(scene, float(h), n_frames, seed=seed, kind=kind)
+        if frame is not None:
+            best = r.render(poses[frame])
+        else:
+            cands = [r.render(p) for p in poses[::5]]
+            best = max(cands, key=lambda c: len(set(np.unique(c.labels).tolist()) & set(EVAL_CLASSES)))
+        frames.append(best)
+        titles.append(f"{kind} {h:.1f} m")
+    return frame_figure(frames, path, titles=titles)
