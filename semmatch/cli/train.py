@@ -20,6 +20,7 @@ def register(sub) -> None:
     p.add_argument("--steps", type=int, help="optimisation steps (profile default otherwise)")
     p.add_argument("--batch-size", type=int)
     p.add_argument("--lr", type=float)
+    p.add_argument("--eval-every", type=int, help="validate every N steps")
     p.add_argument("--width", type=int, help="render/network width (profile default otherwise)")
     p.add_argument("--height", type=int, help="render/network height")
     p.add_argument("--kinds", nargs="+", help="scene kinds")
@@ -40,7 +41,7 @@ def run(args: argparse.Namespace) -> int:
 
     cfg = make_config(
         args.profile, out=args.out, arch=args.arch, use_depth=args.depth or None, steps=args.steps,
-        batch_size=args.batch_size, lr=args.lr, width=args.width, height=args.height, kinds=args.kinds,
+        batch_size=args.batch_size, lr=args.lr, eval_every=args.eval_every, width=args.width, height=args.height, kinds=args.kinds,
         train_seeds=args.train_seeds, val_seeds=args.val_seeds, eval_seeds=args.eval_seeds, seed=args.seed,
         device=args.device, threads=args.threads, cache_dir=args.cache_dir, progress=not args.quiet,
     )
