@@ -153,6 +153,8 @@ def test_bad_input(frames, index):
         transfer("2d-slic", f, index, n_superpixels=3)
     with pytest.raises(ValueError, match="empty"):
         transfer("3d-neighborhood", f, SemanticMap(np.zeros((0, 3)), np.zeros(0)))
+    with pytest.raises(ValueError, match="NaN"):
+        transfer("3d-neighborhood", f, SemanticMap(np.full((4, 3), np.nan), np.ones(4)))
     bad = dataclasses.replace(f, depth=f.depth[:-1])
     with pytest.raises(ValueError, match="frame 0: depth is"):
         transfer("3d-neighborhood", bad, index)
@@ -168,6 +170,17 @@ def test_bad_input(frames, index):
         transfer("3d-slic", dataclasses.replace(f, pose=skew), index)
     with pytest.raises(ValueError, match="no pose"):
         transfer("3d-neighborhood", dataclasses.replace(f, pose=None), index)
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_outlier_depth_reads_void(method, frames, index):
+    f = frames[0]
+    depth = f.depth.copy()
+    depth[:10] = 1e5  # a broken sensor row: 100 km away
+    depth[10:20, :5] = -1.0
+    lab = transfer(method, dataclasses.replace(f, depth=depth), index)
+    assert not lab[:20, :5].any() and not lab[:10].any()
+    assert (lab[30:] > 0).mean() > 0.7
 
 
 @pytest.mark.parametrize("method", METHODS)

@@ -143,7 +143,7 @@ class MapIndex:
         self.is_mesh = semantic_map.is_mesh
         if self.is_mesh:
             self.samples, self.sample_labels = sample_mesh(
-                semantic_map.points, semantic_map.faces, semantic_map.labels, voxel_size / 2
+                semantic_map.points, semantic_map.faces, semantic_map.labels, 0.7 * voxel_size
             )
         else:
             self.samples, self.sample_labels = semantic_map.points, semantic_map.labels
@@ -183,8 +183,8 @@ class MapIndex:
         # not depend on the label ids); voxels holding samples of several labels are "mixed"
         k = np.floor((self.samples - self.origin) / s).astype(np.int64)
         lin = np.ravel_multi_index(k.T, self.shape)
-        off = np.linalg.norm((self.samples - self.origin) / s - k - 0.5, axis=1)
-        order = np.lexsort((off, lin))
+        off = np.linalg.norm((self.samples - self.origin) / s - k - 0.5, axis=1)  # < 0.87
+        order = np.argsort(lin * 1024 + np.minimum(off * 1024, 1023).astype(np.int64))
         lin_o, lab_o = lin[order], self.sample_labels[order]
         first = np.r_[True, lin_o[1:] != lin_o[:-1]]
         lab_min = np.minimum.reduceat(lab_o, np.flatnonzero(first))
@@ -199,7 +199,7 @@ class MapIndex:
         del empty
         near = label_of[tuple(idx)]
         del idx
-        near[dist * s > self.max_distance] = 0
+        near[dist > self.max_distance / s] = 0
         del dist
         mixed = (near & _MIXED) > 0
         grid = near & ~np.uint8(_MIXED)
@@ -216,6 +216,13 @@ class MapIndex:
         grid[:, :, [0, -1]] = 0
         self.grid = grid
         self._flat = grid.ravel()
+
+    def inside(self, points: np.ndarray) -> np.ndarray:
+        """Which points lie inside the grid bounds (outside: farther than ``max_distance``
+        from every map surface, so without support)."""
+        p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        hi = self.origin + np.asarray(self.shape) * self.voxel_size
+        return np.all((p >= self.origin) & (p < hi), axis=1)
 
     @property
     def n_points(self) -> int:

@@ -24,6 +24,16 @@ from .voting import paint, vote
 __all__ = ["slic_2d", "projected_sp_3d", "slic_3d", "dbscan", "neighborhood_3d", "render_labels"]
 
 
+def _mapped_points(fd: FrameData, index: MapIndex) -> tuple[np.ndarray, np.ndarray]:
+    """World points of the valid pixels that lie within the map's reach (the others have no
+    support in any case; dropping them bounds the voxel grids of 3d-slic and dbscan)."""
+    pts, pix = fd.points()
+    keep = index.inside(pts)
+    if not keep.all():
+        pts, pix = pts[keep], pix[keep]
+    return pts, pix
+
+
 def _finish(fd: FrameData, index: MapIndex, labels: np.ndarray, purity: np.ndarray):
     """Apply the per-pixel support mask shared by the group methods."""
     support = index.support_depth(fd.depth, fd.pose, fd.intrinsics)
@@ -226,7 +236,7 @@ def slic_3d(
     from skimage.segmentation import slic
 
     out = np.zeros(fd.shape, np.uint8), np.zeros(fd.shape, np.float32)
-    pts, pix = fd.points()
+    pts, pix = _mapped_points(fd, index)
     if len(pts) == 0:
         return out
     vkeys, cen, inv = _voxel_downsample(pts, voxel_size)
@@ -333,7 +343,7 @@ def dbscan(
     import open3d as o3d
 
     out = np.zeros(fd.shape, np.uint8), np.zeros(fd.shape, np.float32)
-    pts, pix = fd.points()
+    pts, pix = _mapped_points(fd, index)
     if len(pts) == 0:
         return out
     _, cen, inv = _voxel_downsample(pts, voxel_size)
