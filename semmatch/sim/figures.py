@@ -11,7 +11,7 @@ import numpy as np
 from ..io import atomic_path
 from ..labels import EVAL_CLASSES, NAMES, PALETTE, labels_to_colors
 
-__all__ = ["frame_figure", "scene_frames_figure"]
+__all__ = ["frame_figure", "scene_frames_figure", "sequence_frames_figure", "dataset_summary"]
 
 
 def frame_figure(
@@ -134,3 +134,77 @@ def scene_frames_figure(
         frames.append(best)
         titles.append(f"{kind} {h:.1f} m")
     return frame_figure(frames, path, titles=titles)
+
+
+def _best_frame(seq, stride: int = 5):
+    """The frame of a sequence showing the most evaluation categories (every ``stride``-th)."""
+    best, score = None, -1
+    for i in range(0, len(seq), max(1, stride)):
+        lab = seq.read_labels(i)
+        if lab is None:
+            continue
+        s = len(set(np.unique(lab).tolist()) & set(EVAL_CLASSES))
+        if s > score:
+            best, score = i, s
+    if best is None:
+        raise ValueError(f"{seq.path}: no labelled frame to show")
+    return seq[best]
+
+
+def sequence_frames_figure(
+    scene_dir: str | os.PathLike,
+    path: str | os.PathLike,
+    *,
+    sequences: Sequence[str] = ("upper", "lower"),
+    stride: int = 5,
+) -> Path:
+    """:func:`frame_figure` of the written sequences of one scene folder (the README figure).
+
+    For each sequence (``<scene_dir>/upper``, ``<scene_dir>/lower``) the frame showing the
+    most evaluation categories is drawn, with the camera height in the row title.
+
+    Raises
+    ------
+    FileNotFoundError, ValueError
+        A missing or incomplete sequence, named.
+    """
+    from ..io import read_sequence
+
+    scene_dir = Path(scene_dir)
+    frames, titles = [], []
+    for name in sequences:
+        seq = read_sequence(scene_dir / name)
+        f = _best_frame(seq, stride)
+        frames.append(f)
+        titles.append(f"{name} {f.pose[2, 3]:.1f} m (frame {f.index})")
+    return frame_figure(frames, path, titles=titles)
+
+
+def dataset_summary(root: str | os.PathLike, *, stride: int = 5):
+    """One row per sequence under ``root/<split>/<scene>/``: frames, camera height, share of
+    floor pixels and of void (no depth), categories seen (every ``stride``-th frame).
+
+    Returns
+    -------
+    pandas.DataFrame
+    """
+    import pandas as pd
+
+    from ..io import is_sequence, read_sequence
+    from ..labels import id_of
+
+    rows = []
+    for seq_dir in sorted(Path(root).glob("*/*/*")):
+        if not is_sequence(seq_dir):
+            continue
+        seq = read_sequence(seq_dir)
+        labs = [seq.read_labels(i) for i in range(0, len(seq), max(1, stride))]
+        labs = [x for x in labs if x is not None]
+        allv = np.concatenate([x.reshape(-1) for x in labs]) if labs else np.zeros(0, np.uint8)
+        rows.append({
+            "split": seq_dir.parts[-3], "scene": seq_dir.parts[-2], "sequence": seq_dir.name,
+            "frames": len(seq), "height_m": round(float(np.median(seq.poses[:, 2, 3])), 2),
+            "floor_share": round(float((allv == id_of("floor")).mean()) if allv.size else 0.0, 3),
+            "categories": int(len(set(np.unique(allv).tolist()) - {0})),
+        })
+    return pd.DataFrame(rows)
