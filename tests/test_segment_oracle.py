@@ -103,3 +103,19 @@ def test_detectron2_segmenter_end_to_end():
     seg = Detectron2Segmenter(predictor, class_names=["bed"])
     lab = seg.predict_labels(np.zeros((10, 12, 3), np.uint8))
     assert (lab[:5] == id_of("bed")).all() and (lab[5:] == 0).all()
+
+
+def test_pixel_scores_agree_with_semmatch_metrics():
+    from semmatch.metrics import pixel_metrics
+    from semmatch.segment.scores import confusion, scores
+
+    rng = np.random.default_rng(0)
+    gt = rng.integers(0, 12, (3, 20, 30)).astype(np.uint8)
+    pred = np.where(rng.uniform(size=gt.shape) < 0.7, gt, rng.integers(0, 14, gt.shape)).astype(np.uint8)
+    ours, ref = scores(confusion(gt, pred)), pixel_metrics(gt, pred)
+    assert np.isclose(ours["miou"], ref["miou"]) and np.isclose(ours["pixel_acc"], ref["pixel_acc"])
+    # 2D Sorensen and Jaccard from their definitions
+    G, P = np.isin(gt, range(1, 11)), np.isin(pred, range(1, 11)) & (gt > 0)  # GT void is not scored
+    C = (G & P & (gt == pred)).sum()
+    assert np.isclose(ours["sorensen"], 2 * C / (G.sum() + P.sum()))
+    assert np.isclose(ours["color_acc"], C / (G & P).sum())

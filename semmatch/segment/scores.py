@@ -10,29 +10,25 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..labels import EVAL_CLASSES, NUM_CLASSES
+from ..labels import EVAL_CLASSES, NUM_CLASSES, VOID
 
 __all__ = ["confusion", "scores"]
 
 
 def confusion(gt: np.ndarray, pred: np.ndarray, num_classes: int = NUM_CLASSES) -> np.ndarray:
-    """Confusion matrix ``M[g, p]`` (int64, ``num_classes`` square) of two label arrays.
+    """Confusion matrix ``M[g, p]`` (int64, rows = ground truth) of label images.
+
+    A thin alias of :func:`semmatch.metrics.pixel_confusion` (one image pair or ``(N,H,W)``
+    stacks).
 
     Raises
     ------
     ValueError
         If the shapes differ or a label lies outside ``0..num_classes-1``.
     """
-    gt = np.asarray(gt)
-    pred = np.asarray(pred)
-    if gt.shape != pred.shape:
-        raise ValueError(f"label shapes differ: ground truth {gt.shape}, prediction {pred.shape}")
-    g = gt.reshape(-1).astype(np.int64)
-    p = pred.reshape(-1).astype(np.int64)
-    for what, a in (("ground truth", g), ("prediction", p)):
-        if a.size and (a.min() < 0 or a.max() >= num_classes):
-            raise ValueError(f"{what} label outside 0..{num_classes - 1}")
-    return np.bincount(g * num_classes + p, minlength=num_classes * num_classes).reshape(num_classes, num_classes)
+    from ..metrics import pixel_confusion
+
+    return pixel_confusion(np.asarray(gt), np.asarray(pred), n_classes=num_classes)
 
 
 def scores(conf: np.ndarray, classes: tuple[int, ...] = EVAL_CLASSES) -> dict:
@@ -48,13 +44,15 @@ def scores(conf: np.ndarray, classes: tuple[int, ...] = EVAL_CLASSES) -> dict:
     Returns
     -------
     dict
-        ``miou`` (mean IoU over the classes present in the ground truth), ``pixel_acc``
+        ``miou`` (mean IoU over the classes present in the ground truth or the prediction,
+        as :func:`semmatch.metrics.pixel_metrics`; ground-truth void is not scored), ``pixel_acc``
         (fraction of ground-truth evaluation pixels labelled correctly), ``jaccard``
         (|C| / |G u P|), ``sorensen`` (2|C| / (|G| + |P|)), ``color_acc`` (|C| / |G n P|),
         ``mean_acc`` (mean of the last three, as the paper's Mean Acc.) and ``per_class_iou``
         (dict class id -> IoU, NaN when absent from both).
     """
-    conf = np.asarray(conf, dtype=np.float64)
+    conf = np.array(conf, dtype=np.float64)
+    conf[VOID, :] = 0  # ground-truth void pixels (no geometry) are not scored
     cls = np.asarray(classes, dtype=np.intp)
     tp = conf[cls, cls]
     gt_n = conf[cls].sum(axis=1)
@@ -62,7 +60,6 @@ def scores(conf: np.ndarray, classes: tuple[int, ...] = EVAL_CLASSES) -> dict:
     union = gt_n + pred_n - tp
     with np.errstate(invalid="ignore", divide="ignore"):
         iou = np.where(union > 0, tp / union, np.nan)
-    present = gt_n > 0
     G = gt_n.sum()
     P = pred_n.sum()
     C = tp.sum()
@@ -71,7 +68,7 @@ def scores(conf: np.ndarray, classes: tuple[int, ...] = EVAL_CLASSES) -> dict:
     sor = 2 * C / (G + P) if G + P > 0 else np.nan
     col = C / both if both > 0 else np.nan
     return {
-        "miou": float(np.nanmean(iou[present])) if present.any() else float("nan"),
+        "miou": float(np.nanmean(iou)) if np.isfinite(iou).any() else float("nan"),
         "pixel_acc": float(C / G) if G > 0 else float("nan"),
         "jaccard": float(jac),
         "sorensen": float(sor),
