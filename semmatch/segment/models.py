@@ -143,7 +143,7 @@ def _up(x: torch.Tensor, ref: torch.Tensor | tuple[int, int]) -> torch.Tensor:
 
 
 class CompactNet(nn.Module):
-    """LR-ASPP segmentation head on a small inverted-residual encoder (~0.2 M parameters)."""
+    """LR-ASPP segmentation head on a small inverted-residual encoder (~0.14 M parameters)."""
 
     def __init__(self, in_channels: int = 3, num_classes: int = NUM_CLASSES) -> None:
         super().__init__()
@@ -186,7 +186,7 @@ class ASPP(nn.Module):
 
 
 class StrongNet(nn.Module):
-    """Residual encoder + ASPP + DeepLabV3+-style decoder with 1/4 and 1/2 skips (~2.5 M parameters)."""
+    """Residual encoder + ASPP + DeepLabV3+-style decoder with 1/4 and 1/2 skips (~2.7 M parameters)."""
 
     def __init__(self, in_channels: int = 3, num_classes: int = NUM_CLASSES) -> None:
         super().__init__()
