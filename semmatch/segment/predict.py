@@ -8,7 +8,8 @@ Input conventions (documented conversions, everything else is a ``ValueError``):
   read as "no measurement" (0), as in the data contract; ``uint16`` is refused (convert with
   the sequence's ``depth_scale`` first).
 - An image of another size than the network's is resized to it (area interpolation; depth
-  nearest) and the probabilities are restored to the input size (bilinear on the logits).
+  nearest) and the probabilities are restored to the input size (bilinear interpolation of
+  the probabilities, which keeps them summing to 1).
 """
 
 from __future__ import annotations
