@@ -230,60 +230,53 @@ class Renderer:
         entirely between samples can be missed.
         """
         H, W = self.intrinsics.shape
+        hc, wc = (H + 1) // 2, (W + 1) // 2
         if self._groups is None:
             self._groups = self._plane_groups()
             self._coarse_index = np.arange(H * W).reshape(H, W)[0::2, 0::2].reshape(-1)
-        hc, wc = (H + 1) // 2, (W + 1) // 2
         d_c, p_c, l_c, i_c, rgb_c = self._cast(self.rays(pose, self._coarse_index))
-        shape = (hc, wc)
-        g = np.where(p_c >= 0, self._groups[np.maximum(p_c, 0)], -1).reshape(shape)
-        inv = (1.0 / np.maximum(d_c, np.float32(1e-9))).reshape(shape)
-        p_c, l_c, i_c = p_c.reshape(shape), l_c.reshape(shape), i_c.reshape(shape)
-        rgb_c = rgb_c.reshape(hc, wc, 3).astype(np.float32)
-        depth = np.zeros((H, W), np.float32)
-        prim = np.full((H, W), -1, np.int64)
-        labels = np.zeros((H, W), np.uint8)
-        inst = np.zeros((H, W), np.int32)
-        rgb = np.zeros((H, W, 3), np.uint8)
-        todo = np.ones((H, W), dtype=bool)
-        depth[0::2, 0::2], prim[0::2, 0::2], labels[0::2, 0::2] = d_c.reshape(shape), p_c, l_c
-        inst[0::2, 0::2], rgb[0::2, 0::2] = i_c, rgb_c.astype(np.uint8)
-        todo[0::2, 0::2] = False
 
-        def fill(rs, cs, neighbours):
-            # neighbours: coarse (row slice, col slice) pairs of equal shape; only pixels
-            # whose samples share one plane group are filled, the others stay to do
-            g0 = g[neighbours[0]]
-            ok = g0 >= 0
-            for nb in neighbours[1:]:
-                ok &= g[nb] == g0
-            k = np.float32(1.0 / len(neighbours))
-            sub = (slice(rs.start, rs.start + 2 * ok.shape[0] - 1, 2),
-                   slice(cs.start, cs.start + 2 * ok.shape[1] - 1, 2))
-            first = neighbours[0]
-            iz = inv[first][ok]
-            col = rgb_c[first][ok]
-            for nb in neighbours[1:]:
-                iz = iz + inv[nb][ok]
-                col = col + rgb_c[nb][ok]
-            depth[sub][ok] = 1.0 / (iz * k)
-            prim[sub][ok] = p_c[first][ok]
-            labels[sub][ok] = l_c[first][ok]
-            inst[sub][ok] = i_c[first][ok]
-            rgb[sub][ok] = (col * k + np.float32(0.5)).astype(np.uint8)
-            todo[sub] = ~ok
+        def padded(a, fill):
+            # coarse image with one extra row and column (never equal: group -1)
+            out = np.full((hc + 1, wc + 1) + a.shape[1:], fill, dtype=a.dtype)
+            out[:hc, :wc] = a.reshape((hc, wc) + a.shape[1:])
+            return out
 
-        a, b_ = slice(None, -1), slice(1, None)
-        full_r, full_c = slice(0, hc), slice(0, wc)
-        fill(slice(0, None), slice(1, None), [(full_r, a), (full_r, b_)])  # even rows, odd cols
-        fill(slice(1, None), slice(0, None), [(a, full_c), (b_, full_c)])  # odd rows, even cols
-        fill(slice(1, None), slice(1, None), [(a, a), (a, b_), (b_, a), (b_, b_)])  # odd, odd
+        g = padded(np.where(p_c >= 0, self._groups[np.maximum(p_c, 0)], -1), -1)
+        inv = padded(1.0 / np.maximum(d_c, np.float32(1e-9)), np.float32(0))
+        col = padded(rgb_c.astype(np.uint16), 0)
+        A, B = (slice(0, hc), slice(0, wc)), (slice(0, hc), slice(1, wc + 1))
+        C, D = (slice(1, hc + 1), slice(0, wc)), (slice(1, hc + 1), slice(1, wc + 1))
+        gA = g[A]
+        ok_ab = (gA >= 0) & (g[B] == gA)
+        ok_ac = (gA >= 0) & (g[C] == gA)
+        ok_all = ok_ab & ok_ac & (g[D] == gA)
+        # fine image as (hc, 2, wc, 2) blocks: [:, 0, :, 0] are the coarse samples
+        depth = np.zeros((hc, 2, wc, 2), np.float32)
+        prim = np.full((hc, 2, wc, 2), -1, np.int64)
+        labels = np.zeros((hc, 2, wc, 2), np.uint8)
+        inst = np.zeros((hc, 2, wc, 2), np.int32)
+        rgb = np.zeros((hc, 2, wc, 2, 3), np.uint8)
+        todo = np.zeros((hc, 2, wc, 2), bool)
+        pA, lA, iA = p_c.reshape(hc, wc), l_c.reshape(hc, wc), i_c.reshape(hc, wc)
+        depth[:, 0, :, 0], prim[:, 0, :, 0], labels[:, 0, :, 0] = d_c.reshape(hc, wc), pA, lA
+        inst[:, 0, :, 0], rgb[:, 0, :, 0] = iA, rgb_c.reshape(hc, wc, 3)
+        for (r, c), ok, nbs in (((0, 1), ok_ab, (A, B)), ((1, 0), ok_ac, (A, C)), ((1, 1), ok_all, (A, B, C, D))):
+            s_inv = sum(inv[n] for n in nbs)
+            depth[:, r, :, c] = np.divide(np.float32(len(nbs)), s_inv, out=np.zeros_like(s_inv), where=ok)
+            prim[:, r, :, c] = np.where(ok, pA, -1)
+            labels[:, r, :, c] = np.where(ok, lA, 0)
+            inst[:, r, :, c] = np.where(ok, iA, 0)
+            mean = (sum(col[n] for n in nbs) + len(nbs) // 2) // len(nbs)
+            rgb[:, r, :, c] = np.where(ok[..., None], mean, 0)
+            todo[:, r, :, c] = ~ok
+        out = [x.reshape((2 * hc, 2 * wc) + x.shape[4:])[:H, :W].reshape((H * W,) + x.shape[4:])
+               for x in (depth, prim, labels, inst, rgb, todo)]
+        depth, prim, labels, inst, rgb, todo = out
         idx = np.flatnonzero(todo)
         if len(idx):
             d2, p2, l2, i2, rgb2 = self._cast(self.rays(pose, idx))
-            depth.reshape(-1)[idx], prim.reshape(-1)[idx], labels.reshape(-1)[idx] = d2, p2, l2
-            inst.reshape(-1)[idx] = i2
-            rgb.reshape(-1, 3)[idx] = rgb2
+            depth[idx], prim[idx], labels[idx], inst[idx], rgb[idx] = d2, p2, l2, i2, rgb2
         self.last_cast_fraction = (hc * wc + len(idx)) / (H * W)
         return depth, prim, labels, inst, rgb
 
