@@ -220,9 +220,12 @@ class MapIndex:
     def inside(self, points: np.ndarray) -> np.ndarray:
         """Which points lie inside the grid bounds (outside: farther than ``max_distance``
         from every map surface, so without support)."""
-        p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        p = np.asarray(points).reshape(-1, 3)
         hi = self.origin + np.asarray(self.shape) * self.voxel_size
-        return np.all((p >= self.origin) & (p < hi), axis=1)
+        ok = np.ones(len(p), bool)
+        for a in range(3):
+            ok &= (p[:, a] >= self.origin[a]) & (p[:, a] < hi[a])
+        return ok
 
     @property
     def n_points(self) -> int:
