@@ -304,7 +304,7 @@ def test_cli_simulate(tmp_path, capsys):
 
     out = tmp_path / "cli"
     rc = main(["simulate", "--kind", "office", "--seed", "1", "--height", "0.2", "--frames", "3",
-               "--size", "80x60", "--out", str(out), "--no-progress", "--noise", "kinect"])
+               "--size", "80x60", "--out", str(out), "--no-progress", "--noise", "kinect", "--fast"])
     assert rc == 0 and len(read_sequence(out)) == 3
     assert main(["simulate", "--kind", "office", "--frames", "3", "--size", "80x60", "--out", str(out),
                  "--no-progress"]) == 2

@@ -54,6 +54,7 @@ def simulate_sequence(
     progress: bool = True,
     renderer: Renderer | None = None,
     meta: dict | None = None,
+    fast: bool = False,
 ) -> Path:
     """Render ``poses`` of ``scene`` and stream the frames into a sequence folder.
 
@@ -80,6 +81,9 @@ def simulate_sequence(
         Reuse a renderer of ``scene`` (must have the same intrinsics).
     meta : dict, optional
         Extra entries for ``meta.json``.
+    fast : bool
+        Build the renderer in its coarse-to-fine mode (see :class:`Renderer`); ignored when
+        ``renderer`` is given.
 
     Returns
     -------
@@ -98,7 +102,7 @@ def simulate_sequence(
     if poses.ndim != 3 or poses.shape[1:] != (4, 4) or len(poses) == 0:
         raise ValueError(f"{out_dir}: poses must have shape (N, 4, 4) with N >= 1, got {poses.shape}")
     if renderer is None:
-        renderer = Renderer(scene, intrinsics)
+        renderer = Renderer(scene, intrinsics, fast=fast)
     elif renderer.intrinsics != intrinsics:
         raise ValueError(f"{out_dir}: the renderer's intrinsics differ from the requested ones")
     cfg = noise or NoiseConfig()
