@@ -289,3 +289,22 @@ def test_cli_transfer(seq_and_map, capsys):
                "--method", "2d-slic", "--out", str(root / "cli2"), "--param", "bogus=1", "--no-progress"])
     assert rc == 2 and "unknown parameter" in capsys.readouterr().err
     assert not (root / "cli2").exists()
+
+
+def test_cli_fused_with_probs_folder(seq_and_map, capsys):
+    from semmatch.cli import main
+
+    root = seq_and_map
+    probs_dir = root / "probs"
+    probs_dir.mkdir(exist_ok=True)
+    for i in range(3):
+        p = np.zeros((INTR.height, INTR.width, 21), np.float32)
+        p[..., 2] = 1.0
+        np.save(probs_dir / f"{i:06d}.npy", p)
+    rc = main(["transfer", "--map", str(root / "upper.ply"), "--sequence", str(root / "lower"),
+               "--method", "fused", "--probs", str(probs_dir), "--param", "base=3d-neighborhood",
+               "--voxel-size", "0.04", "--out", str(root / "fused"), "--no-progress", "--json"])
+    assert rc == 0 and '"coverage": 1.0' in capsys.readouterr().out
+    assert main(["transfer", "--map", str(root / "upper.ply"), "--sequence", str(root / "lower"),
+                 "--method", "fused", "--out", str(root / "f2"), "--no-progress"]) == 2
+    assert "needs --probs" in capsys.readouterr().err

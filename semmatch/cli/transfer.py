@@ -17,8 +17,10 @@ def register(sub) -> None:
     )
     p.add_argument("--map", required=True, help="upper semantic map or mesh (PLY)")
     p.add_argument("--sequence", required=True, help="lower sequence folder")
-    p.add_argument("--method", required=True, choices=[m for m in ALL_METHODS if m != "fused"],
-                   help="transfer method")
+    p.add_argument("--method", required=True, choices=list(ALL_METHODS),
+                   help="transfer method (fused: also --probs)")
+    p.add_argument("--probs", default=None,
+                   help="fused: folder of per-frame class probabilities 000000.npy (H,W,C)")
     p.add_argument("--out", required=True, help="labels folder to write")
     p.add_argument("--max-distance", type=float, default=DEFAULT_MAX_DISTANCE,
                    help="metres; pixels farther than this from the map get 0 (default %(default)s)")
@@ -51,6 +53,12 @@ def run(args) -> int:
     from semmatch.transfer.registry import check_params
 
     params = _parse_params(args.param)
+    if args.probs is not None:
+        if args.method != "fused":
+            raise ValueError("--probs is only used by --method fused")
+        params["probs"] = args.probs
+    elif args.method == "fused":
+        raise ValueError("--method fused needs --probs DIR (per-frame class probabilities)")
     check_params(args.method, params)
     seq = read_sequence(args.sequence)
     index = MapIndex(read_map(args.map), max_distance=args.max_distance, voxel_size=args.voxel_size)

@@ -44,7 +44,7 @@ class FrameData:
     @property
     def n_valid(self) -> int:
         """Pixels with a depth measurement."""
-        return int(self.valid.sum())
+        return int(np.count_nonzero(self.valid))
 
     def points(self, stride: int = 1) -> tuple[np.ndarray, np.ndarray]:
         """World points of the valid pixels and their flat pixel indices (raster order).
@@ -115,8 +115,10 @@ def check_frame(frame: Frame, *, need_rgb: bool = True) -> FrameData:
     if not np.issubdtype(depth.dtype, np.floating):
         raise ValueError(f"{name}: depth must be float metres, got {depth.dtype}")
     depth = depth.astype(np.float32, copy=False)
-    valid = np.isfinite(depth) & (depth > 0)
-    if not valid.all():
+    valid = depth > 0  # NaN compares False
+    if np.isinf(depth).any():
+        valid &= np.isfinite(depth)
+    if not (valid | (depth == 0)).all():
         depth = np.where(valid, depth, 0).astype(np.float32)
     rgb = frame.rgb
     if need_rgb or rgb is not None:

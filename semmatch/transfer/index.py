@@ -216,6 +216,7 @@ class MapIndex:
         grid[:, :, [0, -1]] = 0
         self.grid = grid
         self._flat = grid.ravel()
+        self._labels_flat = (grid & np.uint8(_LABEL_BITS)).ravel()  # voxel-centre answers
 
     def inside(self, points: np.ndarray) -> np.ndarray:
         """Which points lie inside the grid bounds (outside: farther than ``max_distance``
@@ -325,13 +326,19 @@ class MapIndex:
         out = self._flat[lin]
         return self._resolve(out, lambda sel: p[sel], exact)
 
-    def _gather_depth(self, depth: np.ndarray, pose: np.ndarray, intrinsics: Intrinsics):
-        """Raw grid values of every pixel and a function giving world points of selected pixels."""
+    def _gather_depth(
+        self, depth: np.ndarray, pose: np.ndarray, intrinsics: Intrinsics, *, flags: bool = True
+    ):
+        """Grid values of every pixel (with the flag bits, or the voxel-centre labels only) and a
+        function giving the world points of selected pixels."""
         T = check_pose(pose)
         rx, ry = self._pixel_rays(intrinsics)
         z = np.asarray(depth, dtype=np.float32)
-        valid = np.isfinite(z) & (z > 0)
-        if not valid.all():
+        if z.shape != intrinsics.shape:
+            raise ValueError(f"depth is {z.shape} but the intrinsics say {intrinsics.shape}")
+        valid = z > 0  # NaN compares False
+        if not (valid | (z == 0)).all() or np.isinf(z).any():
+            valid &= np.isfinite(z)
             z = np.where(valid, z, 0).astype(np.float32)
         inv = 1.0 / self.voxel_size
         R = T[:3, :3] * inv
@@ -349,7 +356,8 @@ class MapIndex:
             else:
                 lin *= self.shape[a]
                 lin += qa
-        out = self._flat[lin.astype(np.int64 if exact_dtype is np.float64 else np.int32)]
+        table = self._flat if flags else self._labels_flat
+        out = table[lin.astype(np.int64 if exact_dtype is np.float64 else np.int32)]
         out[~valid] = 0
 
         def world(sel: tuple[np.ndarray, ...]) -> np.ndarray:
@@ -378,6 +386,8 @@ class MapIndex:
         -------
         uint8 (H,W)
         """
+        if not exact:
+            return self._gather_depth(depth, pose, intrinsics, flags=False)[0]
         out, world = self._gather_depth(depth, pose, intrinsics)
         return self._resolve(out, world, exact)
 

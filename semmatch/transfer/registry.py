@@ -163,7 +163,9 @@ def transfer_frame(
         labels, purity = _call(name, fd, index, params)
     seconds = time.perf_counter() - t0 - (t1 - t0 if isinstance(semantic_map, MapIndex) else 0.0)
     n_valid = fd.n_valid
-    coverage = float((labels[fd.valid] > 0).sum() / n_valid) if n_valid else 0.0
+    # the paper's methods leave pixels without depth at 0; fused may label them from the network
+    n_lab = np.count_nonzero(labels[fd.valid]) if name == "fused" else np.count_nonzero(labels)
+    coverage = float(n_lab / n_valid) if n_valid else 0.0
     return TransferResult(labels, coverage, seconds, purity, name)
 
 

@@ -19,13 +19,24 @@ __all__ = ["transfer_sequence"]
 _WORKER: dict = {}
 
 
+def _frame_params(params: dict, i: int) -> dict:
+    """Per-frame parameters: a ``probs`` folder becomes frame ``i``'s ``NNNNNN.npy`` array."""
+    probs = params.get("probs")
+    if isinstance(probs, (str, os.PathLike)):
+        path = Path(probs) / f"{i:06d}.npy"
+        if not path.is_file():
+            raise FileNotFoundError(f"{path}: probabilities of frame {i} are missing")
+        return {**params, "probs": np.load(path)}
+    return params
+
+
 def _init_worker(index: MapIndex, seq_path, method: str, params: dict) -> None:
     _WORKER.update(index=index, seq=read_sequence(seq_path), method=method, params=params)
 
 
 def _run_one(i: int):
     w = _WORKER
-    r = transfer_frame(w["method"], w["seq"][i], w["index"], **w["params"])
+    r = transfer_frame(w["method"], w["seq"][i], w["index"], **_frame_params(w["params"], i))
     return i, r.labels, r.coverage, r.seconds
 
 
@@ -61,7 +72,8 @@ def transfer_sequence(
     max_distance : float, optional
         Distance threshold (see :func:`~semmatch.transfer.transfer_frame`).
     **params
-        Method parameters.
+        Method parameters. For ``fused``, ``probs`` may be a folder of per-frame
+        ``000000.npy ...`` arrays (H,W,C) (e.g. written by ``semmatch predict``).
 
     Returns
     -------
@@ -98,7 +110,7 @@ def transfer_sequence(
                 bar.update()
     else:
         for i in range(n):
-            r = transfer_frame(method, frames[i], index, **params)
+            r = transfer_frame(method, frames[i], index, **_frame_params(params, i))
             labels[i], cov[i], secs[i] = r.labels, r.coverage, r.seconds
             bar.update()
     bar.close()
