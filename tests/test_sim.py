@@ -339,3 +339,15 @@ def test_bench_render_json(capsys):
     for key in ("fps", "width", "height", "triangles", "fps_fast", "rss_mb_at_end"):
         assert key in res
     assert res["width"] == 80 and res["triangles"] >= 5000 and res["fps"] > 0
+
+
+def test_generate_dataset_redoes_sequences_of_other_sizes(tmp_path):
+    kw = dict(train_seeds=[], eval_seeds=[3], kinds=["bedroom"], n_frames_upper=2, n_frames_lower=2,
+              heights_sweep=None, intrinsics=DEFAULT_INTRINSICS.scaled(40, 30), progress=False)
+    generate_dataset(tmp_path, **kw)
+    ev = tmp_path / "eval" / "bedroom_0003"
+    (ev / ".upper.dead.partial").mkdir()  # left by a killed run
+    res = generate_dataset(tmp_path, **{**kw, "n_frames_upper": 3})
+    assert res["written"] == [str(ev / "upper")]
+    assert len(read_sequence(ev / "upper")) == 3 and len(read_sequence(ev / "lower")) == 2
+    assert not (ev / ".upper.dead.partial").exists()

@@ -118,7 +118,10 @@ class HabitatRenderer:
             s.position, s.hfov = [0.0, 0.0, 0.0], hfov
             specs.append(s)
         agent = habitat_sim.agent.AgentConfiguration(sensor_specifications=specs)
+        from habitat_sim.utils.common import quat_from_coeffs
+
         self._habitat = habitat_sim
+        self._quat_from_coeffs = quat_from_coeffs
         self._sim = habitat_sim.Simulator(habitat_sim.Configuration(sim_cfg, [agent]))
         names = {n: i for i, n in enumerate(NAMES)}
         cmap = category_map or {}
@@ -142,7 +145,7 @@ class HabitatRenderer:
         agent = self._sim.get_agent(0)
         state = self._habitat.AgentState()
         state.position = pos.astype(np.float32)
-        state.rotation = np.quaternion(q[3], q[0], q[1], q[2])  # numpy-quaternion, bundled with habitat
+        state.rotation = self._quat_from_coeffs(q)  # coefficients x, y, z, w
         agent.set_state(state, reset_sensors=True)
         obs = self._sim.get_sensor_observations()
         inst = np.asarray(obs["semantic"]).astype(np.int64)

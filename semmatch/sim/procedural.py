@@ -587,6 +587,24 @@ def box_room(
     """An empty box room ``[0, W] x [0, D] x [0, H]`` (analytic test scene).
 
     Walls, floor and ceiling face inwards; depth from any inside camera is analytic.
+
+    Parameters
+    ----------
+    size : (float, float, float)
+        Width (x), depth (y) and height (z) in metres.
+    cell : float
+        Grid cell of the subdivided faces (m).
+    seed : int
+        Seed of the material colour jitter.
+
+    Returns
+    -------
+    Scene
+
+    Raises
+    ------
+    ValueError
+        A non-positive size.
     """
     W, D, H = (float(s) for s in size)
     if min(W, D, H) <= 0:

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import tempfile
 from collections.abc import Sequence
 from pathlib import Path
@@ -26,7 +27,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from ..geometry import DEFAULT_INTRINSICS, Intrinsics
-from ..io import SequenceWriter, is_sequence, write_json, write_tum
+from ..io import SequenceWriter, is_sequence, read_intrinsics, write_json, write_tum
 from .noise import NoiseConfig, estimated_poses, exposure_gains, noisy_depth, noisy_rgb
 from .procedural import SCENE_KINDS, generate_scene
 from .render import Renderer
@@ -141,6 +142,24 @@ def _tum_text(poses: np.ndarray) -> str:
         return (Path(d) / "p.txt").read_text()
 
 
+def _complete(path: Path, n_frames: int, intrinsics: Intrinsics) -> bool:
+    """True when ``path`` holds a complete sequence of ``n_frames`` frames with ``intrinsics``."""
+    if not is_sequence(path):
+        return False
+    try:
+        same = read_intrinsics(path / "intrinsics.json") == intrinsics
+        n = sum(1 for line in (path / "poses.txt").read_text().splitlines() if line.strip() and line[0] != "#")
+    except (OSError, ValueError):
+        return False
+    return same and n == n_frames
+
+
+def _drop_partials(folder: Path, name: str) -> None:
+    """Remove temporary folders an interrupted writer of ``folder/name`` left behind."""
+    for tmp in folder.glob(f".{name}.*.partial"):
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
 def _check_seeds(train_seeds: Sequence[int], eval_seeds: Sequence[int]) -> None:
     both = sorted(set(map(int, train_seeds)) & set(map(int, eval_seeds)))
     if both:
@@ -176,8 +195,9 @@ def generate_dataset(
         <root>/eval/<scene_id>/upper_noisy/, lower_noisy/   with ``noise``: the same paths,
                                                     sensor noise and estimated poses
 
-    ``<scene_id>`` is ``<kind>_<seed:04d>``. A scene file or sequence already complete is
-    skipped, so an interrupted run resumes where it stopped.
+    ``<scene_id>`` is ``<kind>_<seed:04d>``. A scene file, or a sequence already complete
+    with the requested number of frames and intrinsics, is skipped, so an interrupted run
+    resumes where it stopped (temporary folders of interrupted writes are removed).
 
     Parameters
     ----------
@@ -244,12 +264,13 @@ def generate_dataset(
             if noise is not None and noise.enabled:
                 todo += [("upper_noisy", upper_height, int(n_frames_upper), "upper", noise),
                          ("lower_noisy", lower_height, int(n_frames_lower), "lower", noise)]
-        pending = [t for t in todo if not is_sequence(sdir / t[0])]
-        skipped += [str(sdir / t[0]) for t in todo if is_sequence(sdir / t[0])]
+        done = {t[0] for t in todo if _complete(sdir / t[0], t[2], intrinsics)}
+        pending = [t for t in todo if t[0] not in done]
+        skipped += [str(sdir / t[0]) for t in todo if t[0] in done]
         sweep = {}
         if split == "eval" and heights_sweep:
             names = {sweep_name(h): float(h) for h in heights_sweep}
-            missing = [n for n in names if not is_sequence(sdir / n)]
+            missing = [n for n in names if not _complete(sdir / n, int(n_frames_sweep), intrinsics)]
             skipped += [str(sdir / n) for n in names if n not in missing]
             if missing:
                 traj = make_sweep_trajectories(scene, tuple(names.values()), int(n_frames_sweep),
@@ -259,12 +280,14 @@ def generate_dataset(
             continue
         renderer = Renderer(scene, intrinsics)
         for name, height, n, tkind, cfg in pending:
+            _drop_partials(sdir, name)
             poses = make_trajectory(scene, height, n, tilt_deg=tilt_deg, seed=seed, kind=tkind)
             simulate_sequence(scene, poses, sdir / name, intrinsics=intrinsics, noise=cfg, overwrite=True,
                               progress=progress, renderer=renderer,
                               meta={"trajectory": name, "seed": seed, "tilt_deg": tilt_deg})
             written.append(str(sdir / name))
         for name, poses in sweep.items():
+            _drop_partials(sdir, name)
             simulate_sequence(scene, poses, sdir / name, intrinsics=intrinsics, overwrite=True,
                               progress=progress, renderer=renderer,
                               meta={"trajectory": name, "seed": seed, "tilt_deg": tilt_deg,
