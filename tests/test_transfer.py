@@ -308,3 +308,16 @@ def test_cli_fused_with_probs_folder(seq_and_map, capsys):
     assert main(["transfer", "--map", str(root / "upper.ply"), "--sequence", str(root / "lower"),
                  "--method", "fused", "--out", str(root / "f2"), "--no-progress"]) == 2
     assert "needs --probs" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_bench_transfer_json(capsys):
+    import json
+
+    from semmatch.cli import main
+
+    assert main(["bench", "transfer", "--frames", "1", "--methods", "3d-neighborhood", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    m = out["methods"]["3d-neighborhood"]
+    assert m["fps"] > 0 and m["ms_median"] > 0 and out["reference"]["fps"] > 0
+    assert m["agreement_with_reference"] > 0.95 and out["size"] == [640, 480]

@@ -53,7 +53,7 @@ class TransferResult:
     coverage : float
         Share of the pixels with depth that got a label (0 when no pixel has depth).
     seconds : float
-        Wall time of the method on this frame (the map index excluded when prebuilt).
+        Wall time of the method on this frame (indexing the map excluded).
     purity : float32 (H,W)
         Share of the pixel's group votes that agreed with its label (1 for ``3d-neighborhood``,
         0 for void pixels).
@@ -141,7 +141,6 @@ def transfer_frame(
     if name != "fused":
         _check_name(name)
     check_params(name, {"max_distance": max_distance, **params})
-    t0 = time.perf_counter()
     index = prepare(semantic_map, max_distance=max_distance)
     t1 = time.perf_counter()
     if name == "fused":
@@ -161,7 +160,7 @@ def transfer_frame(
     else:
         fd = check_frame(frame, need_rgb=name not in _RGB_FREE)
         labels, purity = _call(name, fd, index, params)
-    seconds = time.perf_counter() - t0 - (t1 - t0 if isinstance(semantic_map, MapIndex) else 0.0)
+    seconds = time.perf_counter() - t1
     n_valid = fd.n_valid
     # the paper's methods leave pixels without depth at 0; fused may label them from the network
     n_lab = np.count_nonzero(labels[fd.valid]) if name == "fused" else np.count_nonzero(labels)
