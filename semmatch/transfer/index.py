@@ -126,7 +126,7 @@ class MapIndex:
         *,
         max_distance: float = DEFAULT_MAX_DISTANCE,
         voxel_size: float = 0.02,
-        max_voxels: int = 48_000_000,
+        max_voxels: int = 32_000_000,
         workers: int = 1,
     ) -> None:
         if not isinstance(semantic_map, SemanticMap):
