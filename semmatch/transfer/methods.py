@@ -4,11 +4,12 @@ Every method takes a validated frame (:class:`~semmatch.transfer.frames.FrameDat
 index and returns ``(labels, purity)``: ``uint8 (H,W)`` labels (0 = no support) and the
 per-pixel share of its group's votes that agreed (``float32 (H,W)``), which ``fused`` uses.
 
-Common rules: pixels without depth get 0; the group methods look their votes up with the
-index's voxel-centre answers (``exact=False``: a vote within about one voxel of a class edge
-may go to the neighbouring class, which a majority vote absorbs; ``exact=True`` resolves them); a pixel whose own 3D point is farther than the
+Common rules: pixels without depth get 0; a pixel whose own 3D point is farther than the
 index's ``max_distance`` from the map gets 0 even when its group has a label (the group vote
-fills label gaps and fixes edges, it never extends the map to unmapped geometry).
+fills label gaps and fixes edges, it never extends the map to unmapped geometry). The group
+methods look their votes up with the index's voxel-centre answers (``exact=False``: a vote
+within about one voxel of a class edge may go to the neighbouring class, which the majority
+vote absorbs; ``exact=True`` resolves them with exact queries).
 """
 
 from __future__ import annotations
