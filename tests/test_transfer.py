@@ -101,7 +101,7 @@ def test_permuting_label_ids_permutes_output(method, frames, gt_map, index):
     for f in frames[:2]:
         a = transfer(method, f, index)
         b = transfer(method, f, idx2)
-        assert (perm[a] == b).mean() >= 0.995, method
+        assert (perm[a] == b).all(), method  # ties are broken by observation order, not by id
 
 
 def test_reference_and_fast_agree_on_generated_frame():
