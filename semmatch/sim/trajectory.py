@@ -264,9 +264,9 @@ def _smooth_path(fs: FreeSpace, xy: np.ndarray, margin: float) -> np.ndarray:
     n = max(2, int(s[-1] / 0.02))
     si = np.linspace(0, s[-1], n)
     raw = np.stack([np.interp(si, s, xy[:, 0]), np.interp(si, s, xy[:, 1])], axis=1)
-    for sigma_m in (0.5, 0.3, 0.15, 0.06):
+    for sigma_m in (0.5, 0.35, 0.25, 0.15, 0.1, 0.06, 0.03):
         sm = gaussian_filter1d(raw, sigma=sigma_m / 0.02, axis=0, mode="nearest")
-        if (fs.clearance_at(sm) >= 0.8 * margin).all():
+        if (fs.clearance_at(sm) >= margin).all():  # every point stays in a free cell
             return sm
     return raw
 
