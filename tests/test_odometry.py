@@ -1,0 +1,68 @@
+"""semmatch.odometry: trajectory errors, RGB-D pose estimation on a rendered sequence."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from semmatch.geometry import DEFAULT_INTRINSICS, look_at
+from semmatch.io import Frame
+from semmatch.odometry import align_trajectory, ate, estimate_poses, rpe, trajectory_errors
+from semmatch.sim import Renderer, generate_scene
+
+
+def circle_poses(n: int = 20) -> np.ndarray:
+    a = np.linspace(0, 1.0, n)
+    return np.stack([look_at([2 + 0.5 * np.cos(t), 1.5 + 0.5 * np.sin(t), 1.2], [2.5, 3.5, 0.8]) for t in a])
+
+
+def test_ate_is_zero_after_alignment_of_a_moved_trajectory():
+    gt = circle_poses()
+    S = np.eye(4)
+    S[:3, :3] = look_at([0, 0, 0], [1, 1, 0.2])[:3, :3]
+    S[:3, 3] = [3.0, -1.0, 0.5]
+    est = S @ gt
+    assert ate(est, gt) == pytest.approx(0.0, abs=1e-9)
+    assert ate(est, gt, align=False) > 1.0
+    assert np.allclose(align_trajectory(est, gt), np.linalg.inv(S), atol=1e-9)
+    t, r = rpe(est, gt)
+    assert t == pytest.approx(0.0, abs=1e-9) and r == pytest.approx(0.0, abs=1e-5)
+
+
+def test_trajectory_errors_count_a_known_offset():
+    gt = circle_poses()
+    est = gt.copy()
+    est[:, 0, 3] += np.where(np.arange(len(gt)) % 2, 0.01, -0.01)  # +-1 cm zigzag in x
+    e = trajectory_errors(est, gt)
+    assert e["ate_rmse_unaligned"] == pytest.approx(0.01)
+    assert e["rpe_trans"] == pytest.approx(0.02)  # every step is off by 2 cm
+    assert e["n_frames"] == len(gt)
+    gt_nan = gt.copy()
+    gt_nan[3] = np.nan  # frames without ground truth are skipped
+    assert trajectory_errors(est, gt_nan)["n_frames"] == len(gt) - 1
+    with pytest.raises(ValueError, match="must both be"):
+        ate(est[:5], gt)
+
+
+def test_estimate_poses_tracks_a_rendered_camera():
+    scene = generate_scene("living_room", 0)
+    intr = DEFAULT_INTRINSICS.scaled(160, 120)
+    r = Renderer(scene, intr)
+    lo, hi = scene.bounds
+    c = (lo + hi) / 2
+    gt = np.stack([
+        look_at([c[0] - 0.6 + 0.03 * i, c[1] - 0.3, 1.0], [c[0] + 1.0, hi[1], 0.6 + 0.01 * i]) for i in range(12)
+    ])
+    frames = []
+    for i, p in enumerate(gt):
+        res = r.render(p)
+        frames.append(Frame(res.rgb, res.depth, None, None, intr, index=i))
+    est = estimate_poses(frames, init_pose=gt[0])
+    assert np.allclose(est[0], gt[0])
+    e = trajectory_errors(est, gt)
+    assert e["ate_rmse_unaligned"] < 0.02 and e["rpe_rot_deg"] < 0.5, e
+    with pytest.raises(ValueError, match="method must be one of"):
+        estimate_poses(frames, method="magic")
+    bad = [Frame(f.rgb, f.depth * 1000, None, None, intr, index=f.index) for f in frames[:2]]
+    with pytest.raises(ValueError, match="frame 0: median depth .* wrong unit"):
+        estimate_poses(bad)
