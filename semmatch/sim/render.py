@@ -113,6 +113,10 @@ class Renderer:
         # (2T, 3): irradiance at the three corners of each triangle, front sides then back sides
         self._irradiance = np.concatenate([self._corner_irradiance(side) for side in (1.0, -1.0)])
         self._plane_d = np.einsum("ij,ij->i", self._normals, scene.vertices[scene.triangles[:, 0]])
+        # per-triangle tables with a last "miss" entry (indexed by triangle id -1)
+        self._labels_ext = np.append(scene.labels, np.uint8(0))
+        self._instances_ext = np.append(scene.instances, np.int32(0))
+        self._albedo_ext = np.vstack([scene.albedo * np.float32(4095.0), np.zeros((1, 3), np.float32)])
         # 12-bit linear -> 8-bit sRGB-like display curve
         self._lut = np.clip(np.rint(255.0 * np.linspace(0, 1, 4096) ** (1 / 2.2)), 0, 255).astype(np.uint8)
 
@@ -194,14 +198,14 @@ class Renderer:
 
         ans = self._rc.cast_rays(o3d.core.Tensor(np.ascontiguousarray(rays)), nthreads=self.nthreads)
         t = ans["t_hit"].numpy()
-        hit = np.isfinite(t)
-        prim = np.where(hit, ans["primitive_ids"].numpy().astype(np.int64), -1)
-        tri = np.maximum(prim, 0)
-        depth = np.where(hit, t, 0.0).astype(np.float32)
-        labels = np.where(hit, self.scene.labels[tri], 0).astype(np.uint8)
-        instances = np.where(hit, self.scene.instances[tri], 0).astype(np.int32)
-        rgb = self._shade(rays, np.where(hit, t, 0.0), tri, hit, ans["primitive_uvs"].numpy())
-        return depth, prim, labels, instances, rgb
+        miss = ~np.isfinite(t)
+        prim = ans["primitive_ids"].numpy().astype(np.int64)
+        prim[miss] = -1  # the tables below end with a "miss" entry, indexed by -1
+        t[miss] = 0.0
+        labels = self._labels_ext[prim]
+        instances = self._instances_ext[prim]
+        rgb = self._shade(rays, t, prim, ans["primitive_uvs"].numpy())
+        return t, prim, labels, instances, rgb
 
     def _plane_groups(self) -> np.ndarray:
         """Id per triangle of its group: same plane, category, instance and material."""
@@ -280,16 +284,16 @@ class Renderer:
         self.last_cast_fraction = (hc * wc + len(idx)) / (H * W)
         return depth, prim, labels, inst, rgb
 
-    def _shade(self, rays, t, tri, hit, uv) -> np.ndarray:
-        d = rays[:, 3:]
+    def _shade(self, rays, t, prim, uv) -> np.ndarray:
+        """RGB of hit points: albedo x interpolated irradiance x texture (misses: black)."""
+        tri = np.maximum(prim, 0)
         # the camera sees the back side of triangles whose plane it is behind (self._side)
         corners = self._irradiance[tri + self._side[tri]]
         u, v = uv[:, 0], uv[:, 1]
         shade = corners[:, 0] + (corners[:, 1] - corners[:, 0]) * u + (corners[:, 2] - corners[:, 0]) * v
         if self.use_texture:
-            p = rays[:, :3] + d * t[:, None].astype(np.float32)
+            p = rays[:, :3] + rays[:, 3:] * t[:, None]
             shade *= texture_factor(p, self.scene.texture[tri])
-        shade = np.where(hit, shade, 0.0).astype(np.float32)
-        col = self.scene.albedo[tri] * shade[:, None]
-        idx = np.clip(col * 4095.0, 0, 4095).astype(np.int16)
-        return self._lut[idx]
+        col = self._albedo_ext[prim] * shade[:, None]  # albedo x 4095, 0 for misses
+        np.minimum(col, 4095.0, out=col)
+        return self._lut[col.astype(np.int16)]
