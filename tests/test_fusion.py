@@ -143,3 +143,19 @@ def test_growing_the_grid_keeps_every_voxel(room_frames):
     order_b = np.lexsort(b.points.T)
     assert np.allclose(a.points[order_a], b.points[order_b], atol=1e-5)
     assert (a.labels[order_a] == b.labels[order_b]).all()
+
+
+def test_reconstruct_cli(tmp_path, room_frames, capsys):
+    from semmatch.cli import main
+
+    seq_dir = tmp_path / "seq"
+    with SequenceWriter(seq_dir, INTR) as w:
+        for f in room_frames[:6]:
+            w.add(f.rgb, f.depth, f.pose, labels=f.labels)
+    rc = main(["reconstruct", str(seq_dir), "--out", str(tmp_path / "m.ply"), "--rgb-out",
+               str(tmp_path / "rgb.ply"), "--voxel-size", "0.05", "--quiet"])
+    assert rc == 0 and '"vertices"' in capsys.readouterr().out
+    m = read_map(tmp_path / "m.ply")
+    assert m.is_mesh and {1, 2, 3} <= set(np.unique(m.labels))
+    rc = main(["reconstruct", str(tmp_path / "nothing"), "--out", str(tmp_path / "x.ply")])
+    assert rc == 2 and "no such sequence folder" in capsys.readouterr().err

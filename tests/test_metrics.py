@@ -163,3 +163,29 @@ def test_replica_map_against_itself_and_a_model_map(shared_dir):
     assert headline(s) == (1.0, 1.0, 1.0, 1.0)
     m = compare(gt, room / "high_3d_nb_model_final_0_noise.ply")
     assert 0.2 < m["mean_acc"] < 0.95 and m["overlap"] > 0.3
+
+
+def test_evaluate_cli_table_files_and_errors(tmp_path, rng, capsys):
+    from semmatch.cli import main
+
+    gt = at_voxels(rng.integers(0, 40, (400, 3)), rng.integers(1, 11, 400))
+    pred = SemanticMap(gt.points, np.where(rng.random(400) < 0.2, 5, gt.labels))
+    write_map(tmp_path / "gt.ply", gt)
+    write_map(tmp_path / "pred.ply", pred)
+    write_map(tmp_path / "mm.ply", SemanticMap(gt.points * 1000, gt.labels))
+    rc = main(["evaluate", str(tmp_path / "gt.ply"), str(tmp_path / "gt.ply"), str(tmp_path / "pred.ply"),
+               "--csv", str(tmp_path / "t.csv"), "--markdown", str(tmp_path / "t.md"),
+               "--figure", str(tmp_path / "c.png"), "--per-class"])
+    assert rc == 0
+    out = capsys.readouterr().out
+    assert "mean_acc" in out and "pred.ply" in out
+    import pandas as pd
+
+    df = pd.read_csv(tmp_path / "t.csv", index_col=0)
+    assert df.loc["gt.ply", "mean_acc"] == 1.0
+    expected = compare(gt, pred, VS)["mean_acc"]
+    assert df.loc["pred.ply", "mean_acc"] == pytest.approx(expected, abs=1e-6)
+    assert "| pred.ply" in (tmp_path / "t.md").read_text()
+    assert (tmp_path / "c.png").stat().st_size > 1000
+    rc = main(["evaluate", str(tmp_path / "gt.ply"), str(tmp_path / "mm.ply")])
+    assert rc == 2 and "different units or frames" in capsys.readouterr().err
