@@ -155,6 +155,8 @@ def test_bad_input(frames, index):
         transfer("3d-neighborhood", f, SemanticMap(np.zeros((0, 3)), np.zeros(0)))
     with pytest.raises(ValueError, match="NaN"):
         transfer("3d-neighborhood", f, SemanticMap(np.full((4, 3), np.nan), np.ones(4)))
+    with pytest.raises(ValueError, match="label id 33"):
+        transfer("3d-neighborhood", f, SemanticMap(np.eye(3), [1, 2, 33]))
     bad = dataclasses.replace(f, depth=f.depth[:-1])
     with pytest.raises(ValueError, match="frame 0: depth is"):
         transfer("3d-neighborhood", bad, index)

@@ -29,6 +29,7 @@ from scipy.spatial import cKDTree
 
 from ..geometry import Intrinsics, check_pose, pixel_rays
 from ..io import SemanticMap
+from ..labels import NUM_CLASSES
 
 __all__ = ["MapIndex", "prepare", "sample_mesh", "DEFAULT_MAX_DISTANCE"]
 
@@ -112,7 +113,8 @@ class MapIndex:
     Raises
     ------
     ValueError
-        Empty map, NaN vertices, or a non-positive parameter.
+        Empty map, NaN vertices, label ids outside the category table, or a non-positive
+        parameter.
 
     Examples
     --------
@@ -132,6 +134,11 @@ class MapIndex:
         if not isinstance(semantic_map, SemanticMap):
             raise TypeError(f"expected a SemanticMap, got {type(semantic_map).__name__}")
         semantic_map.check()
+        if semantic_map.labels.max(initial=0) >= NUM_CLASSES:
+            raise ValueError(
+                f"{semantic_map.source}: label id {int(semantic_map.labels.max())} outside "
+                f"0..{NUM_CLASSES - 1}"
+            )
         if not (np.isfinite(max_distance) and max_distance > 0):
             raise ValueError(f"max_distance must be > 0, got {max_distance}")
         if not (np.isfinite(voxel_size) and voxel_size > 0):
