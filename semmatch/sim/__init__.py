@@ -1,5 +1,6 @@
 """The simulator: scenes (procedural or from a semantic PLY mesh), trajectories, a renderer on
-Open3D's ``RaycastingScene`` and sensor noise.
+Open3D's ``RaycastingScene`` and sensor noise. The optional habitat-sim backend lives in
+:mod:`semmatch.sim.habitat` (imported on demand).
 
 >>> from semmatch.sim import generate_scene, make_trajectory, simulate_sequence
 >>> scene = generate_scene("living_room", seed=0)
@@ -7,7 +8,9 @@ Open3D's ``RaycastingScene`` and sensor noise.
 >>> simulate_sequence(scene, poses, "data/tmp/upper")             # doctest: +SKIP
 """
 
+from .figures import frame_figure
 from .noise import NoiseConfig
+from .plyscene import scene_from_ply
 from .procedural import SCENE_KINDS, box_room, generate_scene
 from .render import Renderer, RenderResult
 from .scene import Scene
@@ -28,6 +31,8 @@ __all__ = [
     "SCENE_KINDS",
     "generate_scene",
     "box_room",
+    "scene_from_ply",
+    "frame_figure",
     "FreeSpace",
     "free_space",
     "scene_levels",
