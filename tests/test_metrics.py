@@ -157,8 +157,10 @@ def test_pixel_metrics_hand_counted():
 
 
 def test_replica_map_against_itself_and_a_model_map(shared_dir):
+    from semmatch.io import read_map
+
     room = shared_dir / "scenes" / "replica" / "room_2"
-    gt = room / "high_3d_neighbor_using_GT_mesh_1_noise.ply"
+    gt = read_map(room / "high_3d_neighbor_using_GT_mesh_1_noise.ply")
     s = compare(gt, gt)
     assert headline(s) == (1.0, 1.0, 1.0, 1.0)
     m = compare(gt, room / "high_3d_nb_model_final_0_noise.ply")
