@@ -1,11 +1,9 @@
 """Camera poses for recordings without them, and trajectory errors against ground truth.
 
-Two Open3D trackers (``open3d.t.pipelines``):
-
-* ``"frame-to-frame"`` (default): multi-scale RGB-D odometry (point-to-plane by default;
-  hybrid depth + intensity or intensity on request) between consecutive frames, chained.
-* ``"frame-to-model"``: Open3D's dense RGB-D SLAM model: each frame is tracked against a depth
-  map ray-cast from the TSDF built so far (point-to-plane), then integrated. Slower on CPU.
+Tracker: ``"frame-to-frame"`` multi-scale RGB-D odometry of ``open3d.t.pipelines.odometry``
+(point-to-plane, with a hybrid depth + intensity alternative chosen per frame by photometric and
+depth misfit), chained. (Open3D's frame-to-model ``t.pipelines.slam.Model`` was tried and drifted
+badly on the simulated sequences on CPU, so it is not offered.)
 
 The first pose is ``init_pose`` (identity by default; pass the known start pose to build maps in
 the world frame). Errors: ATE (RMSE of positions after a least-squares rigid alignment,
@@ -30,7 +28,7 @@ from .io import Frame
 
 __all__ = ["estimate_poses", "align_trajectory", "ate", "rpe", "trajectory_errors", "real_like_chain"]
 
-METHODS = ("frame-to-frame", "frame-to-model")
+METHODS = ("frame-to-frame",)
 
 
 def _depth_mm(depth: np.ndarray, where: str) -> np.ndarray:
@@ -49,8 +47,6 @@ def estimate_poses(
     prior: np.ndarray | None = None,
     init_pose: np.ndarray | None = None,
     depth_max: float = 5.0,
-    voxel_size: float = 0.02,
-    depth_diff: float = 0.07,
     device: str | None = None,
     progress: bool = False,
 ) -> np.ndarray:
@@ -61,7 +57,7 @@ def estimate_poses(
     seq : sequence or iterable of Frame
         Frames with metric depth and RGB (e.g. :func:`semmatch.io.read_sequence`,
         :func:`semmatch.recordings.read_tum_rgbd`).
-    method : {"frame-to-frame", "frame-to-model"}
+    method : {"frame-to-frame"}
         Tracker (see the module doc).
     residual : {"point-to-plane", "hybrid", "intensity"}
         Residual of the frame-to-frame odometry (Open3D ``Method``): geometric, geometric +
@@ -83,10 +79,6 @@ def estimate_poses(
         Pose of the first frame (default identity).
     depth_max : float
         Ignore depth beyond this (metres).
-    voxel_size : float
-        TSDF voxel of the frame-to-model tracker (metres).
-    depth_diff : float
-        Largest depth residual (metres) counted as an inlier.
     device : str, optional
         Open3D device (default :func:`semmatch.fusion.default_device`).
     progress : bool
@@ -99,8 +91,14 @@ def estimate_poses(
     Raises
     ------
     ValueError
-        Unknown method, empty sequence, depth in the wrong unit, a frame whose tracking fails
-        (no valid correspondences).
+        Unknown method or residual, empty sequence, depth in the wrong unit, a prior of the
+        wrong shape.
+
+    Warns
+    -----
+    UserWarning
+        Frames for which no residual converged to a plausible motion (their motion is
+        extrapolated); the message lists them.
     """
     import open3d as o3d
     import open3d.core as o3c
@@ -130,7 +128,6 @@ def estimate_poses(
     name = str(getattr(seq, "path", "sequence"))
     poses: list[np.ndarray] = []
     prev = None
-    model = model_frame = input_frame = None
     motion = np.eye(4)
     for i, f in enumerate(tqdm(seq, total=n, desc=f"odometry ({method})", disable=not progress, leave=False)):
         where = f"{name} frame {getattr(f, 'index', i)}"
@@ -171,23 +168,6 @@ def estimate_poses(
                 motion = best  # T_prev_cur
                 T = T @ motion
             prev, prev_frame = rgbd, f
-        else:
-            H, W = f.intrinsics.shape
-            if model is None:
-                model = o3d.t.pipelines.slam.Model(voxel_size, 16, 10000, o3c.Tensor(T), dev)
-                input_frame = o3d.t.pipelines.slam.Frame(H, W, K, dev)
-                model_frame = o3d.t.pipelines.slam.Frame(H, W, K, dev)
-            input_frame.set_data_from_image("depth", depth)
-            input_frame.set_data_from_image("color", color)
-            if i > 0:
-                model.synthesize_model_frame(model_frame, 1000.0, 0.1, depth_max, 8.0, False)
-                try:
-                    res = model.track_frame_to_model(input_frame, model_frame, 1000.0, depth_max, depth_diff)
-                except RuntimeError as e:
-                    raise ValueError(f"{where}: frame-to-model tracking failed ({str(e).strip()[:200]})") from None
-                T = T @ res.transformation.cpu().numpy()
-            model.update_frame_pose(i, o3c.Tensor(T))
-            model.integrate(input_frame, 1000.0, depth_max, 8.0)
         poses.append(T.copy())
     if not poses:
         raise ValueError(f"{name}: the sequence has no frames")
