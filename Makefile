@@ -20,6 +20,7 @@ test-fast: setup
 repro: setup
 	@if [ -n "$(PROFILE)" ]; then $(PY) -m semmatch.experiments set-profile $(PROFILE); fi
 	PATH="$(CURDIR)/$(VENV)/bin:$$PATH" $(VENV)/bin/dvc repro
+	$(PY) -m semmatch.experiments readme
 
 lint: setup
 	$(VENV)/bin/ruff check semmatch tests

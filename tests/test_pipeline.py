@@ -87,3 +87,18 @@ def test_paper_columns_are_matched():
     df = pd.DataFrame([dict(model="strong", method="3d-neighborhood", mean_acc=0.8)])
     out = tables.with_paper_columns(df, 2)
     assert out["paper_mean_acc"].iloc[0] == paper.TABLE2[("transfiner", "3d-neighborhood")][3]
+
+
+def test_readme_results_section_is_generated_from_figures(tmp_path):
+    from semmatch.experiments import readme
+
+    fig = tmp_path / "figures" / "full"
+    fig.mkdir(parents=True)
+    (fig / "table2_synthetic.md").write_text("| a |\n|---|\n| 1 |\n")
+    (fig / "table2_synthetic.png").write_bytes(b"png")
+    r = tmp_path / "README.md"
+    r.write_text(f"# x\n{readme.BEGIN}\nold\n{readme.END}\nrest\n")
+    assert readme.update_readme(r, fig)
+    text = r.read_text()
+    assert "old" not in text and "| 1 |" in text and "](figures/full/table2_synthetic.png)" in text
+    assert text.endswith("rest\n") and not readme.update_readme(r, fig)

@@ -206,6 +206,8 @@ def main(argv: list[str] | None = None) -> int:
     sub.add_parser("profiles", help="list the profiles of params.yaml")
     sp = sub.add_parser("set-profile", help="select the profile dvc repro runs")
     sp.add_argument("name")
+    rd = sub.add_parser("readme", help="write README.md's results section from figures/<profile>/")
+    rd.add_argument("--profile", help="profile whose figures to show (default: params.yaml's)")
     args = ap.parse_args(argv)
     try:
         if args.cmd == "profiles":
@@ -214,6 +216,12 @@ def main(argv: list[str] | None = None) -> int:
             return 0
         if args.cmd == "set-profile":
             set_profile(args.name)
+            return 0
+        if args.cmd == "readme":
+            from .readme import update_readme
+
+            name = load_params(ROOT / "params.yaml", args.profile)["profile"]
+            update_readme(ROOT / "README.md", ROOT / "figures" / name)
             return 0
         kw = dict(params_file=args.params, reports_dir=args.reports_dir, data_root=args.data_root,
                   figures_dir=args.figures_dir)
