@@ -257,24 +257,26 @@ class SemanticTSDF:
         check_depth_units(depth, where=where)
         T = check_pose(pose, what=f"{where} pose")
         if rgb is None:
-            color = np.full((H, W, 3), 0.5, dtype=np.float32)
+            color = np.full((H, W, 3), 128, dtype=np.uint8)
         else:
             rgb = np.asarray(rgb)
             if rgb.shape != (H, W, 3):
                 raise ValueError(f"{where}: rgb is {rgb.shape}, expected {(H, W, 3)}")
-            color = rgb.astype(np.float32) * np.float32(1 / 255)
+            color = np.ascontiguousarray(rgb, dtype=np.uint8)
         K = self._K.get(intrinsics)
         if K is None:
             K = self._K[intrinsics] = o3c.Tensor(intrinsics.K)
         dev = self.device
-        d_img = o3d.t.geometry.Image(_as_o3d(depth, dev))
+        # Open3D integrates (uint16 depth, uint8 colour) without float conversions: depth in mm
+        depth_mm = np.minimum(np.rint(depth * 1000.0), 65535).astype(np.uint16)
+        d_img = o3d.t.geometry.Image(_as_o3d(depth_mm, dev))
         c_img = o3d.t.geometry.Image(_as_o3d(color, dev))
         ext = o3c.Tensor(np.linalg.inv(T))
         blocks = self.vbg.compute_unique_block_coordinates(
-            d_img, K, ext, 1.0, self.depth_max, self.trunc_voxels
+            d_img, K, ext, 1000.0, self.depth_max, self.trunc_voxels
         )
         self._reserve(int(blocks.shape[0]))
-        self.vbg.integrate(blocks, d_img, c_img, K, ext, 1.0, self.depth_max, self.trunc_voxels)
+        self.vbg.integrate(blocks, d_img, c_img, K, ext, 1000.0, self.depth_max, self.trunc_voxels)
         if labels is not None:
             self._add_evidence(depth, np.asarray(labels), T, intrinsics, where)
         self.n_frames += 1

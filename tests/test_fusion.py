@@ -54,6 +54,8 @@ def test_box_room_walls_within_one_voxel_with_right_labels(room_frames):
     # all three classes are present, nothing outside them
     assert set(np.unique(m.labels)) <= {0, 1, 2, 3} and {1, 2, 3} <= set(np.unique(m.labels))
     assert m.colors is not None and m.colors.dtype == np.uint8 and m.normals is not None
+    seen_rgb = np.concatenate([f.rgb[f.depth > 0] for f in room_frames]).mean(axis=0)
+    assert np.abs(m.colors.mean(axis=0) - seen_rgb).max() < 20  # the RGB mesh keeps the colours
 
 
 def test_conflicting_evidence_resolves_to_majority(room_frames):

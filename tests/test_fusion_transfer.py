@@ -24,7 +24,6 @@ def _frames(renderer, scene, height, n, kind):
     return out
 
 
-@pytest.mark.slow
 def test_lower_map_from_3d_neighborhood_labels_reaches_paper_accuracy():
     intr = DEFAULT_INTRINSICS.scaled(160, 120)
     scene = generate_scene("living_room", 0)

@@ -26,6 +26,7 @@ def register(sub) -> None:
     p.add_argument("--camera-height", type=float, default=0.2,
                    help="camera height above the floor (default 0.2: the robot view)")
     p.add_argument("--scene", default="living_room", help="procedural scene kind (default living_room)")
+    p.add_argument("--trunc-voxels", type=float, default=4.0, help="TSDF truncation in voxels (default 4)")
     p.add_argument("--label-stride", type=int, default=2, help="label evidence every Nth pixel (default 2)")
     p.add_argument("--probabilities", action="store_true",
                    help="fuse (H,W,21) class probabilities instead of label images")
@@ -80,11 +81,12 @@ def run(args: argparse.Namespace) -> int:
         labels = [f.labels for f in frames]
     rss0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     # warm-up volume (first calls allocate and load kernels), then the timed one
-    warm = SemanticTSDF(args.voxel_size, label_stride=args.label_stride, device="CPU:0")
+    opts = {"label_stride": args.label_stride, "trunc_voxels": args.trunc_voxels, "device": "CPU:0"}
+    warm = SemanticTSDF(args.voxel_size, **opts)
     for f, lab in list(zip(frames, labels))[:2]:
         warm.integrate(f.depth, f.rgb, f.pose, f.intrinsics, labels=lab)
     del warm
-    vol = SemanticTSDF(args.voxel_size, label_stride=args.label_stride, device="CPU:0")
+    vol = SemanticTSDF(args.voxel_size, **opts)
     t0, c0 = time.perf_counter(), time.process_time()
     for f, lab in zip(frames, labels):
         vol.integrate(f.depth, f.rgb, f.pose, f.intrinsics, labels=lab)
@@ -104,6 +106,7 @@ def run(args: argparse.Namespace) -> int:
         "frames": args.frames,
         "labels": "probabilities" if args.probabilities else "ids",
         "label_stride": args.label_stride,
+        "trunc_voxels": args.trunc_voxels,
         "threads": args.threads,
         "blocks": vol.n_blocks,
         "volume_mb": vol.memory_bytes / 2**20,
