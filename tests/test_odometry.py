@@ -66,3 +66,23 @@ def test_estimate_poses_tracks_a_rendered_camera():
     bad = [Frame(f.rgb, f.depth * 1000, None, None, intr, index=f.index) for f in frames[:2]]
     with pytest.raises(ValueError, match="frame 0: median depth .* wrong unit"):
         estimate_poses(bad)
+
+
+def test_real_like_chain_on_a_noisy_simulated_sequence(tmp_path):
+    from semmatch.io import read_sequence
+    from semmatch.odometry import real_like_chain
+    from semmatch.sim import NoiseConfig, make_trajectory, simulate_sequence
+
+    scene = generate_scene("living_room", 0)
+    intr = DEFAULT_INTRINSICS.scaled(160, 120)
+    poses = make_trajectory(scene, 0.2, 300, kind="lower", seed=0)[:10]
+    simulate_sequence(scene, poses, tmp_path / "lower", intrinsics=intr, noise=NoiseConfig.kinect(0),
+                      progress=False)
+    seq = read_sequence(tmp_path / "lower")
+    res = real_like_chain(seq, prior="recorded")
+    assert res["poses"].shape == (10, 4, 4) and np.allclose(res["poses"][0], poses[0])
+    assert res["trajectory"]["ate_rmse"] < 0.05, res["trajectory"]
+    s = res["scores"]
+    assert s["color_acc"] > 0.9 and 0.3 < s["mean_acc"] <= 1.0 and res["map"].is_mesh, s
+    with pytest.raises(ValueError, match="prior must be"):
+        real_like_chain(seq, prior="wheel")
