@@ -193,14 +193,15 @@ class SemanticTSDF:
     def _reserve(self, n_new: int) -> None:
         """Grow the grid before Open3D would rehash it (its CPU rehash takes seconds).
 
-        A grid of twice the capacity is allocated and the active blocks are copied over with
+        A grid of four (small grids) or two times the capacity is allocated and the active blocks are copied over with
         one vectorised gather/scatter per attribute.
         """
         hm = self.vbg.hashmap()
         size, cap = int(hm.size()), int(hm.capacity())
         if size + n_new <= cap:
             return
-        new = self._new_grid(max(2 * cap, int(1.5 * (size + n_new))))
+        factor = 4 if cap < 8192 else 2  # few growths while small, bounded overshoot when large
+        new = self._new_grid(max(factor * cap, int(1.5 * (size + n_new))))
         if size:
             old_buf = hm.active_buf_indices()
             keys = hm.key_tensor()[old_buf.to(hm.key_tensor().device)]
@@ -313,14 +314,20 @@ class SemanticTSDF:
             return
         key = (intr, s)
         rays = self._rays.get(key)
-        if rays is None:
-            rays = self._rays[key] = pixel_rays(intr, s).reshape(-1, 3)
-        # nearest voxel sample of each surface point: round(world / voxel_size)
+        if rays is None:  # (2, M) contiguous rows: x/z and y/z of every sampled pixel
+            rays = self._rays[key] = np.ascontiguousarray(pixel_rays(intr, s).reshape(-1, 3)[:, :2].T)
+        # nearest voxel sample of each surface point: round(world / voxel_size); column-wise
+        # arithmetic on contiguous 1-D arrays, then one selection (cheaper than (N,3) gathers)
         A = (T / self.voxel_size).astype(np.float32)
-        pc = rays[sel] * d[sel, None]
-        k = pc @ A[:3, :3].T
-        k += A[:3, 3]
-        k = np.rint(k, out=k).astype(np.int32)
+        x = rays[0] * d
+        y = rays[1] * d
+        k = np.empty((len(sel), 3), dtype=np.int32)
+        for a in range(3):
+            col = A[a, 0] * x
+            col += A[a, 1] * y
+            col += A[a, 2] * d
+            col += A[a, 3]
+            k[:, a] = np.rint(col[sel])
         blk = k >> self._shift
         loc = k & (self.res - 1)
         buf, found = self.vbg.hashmap().find(_as_o3d(blk, self.device))
