@@ -68,7 +68,7 @@ def test_estimate_poses_tracks_a_rendered_camera():
         estimate_poses(bad)
 
 
-def test_real_like_chain_on_a_noisy_simulated_sequence(tmp_path):
+def test_real_like_chain_on_a_noisy_simulated_sequence(tmp_path, capsys):
     from semmatch.io import read_sequence
     from semmatch.odometry import real_like_chain
     from semmatch.sim import NoiseConfig, make_trajectory, simulate_sequence
@@ -86,3 +86,13 @@ def test_real_like_chain_on_a_noisy_simulated_sequence(tmp_path):
     assert s["color_acc"] > 0.9 and 0.3 < s["mean_acc"] <= 1.0 and res["map"].is_mesh, s
     with pytest.raises(ValueError, match="prior must be"):
         real_like_chain(seq, prior="wheel")
+    # the same from the command line: estimated poses, ATE against poses_gt.txt
+    import json
+
+    from semmatch.cli import main
+
+    rc = main(["reconstruct", str(tmp_path / "lower"), "--out", str(tmp_path / "m.ply"), "--estimate-poses",
+               "--prior", "--quiet", "--poses-out", str(tmp_path / "est.txt")])
+    assert rc == 0
+    info = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert info["ate_rmse"] < 0.05 and info["n_frames"] == 10 and (tmp_path / "est.txt").is_file()

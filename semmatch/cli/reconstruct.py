@@ -28,9 +28,12 @@ def register(sub) -> None:
     p.add_argument("--min-weight", type=float, default=1.0, help="minimum surface weight (default 1)")
     p.add_argument(
         "--estimate-poses", action="store_true",
-        help="ignore the recorded poses and estimate them by RGB-D odometry (prints ATE when "
-        "ground truth exists)",
+        help="ignore the recorded poses and estimate them by RGB-D odometry, starting at the "
+        "ground-truth first pose when known (prints ATE/RPE against poses_gt.txt or the TUM "
+        "ground truth)",
     )
+    p.add_argument("--prior", action="store_true",
+                   help="with --estimate-poses: seed the odometry with the recorded (rough) poses")
     p.add_argument("--poses-out", help="with --estimate-poses: write the estimated trajectory (TUM)")
     p.add_argument("--device", help="Open3D device (default: CUDA:0 when available, else CPU:0)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -53,14 +56,19 @@ def run(args: argparse.Namespace) -> int:
     poses = None
     info: dict = {}
     if args.estimate_poses:
-        from semmatch.io import write_tum
+        import numpy as np
+
+        from semmatch.io import read_tum, write_tum
         from semmatch.odometry import estimate_poses, trajectory_errors
 
-        gt = getattr(seq, "poses", None)
-        poses = estimate_poses(seq, progress=not args.quiet)
+        gt_file = Path(args.seq) / "poses_gt.txt"  # simulated real-like sequences
+        gt = read_tum(gt_file)[1] if gt_file.is_file() else getattr(seq, "poses", None)
+        init = gt[0] if gt is not None and np.isfinite(gt[0]).all() else None
+        prior = seq.poses if args.prior and getattr(seq, "poses", None) is not None else None
+        poses = estimate_poses(seq, init_pose=init, prior=prior, progress=not args.quiet)
         if args.poses_out:
             write_tum(args.poses_out, getattr(seq, "timestamps", range(len(poses))), poses)
-        if gt is not None and all(g is not None for g in gt):
+        if gt is not None and len(gt) == len(poses):
             info.update(trajectory_errors(poses, gt))
     m = reconstruct(
         seq,
