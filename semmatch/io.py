@@ -36,6 +36,7 @@ __all__ = [
     "SemanticMap",
     "atomic_path",
     "atomic_write_text",
+    "save_figure",
     "write_json",
     "read_intrinsics",
     "write_intrinsics",
@@ -79,6 +80,18 @@ def atomic_write_text(path: PathLike, text: str) -> None:
     """Write ``text`` to ``path`` atomically."""
     with atomic_path(path) as tmp:
         tmp.write_text(text)
+
+
+def save_figure(fig, path: PathLike, *, dpi: int = 120, close: bool = True, **kwargs) -> Path:
+    """Save a matplotlib figure (format from the suffix) atomically; close it by default."""
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=dpi, **kwargs)
+    if close:
+        import matplotlib.pyplot as plt
+
+        plt.close(fig)
+    return path
 
 
 def write_json(path: PathLike, obj) -> None:

@@ -64,7 +64,7 @@ def confusion_figure(results: dict[str, dict], path: str | Path) -> Path:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from semmatch.io import atomic_path
+    from semmatch.io import save_figure
     from semmatch.labels import NAMES
 
     n = len(results)
@@ -86,11 +86,7 @@ def confusion_figure(results: dict[str, dict], path: str | Path) -> Path:
                         color="white" if v > 0.5 else "black")
         fig.colorbar(im, ax=ax, fraction=0.046)
     fig.tight_layout()
-    path = Path(path)
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=120)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from ..geometry import Intrinsics, look_at
-from ..io import SemanticMap, atomic_path, read_map
+from ..io import SemanticMap, read_map, save_figure
 from ..labels import NAMES, PALETTE
 from .layout import GT, Layout
 
@@ -104,9 +104,4 @@ def qualitative_figure(
     fig.legend(handles=handles, loc="lower center", ncol=min(len(handles), 8), fontsize=7, frameon=False)
     fig.suptitle(f"Lower-view semantic maps of {sid}")
     fig.tight_layout(rect=(0, 0.08, 1, 1))
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=110)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path, dpi=110)

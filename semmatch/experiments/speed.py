@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ..io import atomic_path, read_map, read_sequence
+from ..io import read_map, read_sequence, save_figure
 from .layout import GT, Layout
 from .tables import speed_table
 
@@ -69,9 +69,4 @@ def plot_speed(df: pd.DataFrame, path: str | Path) -> Path:
     ax.legend(fontsize=7)
     ax.grid(axis="y", alpha=0.3, which="both")
     fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=120)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)

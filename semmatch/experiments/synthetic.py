@@ -204,7 +204,7 @@ def plot_table(df: pd.DataFrame, path: str | Path, *, title: str, methods: Seque
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from ..io import atomic_path
+    from ..io import save_figure
 
     models = list(dict.fromkeys(df["model"]))
     order = ["upper", "lower", *methods]
@@ -225,9 +225,4 @@ def plot_table(df: pd.DataFrame, path: str | Path, *, title: str, methods: Seque
     axes[0][0].legend(loc="lower left", fontsize=8)
     fig.suptitle(title)
     fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=120)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io import atomic_path
+from ..io import save_figure
 from ..labels import EVAL_CLASSES, NAMES, PALETTE, labels_to_colors
 
 __all__ = ["frame_figure", "scene_frames_figure", "sequence_frames_figure", "dataset_summary"]
@@ -82,11 +82,7 @@ def frame_figure(
     ]
     fig.legend(handles=handles, loc="lower center", ncol=min(8, len(handles)), fontsize=8, frameon=False)
     fig.tight_layout(rect=(0, 0.08, 1, 1))
-    path = Path(path)
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=dpi)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path, dpi=dpi)
 
 
 def scene_frames_figure(
