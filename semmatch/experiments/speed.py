@@ -28,7 +28,8 @@ def measure_speed(data_root: str | Path, methods: Sequence[str], *, n_frames: in
         (the reference is ``3d-neighborhood`` with Open3D closest-point queries on the mesh,
         as the authors' code).
     """
-    from ..transfer import prepare, transfer_frame
+    from ..transfer import prepare
+    from ..transfer.benchmark import time_methods
 
     layout = Layout(data_root)
     sd = layout.scene_dirs("eval")[scene]
@@ -37,12 +38,9 @@ def measure_speed(data_root: str | Path, methods: Sequence[str], *, n_frames: in
     frames = [seq[int(i)] for i in idx]
     index = prepare(read_map(layout.upper_map(sd.name, GT)))
 
-    def median_ms(name: str, **params) -> float:
-        transfer_frame(name, frames[0], index, **params)
-        return float(np.median([transfer_frame(name, f, index, **params).seconds for f in frames]) * 1000)
-
-    ref_fps = 1000.0 / median_ms("3d-neighborhood", backend="reference")
-    fps = {m: 1000.0 / median_ms(m) for m in methods}
+    timing = time_methods(frames, index, methods, exact_variant=False)
+    ref_fps = timing["reference"]["fps"]
+    fps = {m: timing["methods"][m]["fps"] for m in methods}
     df = speed_table(fps, ref_fps)
     df.attrs["reference_fps"] = ref_fps
     df.attrs["frames"] = len(frames)

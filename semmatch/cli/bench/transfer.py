@@ -26,9 +26,8 @@ def register(sub) -> None:
 
 def run(args) -> int:
     """Run the benchmark."""
-    import numpy as np
-
-    from semmatch.transfer import METHODS, PAPER_FPS, prepare, transfer_frame
+    from semmatch.transfer import METHODS, prepare
+    from semmatch.transfer.benchmark import time_methods
     from semmatch.transfer.demo import bench_scene, render_frames
 
     if args.frames < 1:
@@ -44,36 +43,10 @@ def run(args) -> int:
     index = prepare(gt_map)
     build_s = time.perf_counter() - t
 
-    def bench(name: str, **params) -> dict:
-        transfer_frame(name, frames[0], index, **params)  # warm-up (lazy structures, caches)
-        ms, acc, cov = [], [], []
-        for f in frames:
-            r = transfer_frame(name, f, index, **params)
-            ms.append(r.seconds * 1000)
-            lab = r.labels > 0
-            acc.append(float((r.labels[lab] == f.labels[lab]).mean()) if lab.any() else 0.0)
-            cov.append(r.coverage)
-        med = float(np.median(ms))
-        return {"ms_median": med, "fps": 1000.0 / med, "ms_min": float(np.min(ms)), "accuracy": float(np.mean(acc)),
-                "coverage": float(np.mean(cov)), "labels": [r.labels]}
-
-    ref = bench("3d-neighborhood", backend="reference")
-    ref_labels = ref.pop("labels")
-    result = {"methods": {}, "reference": ref, "index_build_s": build_s,
-              "frames": len(frames), "size": [frames[0].intrinsics.width, frames[0].intrinsics.height],
-              "scene": scene.name}
-    variants = [(m, m, {}) for m in methods]
-    if "3d-neighborhood" in methods:
-        variants.append(("3d-neighborhood (exact)", "3d-neighborhood", {"exact": True}))
-    for key, name, params in variants:
-        r = bench(name, **params)
-        labels = r.pop("labels")
-        r["paper_fps"] = PAPER_FPS[name]
-        r["speedup_vs_paper"] = r["fps"] / PAPER_FPS[name]
-        r["speedup_vs_reference"] = r["fps"] / ref["fps"]
-        if name == "3d-neighborhood":
-            r["agreement_with_reference"] = float((labels[0] == ref_labels[0]).mean())
-        result["methods"][key] = r
+    result = time_methods(frames, index, methods)
+    ref = result["reference"]
+    result.update(index_build_s=build_s, frames=len(frames), scene=scene.name,
+                  size=[frames[0].intrinsics.width, frames[0].intrinsics.height])
     rows = [f"{'method':28s} {'ms/frame':>9s} {'min ms':>7s} {'FPS':>7s} {'x paper':>8s} {'x ref':>7s} "
             f"{'acc':>6s} {'cov':>6s}"]
     for key, r in result["methods"].items():
