@@ -145,6 +145,7 @@ def render_views(
     n_frames: int,
     *,
     tilt_deg: float = 20.0,
+    tilt_period: int | None = None,
     intrinsics: Intrinsics = DEFAULT_INTRINSICS,
     seed: int = 0,
     same_path: bool = False,
@@ -161,6 +162,9 @@ def render_views(
         Frames per trajectory.
     tilt_deg : float
         Amplitude of the up/down tilt of the trajectories.
+    tilt_period : int, optional
+        Frames per tilt cycle; default ``n_frames``, so that every trajectory covers a whole
+        cycle (a short trajectory with a long period would only look up, or only down).
     intrinsics : Intrinsics
         Render resolution (use ``Intrinsics.scaled`` for small training images).
     seed : int
@@ -187,6 +191,7 @@ def render_views(
         raise ValueError(f"heights must be (k,) or (n_scenes, k), got {np.shape(heights)} for {len(scenes)} scenes")
     if not np.isfinite(h).all() or (h <= 0).any():
         raise ValueError("camera heights must be finite and > 0")
+    period = max(2, int(tilt_period or n_frames))
     H, W = intrinsics.shape
     total = len(scenes) * h.shape[1] * n_frames
     rgb = np.empty((total, H, W, 3), np.uint8)
@@ -200,7 +205,8 @@ def render_views(
         renderer = Renderer(scene, intrinsics)
         for hi, hh in enumerate(h[si]):
             traj_seed = seed * 100_003 + si * 1009 + (0 if same_path else hi)
-            poses = _poses(make_trajectory(scene, float(hh), n_frames, tilt_deg=tilt_deg, seed=traj_seed))
+            poses = _poses(make_trajectory(scene, float(hh), n_frames, tilt_deg=tilt_deg,
+                                           tilt_period=period, seed=traj_seed))
             for pose in poses[:n_frames]:
                 r = renderer.render(pose)
                 rgb[k], depth[k], labels[k] = r.rgb, r.depth, r.labels

@@ -148,7 +148,7 @@ PROFILES: dict[str, dict] = {
     "smoke": dict(width=160, height=120, n_heights=2, frames=6, val_frames=6, steps=100, batch_size=8,
                   eval_every=50),
     "full": dict(width=320, height=240, crop_width=160, crop_height=120, n_heights=4, frames=24,
-                 val_frames=30, steps=2400, batch_size=16, eval_every=200,
+                 val_frames=30, steps=2000, batch_size=16, eval_every=200,
                  train_seeds=tuple(range(1, 13)), val_seeds=(501, 502)),
 }
 
@@ -312,7 +312,8 @@ def build_views(config: TrainConfig) -> tuple[D.Views, D.Views]:
         scenes = D.make_scenes(config.kinds, config.val_seeds)
         return D.render_views(scenes, val_h, config.val_frames, seed=config.seed + 1, **common)
 
-    key = dict(kinds=config.kinds, width=config.width, height=config.height, tilt=config.tilt_deg)
+    key = dict(kinds=config.kinds, width=config.width, height=config.height, tilt=config.tilt_deg,
+               tilt_period="n_frames")
     tr = D.cached_views(config.cache_dir, dict(key, seeds=config.train_seeds, h=train_heights.round(4).tolist(),
                                                frames=config.frames, seed=config.seed), make_train)
     va = D.cached_views(config.cache_dir, dict(key, seeds=config.val_seeds, h=val_h, frames=config.val_frames,

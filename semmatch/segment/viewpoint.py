@@ -70,6 +70,7 @@ def viewpoint_gap(
     heights: Sequence[float] = HEIGHTS,
     n_frames: int = 40,
     tilt_deg: float = 20.0,
+    tilt_period: int | None = None,
     intrinsics: Intrinsics | None = None,
     seed: int = 0,
     batch_size: int = 8,
@@ -90,6 +91,8 @@ def viewpoint_gap(
         Frames per (scene, height); the same path at every height.
     tilt_deg : float
         Up/down tilt amplitude of the camera.
+    tilt_period : int, optional
+        Frames per tilt cycle; default ``n_frames`` (one whole up-and-down cycle per path).
     intrinsics : Intrinsics, optional
         Render camera; default the paper's camera scaled to 320x240.
     seed : int
@@ -114,11 +117,13 @@ def viewpoint_gap(
     if not hs or min(hs) <= 0:
         raise ValueError(f"heights must be positive, got {heights}")
     intr = intrinsics or DEFAULT_INTRINSICS.scaled(320, 240)
+    period = max(2, int(tilt_period or n_frames))
 
     def batches() -> Iterator:
         bar = tqdm(total=len(scenes) * len(hs) * n_frames, desc="viewpoint gap", disable=not progress)
         for i, scene in enumerate(scenes):
-            sweep = make_sweep_trajectories(scene, hs, n_frames, tilt_deg=tilt_deg, seed=seed + i)
+            sweep = make_sweep_trajectories(scene, hs, n_frames, tilt_deg=tilt_deg, tilt_period=period,
+                                            seed=seed + i)
             renderer = Renderer(scene, intr)
             for h in hs:
                 poses = np.asarray(sweep[h])
