@@ -15,8 +15,7 @@ from semmatch.segment.oracle import CONFUSIONS, NoisyOracle, OracleSegmenter, no
 @pytest.fixture(scope="module")
 def frame() -> Frame:
     from semmatch.segment.data import make_scenes
-    from semmatch.sim import Renderer
-    from semmatch.sim.trajectory import make_trajectory
+    from semmatch.sim import Renderer, make_trajectory
 
     intr = DEFAULT_INTRINSICS.scaled(160, 120)
     scene = make_scenes(["living_room"], [21])[0]

@@ -103,22 +103,11 @@ def make_scenes(kinds: Sequence[str], seeds: Sequence[int]) -> list:
     -------
     list of semmatch.sim.Scene
     """
-    generate_scene, _ = _sim()
+    from ..sim import generate_scene
+
     if not kinds:
         raise ValueError("make_scenes: no scene kinds given")
     return [generate_scene(kinds[i % len(kinds)], int(s)) for i, s in enumerate(seeds)]
-
-
-def _sim():
-    """``(generate_scene, make_trajectory)`` of the simulator."""
-    from .. import sim
-
-    gen = getattr(sim, "generate_scene", None)
-    traj = getattr(sim, "make_trajectory", None)
-    if gen is None or traj is None:  # not re-exported by semmatch.sim yet
-        from ..sim.procedural import generate_scene as gen
-        from ..sim.trajectory import make_trajectory as traj
-    return gen, traj
 
 
 def check_disjoint(**seed_lists: Sequence[int]) -> None:
@@ -179,9 +168,8 @@ def render_views(
     -------
     Views
     """
-    from ..sim import Renderer
+    from ..sim import Renderer, make_trajectory
 
-    _, make_trajectory = _sim()
     if n_frames < 1:
         raise ValueError(f"n_frames must be >= 1, got {n_frames}")
     h = np.asarray(heights, dtype=np.float64)

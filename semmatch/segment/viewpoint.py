@@ -108,8 +108,7 @@ def viewpoint_gap(
         Columns ``model, scene, height, n_frames, miou, pixel_acc, jaccard, sorensen,
         color_acc, mean_acc`` (pixel measures over classes 1..10).
     """
-    from ..sim import Renderer
-    from ..sim.trajectory import make_sweep_trajectories
+    from ..sim import Renderer, make_sweep_trajectories
 
     if not scenes:
         raise ValueError("viewpoint_gap: no scenes given")
