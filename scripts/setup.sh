@@ -23,12 +23,14 @@ if [ ! -x "$VENV/bin/python" ]; then
   "$PYTHON" -m venv "$VENV"
 fi
 stamp="$VENV/.semmatch-installed"
+# pip on some machines warns once per package about unreachable local index folders: drop those lines
+pip_install() { "$VENV/bin/python" -m pip install -q "$@" 2> >(grep -v "^WARNING: Location .* is ignored" >&2); }
 if [ ! -f "$stamp" ] || [ requirements.txt -nt "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
   echo "setup: installing pinned dependencies into $VENV (CPU torch)"
-  "$VENV/bin/python" -m pip install -q --upgrade pip
+  pip_install --upgrade pip
   # torch first and alone: a pinned CPU build, so nothing can pull a CUDA build
-  "$VENV/bin/python" -m pip install -q "torch==2.13.0"
-  "$VENV/bin/python" -m pip install -q -r requirements.txt
-  "$VENV/bin/python" -m pip install -q --no-deps -e .
+  pip_install "torch==2.13.0"
+  pip_install -r requirements.txt
+  pip_install --no-deps -e .
   touch "$stamp"
 fi
