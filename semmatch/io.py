@@ -48,6 +48,7 @@ __all__ = [
     "write_depth",
     "read_labels_folder",
     "write_labels_folder",
+    "frame_index",
     "is_sequence",
     "read_sequence",
     "read_map",
@@ -230,6 +231,19 @@ def _frame_name(i: int) -> str:
     return f"{i:06d}.png"
 
 
+def frame_index(i: int, n: int) -> int:
+    """Normalise a frame index (negative counts from the end) for a sequence of ``n`` frames.
+
+    Raises
+    ------
+    IndexError
+        When ``i`` is out of range.
+    """
+    if not -n <= i < n:
+        raise IndexError(f"frame {i} out of range for a sequence of {n} frames")
+    return i % n
+
+
 def is_sequence(path: PathLike) -> bool:
     """True when ``path`` holds a (complete) sequence folder."""
     p = Path(path)
@@ -300,10 +314,7 @@ class SequenceReader(_SequenceABC):
     def __getitem__(self, i):  # type: ignore[override]
         if isinstance(i, slice):
             return [self[j] for j in range(*i.indices(len(self)))]
-        n = len(self)
-        if not -n <= i < n:
-            raise IndexError(f"frame {i} out of range for a sequence of {n} frames")
-        i = i % n
+        i = frame_index(i, len(self))
         rp = self.path / "rgb" / _frame_name(i)
         dp = self.path / "depth" / _frame_name(i)
         rgb = read_image(rp)

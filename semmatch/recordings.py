@@ -25,7 +25,7 @@ import numpy as np
 
 from .fusion import check_depth_units
 from .geometry import Intrinsics
-from .io import Frame, read_depth, read_image, read_intrinsics, read_tum
+from .io import Frame, frame_index, read_depth, read_image, read_intrinsics, read_tum
 
 __all__ = [
     "TUM_INTRINSICS",
@@ -275,10 +275,7 @@ class TumRgbdSequence(_SequenceABC):
     def __getitem__(self, i):  # type: ignore[override]
         if isinstance(i, slice):
             return [self[j] for j in range(*i.indices(len(self)))]
-        n = len(self)
-        if not -n <= i < n:
-            raise IndexError(f"frame {i} out of range for a sequence of {n} frames")
-        i = i % n
+        i = frame_index(i, len(self))
         rp, dp = self._rgb[i], self._depth[i]
         rgb = read_image(rp)
         if rgb.ndim == 2:
