@@ -351,3 +351,11 @@ def test_generate_dataset_redoes_sequences_of_other_sizes(tmp_path):
     assert res["written"] == [str(ev / "upper")]
     assert len(read_sequence(ev / "upper")) == 3 and len(read_sequence(ev / "lower")) == 2
     assert not (ev / ".upper.dead.partial").exists()
+
+
+def test_short_trajectory_tilts_both_up_and_down():
+    from semmatch.sim import camera_elevation_deg, generate_scene, make_trajectory
+
+    poses = make_trajectory(generate_scene("bedroom", 3), 0.2, 24, tilt_deg=20.0, seed=3)
+    el = camera_elevation_deg(poses)
+    assert el.max() > 15 and el.min() < -15

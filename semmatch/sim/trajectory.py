@@ -295,7 +295,7 @@ def make_trajectory(
     n_frames: int,
     *,
     tilt_deg: float = 20.0,
-    tilt_period: int = 60,
+    tilt_period: int | None = None,
     seed: int = 0,
     kind: str = "upper",
     margin: float = 0.3,
@@ -315,8 +315,9 @@ def make_trajectory(
         Number of poses.
     tilt_deg : float
         Amplitude of the periodic up/down tilt of the camera (degrees).
-    tilt_period : int
-        Frames per tilt cycle.
+    tilt_period : int, optional
+        Frames per tilt cycle; default ``min(60, n_frames)`` so that even a short trajectory
+        tilts both up and down (a 60-frame cycle on a 24-frame path only looks up).
     seed : int
         Same seed (and kind), same trajectory.
     kind : str
@@ -350,6 +351,8 @@ def make_trajectory(
         raise ValueError(f"n_frames must be >= 1, got {n_frames}")
     if not 0 <= tilt_deg < 89:
         raise ValueError(f"tilt_deg must lie in [0, 89), got {tilt_deg}")
+    if tilt_period is None:
+        tilt_period = max(2, min(60, int(n_frames)))
     if tilt_period < 2:
         raise ValueError(f"tilt_period must be >= 2 frames, got {tilt_period}")
     n_frames = int(n_frames)
