@@ -40,16 +40,10 @@ def height_study(
         model, height, n_frames and the pixel and voxel-style measures over classes 1..10
         (see :func:`semmatch.segment.viewpoint.viewpoint_gap_sequences`), scenes pooled.
     """
-    from ..segment import load_model
     from ..segment.viewpoint import plot_viewpoint_gap, viewpoint_gap_sequences
 
     layout = Layout(data_root)
-    models = {}
-    for net in networks:
-        path = layout.model(net)
-        if not path.is_file():
-            raise FileNotFoundError(f"{path}: no trained {net} network; run 02_train_segmentation first")
-        models[net] = load_model(path)
+    models = {net: layout.load_network(net) for net in networks}
     df = viewpoint_gap_sequences(models, sweep_sequences(data_root), progress=progress)
     save_table(df, figures_dir, "fig3_height")
     import matplotlib.pyplot as plt

@@ -58,6 +58,15 @@ class Layout:
     def model(self, network: str) -> Path:
         return self.root / "models" / f"{network}.pt"
 
+    def load_network(self, network: str):
+        """The trained network ``network`` (:func:`semmatch.segment.load_model`)."""
+        from ..segment import load_model
+
+        path = self.model(network)
+        if not path.is_file():
+            raise FileNotFoundError(f"{path}: no trained {network} network; run 02_train_segmentation first")
+        return load_model(path)
+
     def upper_map(self, scene_id: str, source: str) -> Path:
         return self.root / "upper" / scene_id / f"{source_dir(source)}.ply"
 

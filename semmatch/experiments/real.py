@@ -100,10 +100,11 @@ def evaluate_real_like(
     from ..fusion import reconstruct
     from ..metrics import compare
     from ..odometry import trajectory_errors
-    from ..segment import load_model, predict_sequence
+    from ..segment import predict_sequence
     from ..transfer import prepare, transfer_sequence
 
     layout = Layout(data_root)
+    models = {net: layout.load_network(net) for net in networks}
     rows, traj_rows = [], []
     for sd in tqdm(layout.scene_dirs("eval"), desc="real-like scenes", disable=not progress):
         sid = sd.name
@@ -134,9 +135,9 @@ def evaluate_real_like(
                 labels = None
             else:
                 labels = work / f"upper_labels_{source}"
-                predict_sequence(load_model(layout.model(source)), seqs["upper"], labels, progress=False)
+                predict_sequence(models[source], seqs["upper"], labels, progress=False)
                 low_dir = work / f"lower_labels_{source}" / "lower"
-                predict_sequence(load_model(layout.model(source)), seqs["lower"], low_dir, progress=False)
+                predict_sequence(models[source], seqs["lower"], low_dir, progress=False)
                 score(reconstruct(seqs["lower"], low_dir, voxel_size), model_name(source), "lower")
             upper_map = reconstruct(seqs["upper"], labels, voxel_size, out=work / f"upper_{source}.ply")
             index = prepare(upper_map)

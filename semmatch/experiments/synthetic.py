@@ -29,15 +29,6 @@ __all__ = [
 MEASURE_COLUMNS = ("jaccard", "sorensen", "color_acc", "mean_acc")
 
 
-def _segmenter(layout: Layout, network: str):
-    from ..segment import load_model
-
-    path = layout.model(network)
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: no trained {network} network; run 02_train_segmentation first")
-    return load_model(path)
-
-
 def _scores(gt, pred, voxel_size: float) -> dict:
     from ..metrics import compare
 
@@ -69,6 +60,7 @@ def reconstruct_upper_maps(
     from ..segment import predict_sequence
 
     layout = Layout(data_root)
+    models = {net: layout.load_network(net) for net in networks}
     rows = []
     for sd in tqdm(layout.scene_dirs("eval"), desc="upper maps", disable=not progress):
         sid = sd.name
@@ -77,7 +69,7 @@ def reconstruct_upper_maps(
         gt_map = reconstruct(upper, None, voxel_size, out=gt_path)
         for net in networks:
             lab_dir = layout.upper_labels(sid, net)
-            predict_sequence(_segmenter(layout, net), upper, lab_dir, progress=False)
+            predict_sequence(models[net], upper, lab_dir, progress=False)
             net_map = reconstruct(upper, lab_dir, voxel_size, out=layout.upper_map(sid, net))
             pred = read_sequence(sd / "upper", labels=lab_dir)
             pix = pixel_metrics((upper.read_labels(i) for i in range(len(upper))),
@@ -112,6 +104,7 @@ def transfer_lower_labels(
     from ..transfer import prepare, transfer_sequence
 
     layout = Layout(data_root)
+    models = {net: layout.load_network(net) for net in networks}
     rows = []
     for sd in layout.scene_dirs("eval"):
         sid = sd.name
@@ -124,7 +117,7 @@ def transfer_lower_labels(
                 rows.append(dict(scene=sid, model=model_name(source), method=method,
                                  coverage=float(st["coverage"]), fps=float(st["fps"])))
         for net in networks:
-            predict_sequence(_segmenter(layout, net), lower, layout.lower_labels(sid, net, "lower"),
+            predict_sequence(models[net], lower, layout.lower_labels(sid, net, "lower"),
                              progress=progress)
     return pd.DataFrame(rows)
 
