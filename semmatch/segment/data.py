@@ -227,11 +227,15 @@ def cached_views(cache_dir: str | Path | None, key: dict, make, *, progress: boo
     return views
 
 
-def class_weights(labels: np.ndarray, num_classes: int = NUM_CLASSES, *, clip: float = 10.0) -> np.ndarray:
-    """Median-frequency balancing weights (Eigen & Fergus, ICCV 2015).
+def class_weights(
+    labels: np.ndarray, num_classes: int = NUM_CLASSES, *, clip: float = 10.0, power: float = 1.0
+) -> np.ndarray:
+    """Median-frequency balancing weights (Eigen & Fergus, ICCV 2015), optionally softened.
 
-    ``w_c = median(f) / f_c`` over the classes present (void excluded), clipped to
-    ``[1/clip, clip]``; absent classes and void get weight 0.
+    ``w_c = (median(f) / f_c) ** power`` over the classes present (void excluded), clipped to
+    ``[1/clip, clip]``; absent classes and void get weight 0. ``power=1`` is plain median
+    frequency balancing, ``0.5`` its square root (large classes such as the floor are not
+    starved), ``0`` unweighted cross-entropy.
 
     Parameters
     ----------
@@ -239,11 +243,15 @@ def class_weights(labels: np.ndarray, num_classes: int = NUM_CLASSES, *, clip: f
         Training label images (any shape).
     num_classes : int
     clip : float
+    power : float
+        Exponent in ``[0, 1]`` applied to the median-frequency ratio.
 
     Returns
     -------
     ndarray of float32, shape (num_classes,)
     """
+    if not 0.0 <= float(power) <= 1.0:
+        raise ValueError(f"class weight power must lie in [0, 1], got {power}")
     counts = np.bincount(np.asarray(labels).reshape(-1), minlength=num_classes)[:num_classes].astype(np.float64)
     counts[VOID] = 0
     present = counts > 0
@@ -251,6 +259,6 @@ def class_weights(labels: np.ndarray, num_classes: int = NUM_CLASSES, *, clip: f
         raise ValueError("class_weights: the training labels hold no category other than void")
     freq = counts / counts.sum()
     w = np.zeros(num_classes)
-    w[present] = np.median(freq[present]) / freq[present]
+    w[present] = (np.median(freq[present]) / freq[present]) ** float(power)
     w[present] = np.clip(w[present], 1.0 / clip, clip)
     return w.astype(np.float32)

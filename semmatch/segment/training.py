@@ -75,6 +75,9 @@ class TrainConfig:
         Range of the scale augmentation (>1 zooms out).
     jitter : float
         Colour-jitter strength.
+    class_weight_power : float
+        Exponent of the median-frequency class weights (1 = median frequency balancing,
+        0.5 = its square root, 0 = unweighted); see :func:`semmatch.segment.data.class_weights`.
     seed : int
     device : str
         ``"auto"`` (CUDA when present, else CPU), ``"cpu"`` or ``"cuda"``.
@@ -108,6 +111,7 @@ class TrainConfig:
     eval_every: int = 40
     zoom: tuple[float, float] = (0.75, 1.5)
     jitter: float = 0.25
+    class_weight_power: float = 1.0
     seed: int = 0
     device: str = "auto"
     threads: int | None = None
@@ -354,7 +358,7 @@ def train(config: TrainConfig, *, views: tuple[D.Views, D.Views] | None = None) 
     train_views, val_views = views if views is not None else build_views(config)
     if train_views.shape != (config.height, config.width):
         raise ValueError(f"training views are {train_views.shape}, config says {config.height}x{config.width}")
-    weights = D.class_weights(train_views.labels)
+    weights = D.class_weights(train_views.labels, power=config.class_weight_power)
     mc = config.model_config()
     net = build_network(mc).to(device)
     opt = torch.optim.AdamW(net.parameters(), lr=config.lr, weight_decay=config.weight_decay)

@@ -19,7 +19,7 @@ import numpy as np
 from ..geometry import pixel_rays
 from .frames import FrameData
 from .index import MapIndex
-from .superpixels import superpixels
+from .superpixels import skimage_slic, superpixels
 from .voting import paint, vote
 
 __all__ = ["slic_2d", "projected_sp_3d", "slic_3d", "dbscan", "neighborhood_3d", "render_labels"]
@@ -238,7 +238,6 @@ def slic_3d(
     """``3d-slic`` (Alg. 2): voxelise the coloured lower point cloud (``voxel_size``), run
     maskSLIC (scikit-image ``slic`` with the occupied voxels as mask) on the voxel grid for
     ``n_segments`` supervoxels, label each voxel centroid from the map, vote per supervoxel."""
-    from skimage.segmentation import slic
 
     out = np.zeros(fd.shape, np.uint8), np.zeros(fd.shape, np.float32)
     pts, pix = _mapped_points(fd, index)
@@ -256,8 +255,8 @@ def slic_3d(
     if len(vkeys) < 2:
         sv = np.zeros(len(vkeys), np.int64)
     else:
-        sv_grid = slic(grid, n_segments=int(n_segments), compactness=float(compactness),
-                       max_num_iter=int(iterations), mask=mask, channel_axis=-1, start_label=1)
+        sv_grid = skimage_slic(grid, n_segments=int(n_segments), compactness=float(compactness),
+                               max_num_iter=int(iterations), mask=mask, channel_axis=-1, start_label=1)
         sv = sv_grid[tuple(vkeys.T)].astype(np.int64) - 1
     winner, purity = vote(sv, index.lookup(cen, exact=exact), int(sv.max()) + 1)
     labels = np.zeros(fd.shape, np.uint8)

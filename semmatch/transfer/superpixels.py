@@ -6,7 +6,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-__all__ = ["BACKENDS", "superpixels"]
+__all__ = ["BACKENDS", "superpixels", "skimage_slic"]
 
 #: Selectable superpixel backends.
 BACKENDS = ("cv2-slic", "cv2-slico", "cv2-seeds", "skimage-slic")
@@ -62,10 +62,8 @@ def superpixels(
         raise ValueError(f"n_segments must be >= 1, got {n_segments}")
     H, W = rgb.shape[:2]
     if backend == "skimage-slic":
-        from skimage.segmentation import slic
-
-        seg = slic(rgb, n_segments=int(n_segments), compactness=float(compactness),
-                   max_num_iter=int(iterations), start_label=1, mask=mask)
+        seg = skimage_slic(rgb, n_segments=int(n_segments), compactness=float(compactness),
+                           max_num_iter=int(iterations), start_label=1, mask=mask)
         return seg.astype(np.int32) - 1
     if mask is not None:
         raise ValueError(f"mask is only supported by the skimage-slic backend, not {backend!r}")
@@ -88,3 +86,32 @@ def superpixels(
     if seg.shape != (H, W):
         seg = cv2.resize(seg, (W, H), interpolation=cv2.INTER_NEAREST)
     return seg.astype(np.int32)
+
+
+def skimage_slic(image: np.ndarray, **kwargs) -> np.ndarray:
+    """:func:`skimage.segmentation.slic` without maskSLIC's empty-cluster warning.
+
+    With a ``mask``, scikit-image seeds the superpixel centres by k-means
+    (:func:`scipy.cluster.vq.kmeans2`), which warns when one of its initial clusters is empty;
+    the empty cluster simply yields one superpixel fewer, so the warning carries no information
+    for a caller and is silenced here. Every other warning passes through.
+
+    Parameters
+    ----------
+    image : ndarray
+        Image or 3D grid (with ``channel_axis``), as for ``slic``.
+    **kwargs
+        Passed to ``slic``.
+
+    Returns
+    -------
+    ndarray of int
+        Superpixel labels.
+    """
+    import warnings
+
+    from skimage.segmentation import slic
+
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message="One of the clusters is empty", category=UserWarning)
+        return slic(image, **kwargs)
