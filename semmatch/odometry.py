@@ -2,8 +2,17 @@
 
 Tracker: ``"frame-to-frame"`` multi-scale RGB-D odometry of ``open3d.t.pipelines.odometry``
 (point-to-plane, with a hybrid depth + intensity alternative chosen per frame by photometric and
-depth misfit), chained. (Open3D's frame-to-model ``t.pipelines.slam.Model`` was tried and drifted
-badly on the simulated sequences on CPU, so it is not offered.)
+depth misfit), chained, then refined by a pose graph (``pose_graph=True``, default): edges to the
+previous few frames and loop-closure edges to earlier keyframes that see the same surfaces, each a
+point-to-plane RGB-D registration started from the chained estimate and kept only when it
+converged close to it, optimised by Open3D's ``global_optimization`` (Levenberg-Marquardt with
+line-process pruning of wrong loop closures), as Open3D's reconstruction system does for its
+fragments. Chained odometry drifts (on a 120-frame simulated lower sequence with Kinect-like
+noise: ATE 2.0 cm, up to 1.7 degrees of heading error); the pose graph takes it to 0.5 cm,
+which is what the 5 cm voxel measures need (a 2 cm offset of a perfect map already costs about
+0.2 of Mean Acc.). (Open3D's frame-to-model ``t.pipelines.slam.Model`` was tried, as a tracker
+and as a refinement against the map fused from the chained poses, and made the poses worse on
+the simulated sequences, so it is not offered.)
 
 The first pose is ``init_pose`` (identity by default; pass the known start pose to build maps in
 the world frame). Errors: ATE (RMSE of positions after a least-squares rigid alignment,
@@ -18,7 +27,7 @@ References
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 
 import numpy as np
 
@@ -26,7 +35,7 @@ from .fusion import check_depth_units, default_device
 from .geometry import check_pose
 from .io import Frame
 
-__all__ = ["estimate_poses", "align_trajectory", "ate", "rpe", "trajectory_errors", "real_like_chain"]
+__all__ = ["estimate_poses", "refine_pose_graph", "align_trajectory", "ate", "rpe", "trajectory_errors", "real_like_chain"]
 
 METHODS = ("frame-to-frame",)
 
@@ -47,6 +56,7 @@ def estimate_poses(
     prior: np.ndarray | None = None,
     init_pose: np.ndarray | None = None,
     depth_max: float = 5.0,
+    pose_graph: bool = True,
     device: str | None = None,
     progress: bool = False,
 ) -> np.ndarray:
@@ -79,6 +89,9 @@ def estimate_poses(
         Pose of the first frame (default identity).
     depth_max : float
         Ignore depth beyond this (metres).
+    pose_graph : bool
+        Refine the chained poses with :func:`refine_pose_graph` (neighbour and loop-closure
+        edges; about doubles the run time, divides the drift by about four).
     device : str, optional
         Open3D device (default :func:`semmatch.fusion.default_device`).
     progress : bool
@@ -92,7 +105,7 @@ def estimate_poses(
     ------
     ValueError
         Unknown method or residual, empty sequence, depth in the wrong unit, a prior of the
-        wrong shape.
+        wrong shape, frames of different sizes.
 
     Warns
     -----
@@ -127,11 +140,20 @@ def estimate_poses(
     T = np.eye(4) if init_pose is None else check_pose(init_pose, what="init_pose").copy()
     name = str(getattr(seq, "path", "sequence"))
     poses: list[np.ndarray] = []
+    depths_mm: list[np.ndarray] = []  # kept for the pose graph (depth only: 2 bytes a pixel)
+    intrinsics = None
     prev = None
     motion = np.eye(4)
     for i, f in enumerate(tqdm(seq, total=n, desc=f"odometry ({method})", disable=not progress, leave=False)):
         where = f"{name} frame {getattr(f, 'index', i)}"
-        depth = o3d.t.geometry.Image(o3c.Tensor(_depth_mm(f.depth, where))).to(dev)
+        d_mm = _depth_mm(f.depth, where)
+        if intrinsics is None:
+            intrinsics = f.intrinsics
+        elif f.intrinsics != intrinsics or d_mm.shape != tuple(intrinsics.shape):
+            raise ValueError(f"{where}: frame size/intrinsics differ from the first frame's")
+        if pose_graph:
+            depths_mm.append(d_mm)
+        depth = o3d.t.geometry.Image(o3c.Tensor(d_mm)).to(dev)
         color = o3d.t.geometry.Image(o3c.Tensor(np.ascontiguousarray(f.rgb, dtype=np.uint8))).to(dev)
         K = o3c.Tensor(f.intrinsics.K)
         if method == "frame-to-frame":
@@ -180,7 +202,179 @@ def estimate_poses(
             UserWarning,
             stacklevel=2,
         )
-    return np.stack(poses)
+    out = np.stack(poses)
+    if pose_graph and len(out) > 2:
+        out = refine_pose_graph(depths_mm, intrinsics, out, depth_max=depth_max, device=device,
+                                progress=progress, name=name)
+    return out
+
+
+def _rotation_deg(R: np.ndarray) -> float:
+    return float(np.degrees(np.arccos(np.clip((np.trace(R) - 1) / 2, -1.0, 1.0))))
+
+
+def _overlap(points_i: np.ndarray, depth_j: np.ndarray, T_j_i: np.ndarray, intr, tol: float = 0.1) -> float:
+    """Share of frame i's sample points (camera i) that frame j sees at the same depth (within ``tol`` m)."""
+    from .geometry import project
+
+    if len(points_i) == 0:
+        return 0.0
+    uv, z = project(points_i @ T_j_i[:3, :3].T + T_j_i[:3, 3], intr)
+    u = np.rint(uv[:, 0]).astype(np.int64)
+    v = np.rint(uv[:, 1]).astype(np.int64)
+    H, W = intr.shape
+    ok = (z > 0) & (u >= 0) & (u < W) & (v >= 0) & (v < H)
+    dz = depth_j[v[ok], u[ok]]
+    return float(((dz > 0) & (np.abs(dz - z[ok]) < tol)).sum() / len(points_i))
+
+
+def refine_pose_graph(
+    depths: Sequence[np.ndarray],
+    intrinsics,
+    poses: np.ndarray,
+    *,
+    neighbours: int = 3,
+    loop_stride: int = 3,
+    loop_candidates: int = 3,
+    min_overlap: float = 0.3,
+    loop_overlap: float = 0.4,
+    max_correction: tuple[float, float] = (0.1, 5.0),
+    min_fitness: float = 0.3,
+    depth_max: float = 5.0,
+    device: str | None = None,
+    progress: bool = False,
+    name: str = "sequence",
+) -> np.ndarray:
+    """Refine chained poses by a pose graph with neighbour and loop-closure edges (Open3D).
+
+    Edges ``(i, j)``: every consecutive pair (the chained motion, with its information matrix);
+    the ``neighbours`` previous frames whose view
+    overlaps frame i's by ``min_overlap`` (share of i's depth samples that j sees at the same
+    depth under the current poses); every ``loop_stride``-th frame, up to ``loop_candidates``
+    earlier keyframes (every ``loop_stride``-th frame, more than ``neighbours + 5`` frames
+    back) overlapping by ``loop_overlap``, best first. Each edge is a multi-scale point-to-plane
+    RGB-D registration (``open3d.t.pipelines.odometry``) started from the current relative
+    pose, with Open3D's information matrix; an edge whose result moves more than
+    ``max_correction`` from its start, fits fewer than ``min_fitness`` of the pixels, or does not
+    converge is dropped. Non-consecutive
+    edges are "uncertain" (Open3D's line process may prune them). The graph is optimised by
+    Levenberg-Marquardt with frame 0 fixed.
+
+    Parameters
+    ----------
+    depths : sequence of ndarray (H, W) uint16
+        Depth images in millimetres (0 = no measurement), one per pose.
+    intrinsics : Intrinsics
+        Camera intrinsics shared by all frames.
+    poses : (N, 4, 4)
+        Chained ``T_world_camera`` estimates (e.g. frame-to-frame odometry).
+    neighbours : int
+        Previous frames tried as edges of every frame.
+    loop_stride, loop_candidates : int
+        Loop closures: tried from every ``loop_stride``-th frame to at most ``loop_candidates``
+        earlier keyframes.
+    min_overlap, loop_overlap : float
+        Least view overlap (0..1) of a neighbour / loop-closure pair.
+    max_correction : (float, float)
+        Largest change of a relative pose by its registration (metres, degrees).
+    min_fitness : float
+        Least share of matched pixels of a registration.
+    depth_max : float
+        Ignore depth beyond this (metres).
+    device : str, optional
+        Open3D device of the registrations.
+    progress : bool
+        Show a tqdm bar.
+    name : str
+        What the sequence is, for messages.
+
+    Returns
+    -------
+    ndarray (N, 4, 4) float64
+        Refined poses; the first equals ``poses[0]``.
+
+    Raises
+    ------
+    ValueError
+        ``depths`` and ``poses`` of different lengths, fewer than 2 frames, depth of other
+        than the first frame's size.
+    """
+    import open3d as o3d
+    import open3d.core as o3c
+    from tqdm.auto import tqdm
+
+    from .geometry import backproject
+
+    reg = o3d.pipelines.registration
+    poses = np.asarray(poses, dtype=np.float64)
+    n = len(poses)
+    if len(depths) != n or n < 2:
+        raise ValueError(f"{name}: need one depth image per pose and at least 2 ({len(depths)} depths, {n} poses)")
+    H, W = intrinsics.shape
+    for i, d in enumerate(depths):
+        if d.shape != (H, W):
+            raise ValueError(f"{name} frame {i}: depth is {d.shape}, the intrinsics say {(H, W)}")
+    dev = o3c.Device(device or default_device())
+    K = o3c.Tensor(intrinsics.K)
+    blank = o3d.t.geometry.Image(o3c.Tensor(np.zeros((H, W, 3), np.uint8))).to(dev)  # point-to-plane: depth only
+    imgs = [o3d.t.geometry.Image(o3c.Tensor(d)).to(dev) for d in depths]
+    metres = [d.astype(np.float32) / 1000.0 for d in depths]
+    samples = [backproject(np.where(m <= depth_max, m, 0), intrinsics, stride=8)[0] for m in metres]
+    criteria = [o3d.t.pipelines.odometry.OdometryConvergenceCriteria(k) for k in (30, 15, 8)]
+    odo = o3d.t.pipelines.odometry
+    max_t, max_r = max_correction
+
+    def register(i: int, j: int) -> tuple[np.ndarray, np.ndarray] | None:
+        init = np.linalg.inv(poses[j]) @ poses[i]  # T_j_i
+        try:
+            res = odo.rgbd_odometry_multi_scale(
+                o3d.t.geometry.RGBDImage(blank, imgs[i]), o3d.t.geometry.RGBDImage(blank, imgs[j]), K,
+                o3c.Tensor(init), 1000.0, depth_max, criteria_list=criteria, method=odo.Method.PointToPlane,
+            )
+        except RuntimeError:  # no correspondences (singular system)
+            return None
+        T = res.transformation.cpu().numpy()
+        D = np.linalg.inv(init) @ T
+        if (not np.isfinite(T).all() or res.fitness < min_fitness or np.linalg.norm(D[:3, 3]) > max_t
+                or _rotation_deg(D[:3, :3]) > max_r):
+            return None
+        info = odo.compute_odometry_information_matrix(imgs[i], imgs[j], K, o3c.Tensor(T), 0.07, 1000.0, depth_max)
+        return T, info.cpu().numpy().astype(np.float64)
+
+    graph = reg.PoseGraph()
+    for p in poses:
+        graph.nodes.append(reg.PoseGraphNode(p))
+    for i in tqdm(range(1, n), desc="pose graph", disable=not progress, leave=False):
+        pairs = [j for j in range(max(0, i - neighbours), i - 1)
+                 if _overlap(samples[i], metres[j], np.linalg.inv(poses[j]) @ poses[i], intrinsics) >= min_overlap]
+        if i % loop_stride == 0:
+            loops = [(_overlap(samples[i], metres[j], np.linalg.inv(poses[j]) @ poses[i], intrinsics), j)
+                     for j in range(0, i - neighbours - 5, loop_stride)]
+            pairs += [j for ov, j in sorted(loops, reverse=True)[:loop_candidates] if ov >= loop_overlap]
+        for j in [i - 1] + pairs:
+            if j == i - 1:  # the chained motion itself (chosen robustly by the tracker, not re-registered)
+                T = np.linalg.inv(poses[j]) @ poses[i]
+                info = odo.compute_odometry_information_matrix(imgs[i], imgs[j], K, o3c.Tensor(T), 0.07, 1000.0,
+                                                               depth_max).cpu().numpy().astype(np.float64)
+                edge = (T, info if np.isfinite(info).all() and info.any() else np.eye(6))
+            else:
+                edge = register(i, j)
+            if edge is not None:
+                graph.edges.append(reg.PoseGraphEdge(i, j, edge[0], edge[1], uncertain=j != i - 1))
+    option = reg.GlobalOptimizationOption(max_correspondence_distance=0.03, edge_prune_threshold=0.25,
+                                          preference_loop_closure=1.0, reference_node=0)
+    level = o3d.utility.get_verbosity_level()
+    o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Error)
+    try:
+        reg.global_optimization(graph, reg.GlobalOptimizationLevenbergMarquardt(),
+                                reg.GlobalOptimizationConvergenceCriteria(), option)
+    finally:
+        o3d.utility.set_verbosity_level(level)
+    out = np.stack([np.asarray(node.pose) for node in graph.nodes])
+    out = poses[0] @ np.linalg.inv(out[0]) @ out  # frame 0 stays where it was
+    if not np.isfinite(out).all():
+        raise RuntimeError(f"{name}: the pose graph optimisation returned non-finite poses")
+    return out
 
 
 def _plausible(T: np.ndarray, max_step: float) -> bool:

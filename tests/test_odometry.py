@@ -7,7 +7,7 @@ import pytest
 
 from semmatch.geometry import DEFAULT_INTRINSICS, look_at
 from semmatch.io import Frame
-from semmatch.odometry import align_trajectory, ate, estimate_poses, rpe, trajectory_errors
+from semmatch.odometry import align_trajectory, ate, estimate_poses, refine_pose_graph, rpe, trajectory_errors
 from semmatch.sim import Renderer, generate_scene
 
 
@@ -66,6 +66,37 @@ def test_estimate_poses_tracks_a_rendered_camera():
     bad = [Frame(f.rgb, f.depth * 1000, None, None, intr, index=f.index) for f in frames[:2]]
     with pytest.raises(ValueError, match="frame 0: median depth .* wrong unit"):
         estimate_poses(bad)
+
+
+def test_pose_graph_removes_drift_from_chained_poses():
+    from scipy.spatial.transform import Rotation
+
+    from semmatch.odometry import _depth_mm
+
+    scene = generate_scene("living_room", 0)
+    intr = DEFAULT_INTRINSICS.scaled(160, 120)
+    r = Renderer(scene, intr)
+    lo, hi = scene.bounds
+    c = (lo + hi) / 2
+    gt = np.stack([
+        look_at([c[0] - 0.6 + 0.03 * i, c[1] - 0.3, 1.0], [c[0] + 1.0, hi[1], 0.6 + 0.01 * i]) for i in range(10)
+    ])
+    depths = [_depth_mm(r.render(p).depth, f"frame {i}") for i, p in enumerate(gt)]
+    # chained estimate with a growing drift: every step off by 1 cm and 0.5 degrees of yaw
+    step = np.eye(4)
+    step[:3, :3] = Rotation.from_euler("y", 0.5, degrees=True).as_matrix()
+    step[:3, 3] = [0.01, 0.0, 0.0]
+    drifted = [gt[0]]
+    for i in range(1, len(gt)):
+        drifted.append(drifted[-1] @ np.linalg.inv(gt[i - 1]) @ gt[i] @ step)
+    drifted = np.stack(drifted)
+    before = trajectory_errors(drifted, gt)["ate_rmse_unaligned"]
+    out = refine_pose_graph(depths, intr, drifted)
+    after = trajectory_errors(out, gt)["ate_rmse_unaligned"]
+    assert np.allclose(out[0], gt[0]) and before > 0.02
+    assert after < 0.3 * before and after < 0.01, (before, after)
+    with pytest.raises(ValueError, match="one depth image per pose"):
+        refine_pose_graph(depths[:3], intr, drifted)
 
 
 def test_real_like_chain_on_a_noisy_simulated_sequence(tmp_path, capsys):

@@ -4,8 +4,9 @@ The simulator writes, for every evaluation scene, ``upper_noisy`` and ``lower_no
 same trajectories as ``upper``/``lower`` seen through a Kinect-like sensor model (depth noise
 growing with distance, dropouts, RGB noise and exposure changes) with drifting, jittered
 recorded poses (what wheel odometry or an IMU would give). The true poses are withheld: poses
-are estimated by RGB-D odometry (:func:`semmatch.odometry.estimate_poses`) seeded by the
-recorded drifting poses as a motion prior, from the known first pose (both agents start at a
+are estimated by RGB-D odometry (:func:`semmatch.odometry.estimate_poses`: frame-to-frame
+tracking refined by a pose graph with loop closures) seeded by the recorded drifting poses as a
+motion prior, from the known first pose (both agents start at a
 known anchor, as when a robot is docked). The upper map and the lower frames therefore drift
 independently, as in a real recording.
 
@@ -53,6 +54,10 @@ class PosedSequence(_SequenceABC):
 
 def estimate_or_load_poses(seq_dir: Path, out: Path, *, progress: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """Estimated poses of a noisy sequence (cached in ``out``) and its true poses.
+
+    The poses are :func:`semmatch.odometry.estimate_poses` with the pose graph on; the cache
+    file name of :func:`evaluate_real_like` (``*_estimated_posegraph.txt``) is new so that
+    caches of the former chained-only estimate are not reused.
 
     Returns
     -------
@@ -115,7 +120,7 @@ def evaluate_real_like(
         work.mkdir(parents=True, exist_ok=True)
         seqs = {}
         for name in ("upper", "lower"):
-            est, true = estimate_or_load_poses(sd / f"{name}_noisy", work / f"{name}_estimated.txt",
+            est, true = estimate_or_load_poses(sd / f"{name}_noisy", work / f"{name}_estimated_posegraph.txt",
                                                progress=progress)
             noisy = read_sequence(sd / f"{name}_noisy")
             for what, poses in (("recorded (drifting prior)", noisy.poses), ("estimated (RGB-D odometry)", est)):
