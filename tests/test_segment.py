@@ -175,6 +175,20 @@ def test_class_weights_favour_rare_classes():
     assert w[4] > w[2] > w[1]
 
 
+def test_class_weight_power_softens_the_balancing():
+    lab = np.zeros((10, 10), np.uint8)
+    lab[:8] = 1
+    lab[8:, :] = 2
+    lab[9, 9] = 4
+    full, root, flat = (class_weights(lab, power=p, clip=100.0) for p in (1.0, 0.5, 0.0))
+    present = [1, 2, 4]
+    np.testing.assert_allclose(root[present], np.sqrt(full[present]), rtol=1e-6)
+    np.testing.assert_array_equal(flat[present], 1.0)
+    assert flat[0] == 0 and root[3] == 0
+    with pytest.raises(ValueError, match="power must lie in"):
+        class_weights(lab, power=2.0)
+
+
 def test_config_validation():
     with pytest.raises(ValueError, match="train and eval scene seeds overlap: \\[1001\\]"):
         make_config("smoke", train_seeds=(1, 1001))

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -17,6 +19,7 @@ from semmatch.sim import (
     free_space,
     generate_dataset,
     generate_scene,
+    limit_turn_rate,
     make_sweep_trajectories,
     make_trajectory,
     simulate_sequence,
@@ -181,6 +184,29 @@ def test_upper_and_lower_paths_differ_and_sweep_shares_one_path(living):
     np.testing.assert_allclose(sw[0.8][:, 2, 3], 0.8)
 
 
+def _headings(poses: np.ndarray) -> np.ndarray:
+    fwd = poses[:, :3, 2]
+    return np.unwrap(np.arctan2(fwd[:, 1], fwd[:, 0]))
+
+
+def test_heading_turns_at_most_max_turn_per_frame():
+    # bedroom 100's lower path doubles back: unlimited, the camera flips round by > 90 deg in a frame
+    scene = generate_scene("bedroom", 100)
+    free = make_trajectory(scene, 0.2, 120, seed=100, kind="lower", max_turn_deg=None)
+    limited = make_trajectory(scene, 0.2, 120, seed=100, kind="lower")
+    assert np.degrees(np.abs(np.diff(_headings(free)))).max() > 45
+    assert np.degrees(np.abs(np.diff(_headings(limited)))).max() <= 20 + 1e-6
+    np.testing.assert_allclose(limited[:, :3, 3], free[:, :3, 3])  # same path, only the heading lags
+
+
+def test_limit_turn_rate():
+    yaw = np.array([0.0, 0.1, 3.0, 3.0, 3.0, -1.0])
+    out = limit_turn_rate(yaw, 1.0)
+    np.testing.assert_allclose(out, [0.0, 0.1, 1.1, 2.1, 3.0, 2.0])
+    with pytest.raises(ValueError, match="max_turn"):
+        limit_turn_rate(yaw, 0.0)
+
+
 def test_bad_heights_and_intrinsics(living):
     with pytest.raises(ValueError, match="above the ceiling"):
         make_trajectory(living, 3.5, 10)
@@ -288,6 +314,27 @@ def test_generate_dataset_layout_and_resume(tmp_path):
     assert again["written"] == [] and len(again["skipped"]) == 7
     with pytest.raises(ValueError, match="disjoint"):
         generate_dataset(tmp_path, train_seeds=[1, 2], eval_seeds=[2], kinds=["bedroom"])
+
+
+def test_generate_dataset_in_parallel_writes_the_same_data(tmp_path):
+    kw = dict(train_seeds=[1], eval_seeds=[2], kinds=["bedroom", "office"], n_frames_upper=2, n_frames_lower=2,
+              heights_sweep=(0.4,), n_frames_sweep=2, intrinsics=DEFAULT_INTRINSICS.scaled(64, 48),
+              progress=False)
+    one = generate_dataset(tmp_path / "one", **kw)
+    two = generate_dataset(tmp_path / "two", jobs=2, **kw)
+    rel = [str(Path(p).relative_to(tmp_path / "one")) for p in one["written"]]
+    assert rel == [str(Path(p).relative_to(tmp_path / "two")) for p in two["written"]]
+    assert len(rel) == 4 * 2 + 2 * 2  # eval: mesh, upper, lower, h040; train: mesh, upper
+    for r in rel:
+        a, b = tmp_path / "one" / r, tmp_path / "two" / r
+        if a.is_dir():
+            sa, sb = read_sequence(a), read_sequence(b)
+            np.testing.assert_array_equal(sa.poses, sb.poses)
+            np.testing.assert_array_equal(sa[1].rgb, sb[1].rgb)
+            np.testing.assert_array_equal(sa[1].depth, sb[1].depth)
+            np.testing.assert_array_equal(sa[1].labels, sb[1].labels)
+        else:
+            assert a.read_bytes() == b.read_bytes()
 
 
 def test_scene_generation_all_kinds_and_save(tmp_path):

@@ -95,6 +95,7 @@ def register(sub) -> None:
     d.add_argument("--frames-sweep", type=int, default=100)
     d.add_argument("--sweep", type=float, nargs="*", default=None,
                    help="height-sweep heights (m); default 0.2 .. 1.6; give none to skip")
+    d.add_argument("--jobs", type=int, default=1, help="scenes written in parallel (worker processes)")
     p.set_defaults(func=run)
 
 
@@ -111,7 +112,7 @@ def run(args) -> int:
             args.dataset, train_seeds=args.train_seeds, eval_seeds=args.eval_seeds, kinds=args.kinds,
             n_frames_upper=args.frames, n_frames_lower=args.frames_lower or args.frames,
             heights_sweep=sweep, n_frames_sweep=args.frames_sweep, tilt_deg=args.tilt, noise=noise,
-            intrinsics=intr, progress=progress,
+            intrinsics=intr, progress=progress, jobs=args.jobs,
         )
         print(f"{args.dataset}: wrote {len(res['written'])}, skipped {len(res['skipped'])} complete item(s)")
         return 0

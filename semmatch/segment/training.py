@@ -25,6 +25,7 @@ from tqdm.auto import tqdm
 from ..geometry import DEFAULT_INTRINSICS
 from ..io import atomic_path
 from ..labels import table_fingerprint
+from ..sim.trajectory import TRAJECTORY_VERSION
 from . import data as D
 from .models import ModelConfig, build_network, count_parameters
 from .scores import confusion, scores
@@ -317,7 +318,7 @@ def build_views(config: TrainConfig) -> tuple[D.Views, D.Views]:
         return D.render_views(scenes, val_h, config.val_frames, seed=config.seed + 1, **common)
 
     key = dict(kinds=config.kinds, width=config.width, height=config.height, tilt=config.tilt_deg,
-               tilt_period="n_frames")
+               tilt_period="n_frames", trajectories=TRAJECTORY_VERSION)
     tr = D.cached_views(config.cache_dir, dict(key, seeds=config.train_seeds, h=train_heights.round(4).tolist(),
                                                frames=config.frames, seed=config.seed), make_train)
     va = D.cached_views(config.cache_dir, dict(key, seeds=config.val_seeds, h=val_h, frames=config.val_frames,

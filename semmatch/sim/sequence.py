@@ -166,6 +166,64 @@ def _check_seeds(train_seeds: Sequence[int], eval_seeds: Sequence[int]) -> None:
         raise ValueError(f"train and eval seeds must be disjoint; both hold {both}")
 
 
+def _write_scene(root: Path, o: dict, split: str, seed: int, kind: str,
+                 progress: bool = False) -> tuple[list[str], list[str]]:
+    """Write one scene of :func:`generate_dataset` (its mesh and sequences); return (written, skipped)."""
+    intrinsics, noise = o["intrinsics"], o["noise"]
+    tilt_deg = o["tilt_deg"]
+    written: list[str] = []
+    skipped: list[str] = []
+    scene = generate_scene(kind, seed)
+    sdir = root / split / scene.name
+    ply = sdir / "scene.ply"
+    if ply.is_file():
+        skipped.append(str(ply))
+    else:
+        scene.save(ply)
+        write_json(sdir / "scene.json", scene.meta)
+        written.append(str(ply))
+    # (folder, height, frames, trajectory kind, noise)
+    todo: list[tuple[str, float, int, str, NoiseConfig | None]] = []
+    if split == "train":
+        todo.append(("upper", o["upper_height"], o["n_train"], "upper", None))
+    else:
+        todo += [("upper", o["upper_height"], o["n_frames_upper"], "upper", None),
+                 ("lower", o["lower_height"], o["n_frames_lower"], "lower", None)]
+        if noise is not None and noise.enabled:
+            todo += [("upper_noisy", o["upper_height"], o["n_frames_upper"], "upper", noise),
+                     ("lower_noisy", o["lower_height"], o["n_frames_lower"], "lower", noise)]
+    done = {t[0] for t in todo if _complete(sdir / t[0], t[2], intrinsics)}
+    pending = [t for t in todo if t[0] not in done]
+    skipped += [str(sdir / t[0]) for t in todo if t[0] in done]
+    sweep = {}
+    if split == "eval" and o["heights_sweep"]:
+        names = {sweep_name(h): float(h) for h in o["heights_sweep"]}
+        missing = [n for n in names if not _complete(sdir / n, o["n_frames_sweep"], intrinsics)]
+        skipped += [str(sdir / n) for n in names if n not in missing]
+        if missing:
+            traj = make_sweep_trajectories(scene, tuple(names.values()), o["n_frames_sweep"],
+                                           tilt_deg=tilt_deg, seed=seed)
+            sweep = {n: traj[names[n]] for n in missing}
+    if not pending and not sweep:
+        return written, skipped
+    renderer = Renderer(scene, intrinsics)
+    for name, height, n, tkind, cfg in pending:
+        _drop_partials(sdir, name)
+        poses = make_trajectory(scene, height, n, tilt_deg=tilt_deg, seed=seed, kind=tkind)
+        simulate_sequence(scene, poses, sdir / name, intrinsics=intrinsics, noise=cfg, overwrite=True,
+                          progress=progress, renderer=renderer,
+                          meta={"trajectory": name, "seed": seed, "tilt_deg": tilt_deg})
+        written.append(str(sdir / name))
+    for name, poses in sweep.items():
+        _drop_partials(sdir, name)
+        simulate_sequence(scene, poses, sdir / name, intrinsics=intrinsics, overwrite=True,
+                          progress=progress, renderer=renderer,
+                          meta={"trajectory": name, "seed": seed, "tilt_deg": tilt_deg,
+                                "height": float(poses[0, 2, 3])})
+        written.append(str(sdir / name))
+    return written, skipped
+
+
 def generate_dataset(
     root: str | os.PathLike,
     *,
@@ -183,6 +241,7 @@ def generate_dataset(
     noise: NoiseConfig | dict | None = None,
     intrinsics: Intrinsics = DEFAULT_INTRINSICS,
     progress: bool = True,
+    jobs: int = 1,
 ) -> dict:
     """Write the generated data layout of DESIGN.md §3 (resumable).
 
@@ -216,6 +275,9 @@ def generate_dataset(
         Also write noisy ("real-like") copies of the eval upper/lower sequences.
     intrinsics : Intrinsics
     progress : bool
+    jobs : int
+        Scenes written in parallel by this many worker processes (each renders on one
+        thread); the output does not depend on it.
 
     Returns
     -------
@@ -242,57 +304,31 @@ def generate_dataset(
     root = Path(root)
     written: list[str] = []
     skipped: list[str] = []
-    jobs = [("train", int(s), k) for s in train_seeds for k in kinds]
-    jobs += [("eval", int(s), k) for s in eval_seeds for k in kinds]
-    for split, seed, kind in tqdm(jobs, desc="scenes", disable=not progress):
-        scene = generate_scene(kind, seed)
-        sdir = root / split / scene.name
-        ply = sdir / "scene.ply"
-        if ply.is_file():
-            skipped.append(str(ply))
-        else:
-            scene.save(ply)
-            write_json(sdir / "scene.json", scene.meta)
-            written.append(str(ply))
-        # (folder, height, frames, trajectory kind, noise)
-        todo: list[tuple[str, float, int, str, NoiseConfig | None]] = []
-        if split == "train":
-            todo.append(("upper", upper_height, n_train, "upper", None))
-        else:
-            todo += [("upper", upper_height, int(n_frames_upper), "upper", None),
-                     ("lower", lower_height, int(n_frames_lower), "lower", None)]
-            if noise is not None and noise.enabled:
-                todo += [("upper_noisy", upper_height, int(n_frames_upper), "upper", noise),
-                         ("lower_noisy", lower_height, int(n_frames_lower), "lower", noise)]
-        done = {t[0] for t in todo if _complete(sdir / t[0], t[2], intrinsics)}
-        pending = [t for t in todo if t[0] not in done]
-        skipped += [str(sdir / t[0]) for t in todo if t[0] in done]
-        sweep = {}
-        if split == "eval" and heights_sweep:
-            names = {sweep_name(h): float(h) for h in heights_sweep}
-            missing = [n for n in names if not _complete(sdir / n, int(n_frames_sweep), intrinsics)]
-            skipped += [str(sdir / n) for n in names if n not in missing]
-            if missing:
-                traj = make_sweep_trajectories(scene, tuple(names.values()), int(n_frames_sweep),
-                                               tilt_deg=tilt_deg, seed=seed)
-                sweep = {n: traj[names[n]] for n in missing}
-        if not pending and not sweep:
-            continue
-        renderer = Renderer(scene, intrinsics)
-        for name, height, n, tkind, cfg in pending:
-            _drop_partials(sdir, name)
-            poses = make_trajectory(scene, height, n, tilt_deg=tilt_deg, seed=seed, kind=tkind)
-            simulate_sequence(scene, poses, sdir / name, intrinsics=intrinsics, noise=cfg, overwrite=True,
-                              progress=progress, renderer=renderer,
-                              meta={"trajectory": name, "seed": seed, "tilt_deg": tilt_deg})
-            written.append(str(sdir / name))
-        for name, poses in sweep.items():
-            _drop_partials(sdir, name)
-            simulate_sequence(scene, poses, sdir / name, intrinsics=intrinsics, overwrite=True,
-                              progress=progress, renderer=renderer,
-                              meta={"trajectory": name, "seed": seed, "tilt_deg": tilt_deg,
-                                    "height": float(poses[0, 2, 3])})
-            written.append(str(sdir / name))
+    # evaluation scenes first: they hold most frames, so a pool of workers finishes together
+    todo = [("eval", int(s), k) for s in eval_seeds for k in kinds]
+    todo += [("train", int(s), k) for s in train_seeds for k in kinds]
+    opts = dict(n_train=n_train, n_frames_upper=int(n_frames_upper), n_frames_lower=int(n_frames_lower),
+                heights_sweep=tuple(heights_sweep or ()), n_frames_sweep=int(n_frames_sweep),
+                upper_height=upper_height, lower_height=lower_height, tilt_deg=tilt_deg, noise=noise,
+                intrinsics=intrinsics)
+    jobs = max(1, min(int(jobs), len(todo)))
+    if jobs == 1:
+        results = (_write_scene(root, opts, *job, progress=progress) for job in todo)
+    else:
+        import multiprocessing as mp
+        from concurrent.futures import ProcessPoolExecutor
+        from functools import partial
+
+        # spawn: Open3D and BLAS thread pools do not survive a fork safely
+        pool = ProcessPoolExecutor(max_workers=jobs, mp_context=mp.get_context("spawn"))
+        results = pool.map(partial(_write_scene, root, opts), *zip(*todo))
+    try:
+        for w, sk in tqdm(results, total=len(todo), desc="scenes", disable=not progress):
+            written += w
+            skipped += sk
+    finally:
+        if jobs > 1:
+            pool.shutdown(cancel_futures=True)
     manifest = {"written": written, "skipped": skipped}
     write_json(root / "manifest.json", {
         "train": sorted({f"{k}_{int(s):04d}" for s in train_seeds for k in kinds}),

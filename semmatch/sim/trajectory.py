@@ -25,12 +25,18 @@ __all__ = [
     "FreeSpace",
     "scene_levels",
     "free_space",
+    "limit_turn_rate",
+    "TRAJECTORY_VERSION",
     "make_trajectory",
     "make_sweep_trajectories",
     "camera_elevation_deg",
 ]
 
 _FLOOR, _CEILING = id_of("floor"), id_of("ceiling")
+
+#: bumped whenever :func:`make_trajectory` returns other poses for the same arguments (caches of
+#: rendered views key on it); 2: heading turn rate limited (``max_turn_deg``)
+TRAJECTORY_VERSION = 2
 
 
 @dataclass
@@ -303,6 +309,7 @@ def make_trajectory(
     plan_height: float | None = None,
     free: FreeSpace | None = None,
     max_step: float | None = 0.15,
+    max_turn_deg: float | None = 20.0,
 ) -> np.ndarray:
     """A smooth, collision-free camera trajectory at ``height`` above the floor.
 
@@ -336,6 +343,10 @@ def make_trajectory(
         Largest camera step between frames (m): when the tour is longer than
         ``(n_frames - 1) * max_step`` only its first part is flown. None = no limit (the
         whole tour, however few the frames).
+    max_turn_deg : float, optional
+        Largest change of heading between consecutive frames (degrees): where the path
+        doubles back the camera turns at this rate instead of flipping round in one frame
+        (which no RGB-D odometry could follow). None = no limit.
 
     Returns
     -------
@@ -385,6 +396,8 @@ def make_trajectory(
     yaw = np.interp(s, s_dense, yaw_dense)
     phase = rng.uniform(0, 2 * np.pi)
     yaw = yaw + np.radians(35.0) * np.sin(2 * np.pi * s / 3.0 + phase)
+    if max_turn_deg is not None:
+        yaw = limit_turn_rate(yaw, np.radians(max_turn_deg))
     t = np.arange(n_frames)
     pitch = np.radians(tilt_deg) * np.sin(2 * np.pi * t / tilt_period)
     fwd = np.stack([np.cos(pitch) * np.cos(yaw), np.cos(pitch) * np.sin(yaw), np.sin(pitch)], axis=1)
@@ -397,6 +410,30 @@ def make_trajectory(
     poses[:, :2, 3] = xy
     poses[:, 2, 3] = fs.floor_z + height
     return poses
+
+
+def limit_turn_rate(yaw: np.ndarray, max_turn: float) -> np.ndarray:
+    """Follow an (unwrapped) heading sequence turning at most ``max_turn`` radians per step.
+
+    Parameters
+    ----------
+    yaw : ndarray (N,)
+        Unwrapped headings (radians).
+    max_turn : float
+        Largest change between consecutive entries (radians, > 0).
+
+    Returns
+    -------
+    ndarray (N,)
+        ``out[0] = yaw[0]``; each later entry moves from the previous one towards ``yaw[i]`` by
+        at most ``max_turn``.
+    """
+    if not max_turn > 0:
+        raise ValueError(f"max_turn must be > 0, got {max_turn}")
+    out = np.array(yaw, dtype=np.float64)
+    for i in range(1, len(out)):
+        out[i] = out[i - 1] + np.clip(yaw[i] - out[i - 1], -max_turn, max_turn)
+    return out
 
 
 def make_sweep_trajectories(
