@@ -309,7 +309,7 @@ def make_trajectory(
     plan_height: float | None = None,
     free: FreeSpace | None = None,
     max_step: float | None = 0.15,
-    max_turn_deg: float | None = 20.0,
+    max_turn_deg: float | None = 30.0,
 ) -> np.ndarray:
     """A smooth, collision-free camera trajectory at ``height`` above the floor.
 
