@@ -28,6 +28,7 @@ References
 from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
+from dataclasses import replace
 
 import numpy as np
 
@@ -35,7 +36,7 @@ from .fusion import check_depth_units, default_device
 from .geometry import check_pose
 from .io import Frame
 
-__all__ = ["estimate_poses", "refine_pose_graph", "align_trajectory", "ate", "rpe", "trajectory_errors", "real_like_chain"]
+__all__ = ["estimate_poses", "refine_pose_graph", "shrink_frame", "align_trajectory", "ate", "rpe", "trajectory_errors", "real_like_chain"]
 
 METHODS = ("frame-to-frame",)
 
@@ -57,6 +58,7 @@ def estimate_poses(
     init_pose: np.ndarray | None = None,
     depth_max: float = 5.0,
     pose_graph: bool = True,
+    downsample: int = 1,
     device: str | None = None,
     progress: bool = False,
 ) -> np.ndarray:
@@ -92,6 +94,10 @@ def estimate_poses(
     pose_graph : bool
         Refine the chained poses with :func:`refine_pose_graph` (neighbour and loop-closure
         edges; about doubles the run time, divides the drift by about four).
+    downsample : int
+        Track on frames shrunk by this factor (RGB area-averaged, depth by nearest pixel so
+        that no depth is invented at edges; intrinsics scaled to match): 2 is about 3x faster
+        at 640x480 and keeps sub-centimetre accuracy on simulated frames.
     device : str, optional
         Open3D device (default :func:`semmatch.fusion.default_device`).
     progress : bool
@@ -144,7 +150,10 @@ def estimate_poses(
     intrinsics = None
     prev = None
     motion = np.eye(4)
-    for i, f in enumerate(tqdm(seq, total=n, desc=f"odometry ({method})", disable=not progress, leave=False)):
+    if int(downsample) < 1:
+        raise ValueError(f"downsample must be an integer >= 1, got {downsample}")
+    frames = seq if int(downsample) == 1 else (shrink_frame(f, int(downsample)) for f in seq)
+    for i, f in enumerate(tqdm(frames, total=n, desc=f"odometry ({method})", disable=not progress, leave=False)):
         where = f"{name} frame {getattr(f, 'index', i)}"
         d_mm = _depth_mm(f.depth, where)
         if intrinsics is None:
@@ -207,6 +216,34 @@ def estimate_poses(
         out = refine_pose_graph(depths_mm, intrinsics, out, depth_max=depth_max, device=device,
                                 progress=progress, name=name)
     return out
+
+
+def shrink_frame(frame: Frame, factor: int) -> Frame:
+    """A frame shrunk by an integer ``factor``: RGB area-averaged, depth (and labels) by nearest pixel.
+
+    Parameters
+    ----------
+    frame : Frame
+    factor : int
+        >= 1; the new size is ``(W // factor, H // factor)``.
+
+    Returns
+    -------
+    Frame
+        Same pose and index; intrinsics scaled to the new size.
+    """
+    import cv2
+
+    if factor == 1:
+        return frame
+    H, W = frame.depth.shape
+    w, h = W // factor, H // factor
+    if w < 8 or h < 8:
+        raise ValueError(f"frame {frame.index}: {W}x{H} shrunk by {factor} is too small")
+    rgb = cv2.resize(np.ascontiguousarray(frame.rgb), (w, h), interpolation=cv2.INTER_AREA)
+    depth = cv2.resize(np.ascontiguousarray(frame.depth), (w, h), interpolation=cv2.INTER_NEAREST)
+    labels = None if frame.labels is None else cv2.resize(frame.labels, (w, h), interpolation=cv2.INTER_NEAREST)
+    return replace(frame, rgb=rgb, depth=depth, labels=labels, intrinsics=frame.intrinsics.scaled(w, h))
 
 
 def _rotation_deg(R: np.ndarray) -> float:

@@ -7,7 +7,15 @@ import pytest
 
 from semmatch.geometry import DEFAULT_INTRINSICS, look_at
 from semmatch.io import Frame
-from semmatch.odometry import align_trajectory, ate, estimate_poses, refine_pose_graph, rpe, trajectory_errors
+from semmatch.odometry import (
+    align_trajectory,
+    ate,
+    estimate_poses,
+    refine_pose_graph,
+    rpe,
+    shrink_frame,
+    trajectory_errors,
+)
 from semmatch.sim import Renderer, generate_scene
 
 
@@ -66,6 +74,27 @@ def test_estimate_poses_tracks_a_rendered_camera():
     bad = [Frame(f.rgb, f.depth * 1000, None, None, intr, index=f.index) for f in frames[:2]]
     with pytest.raises(ValueError, match="frame 0: median depth .* wrong unit"):
         estimate_poses(bad)
+
+
+def test_tracking_on_shrunk_frames():
+    scene = generate_scene("living_room", 0)
+    intr = DEFAULT_INTRINSICS.scaled(320, 240)
+    r = Renderer(scene, intr)
+    lo, hi = scene.bounds
+    c = (lo + hi) / 2
+    gt = np.stack([
+        look_at([c[0] - 0.6 + 0.03 * i, c[1] - 0.3, 1.0], [c[0] + 1.0, hi[1], 0.6 + 0.01 * i]) for i in range(12)
+    ])
+    frames = [Frame(x.rgb, x.depth, x.labels, None, intr, index=i) for i, p in enumerate(gt) for x in [r.render(p)]]
+    small = shrink_frame(frames[3], 2)
+    assert small.depth.shape == (120, 160) and small.rgb.shape == (120, 160, 3) and small.index == 3
+    assert small.intrinsics == intr.scaled(160, 120)
+    assert set(np.unique(small.depth)) <= set(np.unique(frames[3].depth))  # no depth invented at edges
+    est = estimate_poses(frames, init_pose=gt[0], downsample=2)
+    e = trajectory_errors(est, gt)
+    assert e["ate_rmse_unaligned"] < 0.02 and e["rpe_rot_deg"] < 0.5, e
+    with pytest.raises(ValueError, match="downsample must be"):
+        estimate_poses(frames, downsample=0)
 
 
 def test_pose_graph_removes_drift_from_chained_poses():

@@ -324,7 +324,7 @@ def test_generate_dataset_in_parallel_writes_the_same_data(tmp_path):
     two = generate_dataset(tmp_path / "two", jobs=2, **kw)
     rel = [str(Path(p).relative_to(tmp_path / "one")) for p in one["written"]]
     assert rel == [str(Path(p).relative_to(tmp_path / "two")) for p in two["written"]]
-    assert len(rel) == 4 * 2 + 2 * 2  # eval: mesh, upper, lower, h040; train: mesh, upper
+    assert len(rel) == 4 * 2 + 2  # eval: mesh, upper, lower, h040 per kind; train: seed 1 -> bedroom
     for r in rel:
         a, b = tmp_path / "one" / r, tmp_path / "two" / r
         if a.is_dir():

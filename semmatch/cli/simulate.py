@@ -88,8 +88,9 @@ def register(sub) -> None:
     dst.add_argument("--out", type=Path, help="sequence folder to write")
     dst.add_argument("--dataset", type=Path, help="write the generated data layout under this root")
     d = p.add_argument_group("data set (--dataset)")
-    d.add_argument("--train-seeds", type=int, nargs="*", default=[0, 1])
-    d.add_argument("--eval-seeds", type=int, nargs="*", default=[100])
+    d.add_argument("--train-seeds", type=int, nargs="*", default=[0, 1],
+                   help="training scenes: the i-th seed gives one scene of kind KINDS[i %% len(KINDS)]")
+    d.add_argument("--eval-seeds", type=int, nargs="*", default=[100], help="evaluation scenes: every kind per seed")
     d.add_argument("--kinds", nargs="*", default=["living_room", "bedroom", "office"])
     d.add_argument("--frames-lower", type=int, default=None, help="default: --frames")
     d.add_argument("--frames-sweep", type=int, default=100)

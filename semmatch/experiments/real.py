@@ -52,12 +52,18 @@ class PosedSequence(_SequenceABC):
         return self.seq.read_labels(i)
 
 
+#: the pipeline tracks on frames shrunk by this factor (:func:`semmatch.odometry.estimate_poses`):
+#: on a 640x480 real-like lower sequence 0.17 s instead of 0.75 s a frame, ATE 0.2 cm instead of 0.04 cm
+ODOMETRY_DOWNSAMPLE = 2
+
+
 def estimate_or_load_poses(seq_dir: Path, out: Path, *, progress: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """Estimated poses of a noisy sequence (cached in ``out``) and its true poses.
 
-    The poses are :func:`semmatch.odometry.estimate_poses` with the pose graph on; the cache
-    file name of :func:`evaluate_real_like` (``*_estimated_posegraph.txt``) is new so that
-    caches of the former chained-only estimate are not reused.
+    The poses are :func:`semmatch.odometry.estimate_poses` with the pose graph on, tracked on
+    frames shrunk by :data:`ODOMETRY_DOWNSAMPLE`; the cache file name of
+    :func:`evaluate_real_like` (``*_estimated_posegraph_ds2.txt``) names both, so that caches
+    of other settings are not reused.
 
     Returns
     -------
@@ -71,7 +77,7 @@ def estimate_or_load_poses(seq_dir: Path, out: Path, *, progress: bool = True) -
         _, est = read_tum(out)
         if len(est) == len(seq):
             return est, true
-    est = estimate_poses(seq, init_pose=true[0], prior=seq.poses, progress=progress)
+    est = estimate_poses(seq, init_pose=true[0], prior=seq.poses, downsample=ODOMETRY_DOWNSAMPLE, progress=progress)
     write_tum(out, np.arange(len(est), dtype=np.float64), est)
     return est, true
 
@@ -120,8 +126,8 @@ def evaluate_real_like(
         work.mkdir(parents=True, exist_ok=True)
         seqs = {}
         for name in ("upper", "lower"):
-            est, true = estimate_or_load_poses(sd / f"{name}_noisy", work / f"{name}_estimated_posegraph.txt",
-                                               progress=progress)
+            cache = work / f"{name}_estimated_posegraph_ds{ODOMETRY_DOWNSAMPLE}.txt"
+            est, true = estimate_or_load_poses(sd / f"{name}_noisy", cache, progress=progress)
             noisy = read_sequence(sd / f"{name}_noisy")
             for what, poses in (("recorded (drifting prior)", noisy.poses), ("estimated (RGB-D odometry)", est)):
                 err = trajectory_errors(poses, true)

@@ -3,7 +3,7 @@
 Training views are upper views (camera 1.2-1.8 m, tilting +-20 deg) of training scenes only;
 validation uses held-out scenes. Augmentations: horizontal flip, colour jitter and a random
 scale/crop window (depth rescaled with the zoom). The loss is cross-entropy with
-median-frequency class weights (void ignored). The best validation checkpoint (mIoU over
+square-root median-frequency class weights (void ignored). The best validation checkpoint (mIoU over
 classes 1..10) is kept. Everything is seeded: the same config gives the same weights on the
 same machine (``torch.use_deterministic_algorithms``; data rendered single-threaded).
 """
@@ -112,7 +112,7 @@ class TrainConfig:
     eval_every: int = 40
     zoom: tuple[float, float] = (0.75, 1.5)
     jitter: float = 0.25
-    class_weight_power: float = 1.0
+    class_weight_power: float = 0.5
     seed: int = 0
     device: str = "auto"
     threads: int | None = None
@@ -152,7 +152,7 @@ class TrainConfig:
 PROFILES: dict[str, dict] = {
     "smoke": dict(width=160, height=120, n_heights=2, frames=6, val_frames=6, steps=100, batch_size=8,
                   eval_every=50),
-    "full": dict(width=320, height=240, crop_width=160, crop_height=120, n_heights=4, frames=24,
+    "full": dict(width=320, height=240, crop_width=160, crop_height=120, n_heights=2, frames=16,
                  val_frames=30, steps=2000, batch_size=16, eval_every=200,
                  train_seeds=tuple(range(1, 13)), val_seeds=(501, 502)),
 }

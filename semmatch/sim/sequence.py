@@ -263,7 +263,9 @@ def generate_dataset(
     root : path
         Usually ``data/scenes``.
     train_seeds, eval_seeds : sequences of int
-        Scene seeds per split; they must be disjoint.
+        Scene seeds per split; they must be disjoint. Every evaluation seed gives one scene
+        of every kind; training seed ``i`` gives one scene of kind ``kinds[i % len(kinds)]``
+        (the scenes :mod:`semmatch.segment` trains on: many seeds, varied materials).
     kinds : sequence of str
         Scene kinds (see :data:`semmatch.sim.procedural.SCENE_KINDS`).
     n_frames_upper, n_frames_lower, n_frames_train, n_frames_sweep : int
@@ -306,7 +308,8 @@ def generate_dataset(
     skipped: list[str] = []
     # evaluation scenes first: they hold most frames, so a pool of workers finishes together
     todo = [("eval", int(s), k) for s in eval_seeds for k in kinds]
-    todo += [("train", int(s), k) for s in train_seeds for k in kinds]
+    train = [(int(s), kinds[i % len(kinds)]) for i, s in enumerate(train_seeds)]
+    todo += [("train", s, k) for s, k in train]
     opts = dict(n_train=n_train, n_frames_upper=int(n_frames_upper), n_frames_lower=int(n_frames_lower),
                 heights_sweep=tuple(heights_sweep or ()), n_frames_sweep=int(n_frames_sweep),
                 upper_height=upper_height, lower_height=lower_height, tilt_deg=tilt_deg, noise=noise,
@@ -331,7 +334,7 @@ def generate_dataset(
             pool.shutdown(cancel_futures=True)
     manifest = {"written": written, "skipped": skipped}
     write_json(root / "manifest.json", {
-        "train": sorted({f"{k}_{int(s):04d}" for s in train_seeds for k in kinds}),
+        "train": sorted({f"{k}_{s:04d}" for s, k in train}),
         "eval": sorted({f"{k}_{int(s):04d}" for s in eval_seeds for k in kinds}),
         "params": {"n_frames_upper": n_frames_upper, "n_frames_lower": n_frames_lower,
                    "n_frames_train": n_train, "heights_sweep": list(heights_sweep or []),
