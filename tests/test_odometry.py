@@ -24,6 +24,24 @@ def circle_poses(n: int = 20) -> np.ndarray:
     return np.stack([look_at([2 + 0.5 * np.cos(t), 1.5 + 0.5 * np.sin(t), 1.2], [2.5, 3.5, 0.8]) for t in a])
 
 
+def slide_poses(scene, n: int) -> np.ndarray:
+    """A camera sliding sideways through ``scene`` while looking at the far wall."""
+    lo, hi = scene.bounds
+    c = (lo + hi) / 2
+    return np.stack([
+        look_at([c[0] - 0.6 + 0.03 * i, c[1] - 0.3, 1.0], [c[0] + 1.0, hi[1], 0.6 + 0.01 * i]) for i in range(n)
+    ])
+
+
+def rendered_slide(width: int, height: int, n: int = 12) -> tuple[list[Frame], np.ndarray]:
+    """Frames (RGB, depth, labels; no pose) of :func:`slide_poses` in living_room 0, and the true poses."""
+    scene = generate_scene("living_room", 0)
+    intr = DEFAULT_INTRINSICS.scaled(width, height)
+    r = Renderer(scene, intr)
+    gt = slide_poses(scene, n)
+    return [Frame(x.rgb, x.depth, x.labels, None, intr, index=i) for i, p in enumerate(gt) for x in [r.render(p)]], gt
+
+
 def test_ate_is_zero_after_alignment_of_a_moved_trajectory():
     gt = circle_poses()
     S = np.eye(4)
@@ -53,18 +71,8 @@ def test_trajectory_errors_count_a_known_offset():
 
 
 def test_estimate_poses_tracks_a_rendered_camera():
-    scene = generate_scene("living_room", 0)
-    intr = DEFAULT_INTRINSICS.scaled(160, 120)
-    r = Renderer(scene, intr)
-    lo, hi = scene.bounds
-    c = (lo + hi) / 2
-    gt = np.stack([
-        look_at([c[0] - 0.6 + 0.03 * i, c[1] - 0.3, 1.0], [c[0] + 1.0, hi[1], 0.6 + 0.01 * i]) for i in range(12)
-    ])
-    frames = []
-    for i, p in enumerate(gt):
-        res = r.render(p)
-        frames.append(Frame(res.rgb, res.depth, None, None, intr, index=i))
+    frames, gt = rendered_slide(160, 120)
+    intr = frames[0].intrinsics
     est = estimate_poses(frames, init_pose=gt[0])
     assert np.allclose(est[0], gt[0])
     e = trajectory_errors(est, gt)
@@ -77,15 +85,8 @@ def test_estimate_poses_tracks_a_rendered_camera():
 
 
 def test_tracking_on_shrunk_frames():
-    scene = generate_scene("living_room", 0)
-    intr = DEFAULT_INTRINSICS.scaled(320, 240)
-    r = Renderer(scene, intr)
-    lo, hi = scene.bounds
-    c = (lo + hi) / 2
-    gt = np.stack([
-        look_at([c[0] - 0.6 + 0.03 * i, c[1] - 0.3, 1.0], [c[0] + 1.0, hi[1], 0.6 + 0.01 * i]) for i in range(12)
-    ])
-    frames = [Frame(x.rgb, x.depth, x.labels, None, intr, index=i) for i, p in enumerate(gt) for x in [r.render(p)]]
+    frames, gt = rendered_slide(320, 240)
+    intr = frames[0].intrinsics
     small = shrink_frame(frames[3], 2)
     assert small.depth.shape == (120, 160) and small.rgb.shape == (120, 160, 3) and small.index == 3
     assert small.intrinsics == intr.scaled(160, 120)
@@ -102,15 +103,9 @@ def test_pose_graph_removes_drift_from_chained_poses():
 
     from semmatch.odometry import _depth_mm
 
-    scene = generate_scene("living_room", 0)
-    intr = DEFAULT_INTRINSICS.scaled(160, 120)
-    r = Renderer(scene, intr)
-    lo, hi = scene.bounds
-    c = (lo + hi) / 2
-    gt = np.stack([
-        look_at([c[0] - 0.6 + 0.03 * i, c[1] - 0.3, 1.0], [c[0] + 1.0, hi[1], 0.6 + 0.01 * i]) for i in range(10)
-    ])
-    depths = [_depth_mm(r.render(p).depth, f"frame {i}") for i, p in enumerate(gt)]
+    frames, gt = rendered_slide(160, 120, 10)
+    intr = frames[0].intrinsics
+    depths = [_depth_mm(f.depth, f"frame {f.index}") for f in frames]
     # chained estimate with a growing drift: every step off by 1 cm and 0.5 degrees of yaw
     step = np.eye(4)
     step[:3, :3] = Rotation.from_euler("y", 0.5, degrees=True).as_matrix()
