@@ -22,6 +22,7 @@ from semmatch.sim import (
     limit_turn_rate,
     make_sweep_trajectories,
     make_trajectory,
+    route_waypoints,
     simulate_sequence,
 )
 
@@ -184,6 +185,36 @@ def test_upper_and_lower_paths_differ_and_sweep_shares_one_path(living):
     np.testing.assert_allclose(sw[0.8][:, 2, 3], 0.8)
 
 
+def test_short_tour_is_walked_there_and_back():
+    # bedroom 1001's upper tour is ~3.4 m, far less than 119 steps of 15 cm allow
+    scene = generate_scene("bedroom", 1001)
+    once = make_trajectory(scene, 1.6, 120, seed=1001, kind="upper", there_and_back=False)
+    both = make_trajectory(scene, 1.6, 120, seed=1001, kind="upper")
+    length = np.linalg.norm(np.diff(once[:, :2, 3], axis=0), axis=1).sum()
+    assert length < 0.15 * 119 / 2
+    np.testing.assert_allclose(both[-1, :2, 3], once[0, :2, 3], atol=0.05)  # back where it started
+    walked = np.linalg.norm(np.diff(both[:, :2, 3], axis=0), axis=1).sum()
+    assert walked == pytest.approx(2 * length, rel=0.05)
+    # it faces the other way on the way back: headings at the same spot differ by ~180 deg
+    mid = np.argmin(np.linalg.norm(both[60:, :2, 3] - once[60, :2, 3], axis=1)) + 60
+    cos = np.dot(both[mid, :2, 2], once[60, :2, 2]) / (
+        np.linalg.norm(both[mid, :2, 2]) * np.linalg.norm(once[60, :2, 2]))
+    assert cos < 0
+
+
+def test_lower_path_follows_the_upper_route(living):
+    wp = route_waypoints(living, 1.6, seed=2, kind="upper")
+    up = make_trajectory(living, 1.6, 400, seed=2, kind="upper", max_step=None)
+    low = make_trajectory(living, 0.2, 400, seed=2, kind="lower", waypoints=wp, max_step=None)
+    assert wp.shape[1] == 2 and len(wp) >= 5
+    for path in (up, low):  # every waypoint of the route is passed (within the smoothing)
+        d = np.linalg.norm(path[:, None, :2, 3] - wp[None], axis=2).min(axis=0)
+        assert d.max() < 0.5, d
+    np.testing.assert_allclose(low[:, 2, 3], 0.2 + free_space(living, 0.2).floor_z)
+    with pytest.raises(ValueError, match="waypoints"):
+        make_trajectory(living, 0.2, 10, waypoints=np.zeros((3, 3)))
+
+
 def _headings(poses: np.ndarray) -> np.ndarray:
     fwd = poses[:, :3, 2]
     return np.unwrap(np.arctan2(fwd[:, 1], fwd[:, 0]))
@@ -309,6 +340,10 @@ def test_generate_dataset_layout_and_resume(tmp_path):
     m = read_map(ev / "scene.ply")
     assert m.is_mesh and id_of("bed") in m.labels
     np.testing.assert_allclose(read_sequence(ev / "h020").poses[:, 2, 3], 0.2, atol=1e-6)
+    # the lower camera sets off along the upper route (its first waypoint, snapped to free space)
+    scene = generate_scene("bedroom", 2)
+    start = route_waypoints(scene, 1.6, seed=2, kind="upper")[0]
+    assert np.linalg.norm(read_sequence(ev / "lower").poses[0, :2, 3] - start) < 0.3
     assert len(res["written"]) == 7
     again = generate_dataset(tmp_path, **kw)
     assert again["written"] == [] and len(again["skipped"]) == 7

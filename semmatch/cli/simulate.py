@@ -97,6 +97,8 @@ def register(sub) -> None:
     d.add_argument("--sweep", type=float, nargs="*", default=None,
                    help="height-sweep heights (m); default 0.2 .. 1.6; give none to skip")
     d.add_argument("--jobs", type=int, default=1, help="scenes written in parallel (worker processes)")
+    d.add_argument("--own-routes", action="store_true",
+                   help="the lower camera plans its own tour instead of following the upper route")
     p.set_defaults(func=run)
 
 
@@ -113,7 +115,7 @@ def run(args) -> int:
             args.dataset, train_seeds=args.train_seeds, eval_seeds=args.eval_seeds, kinds=args.kinds,
             n_frames_upper=args.frames, n_frames_lower=args.frames_lower or args.frames,
             heights_sweep=sweep, n_frames_sweep=args.frames_sweep, tilt_deg=args.tilt, noise=noise,
-            intrinsics=intr, progress=progress, jobs=args.jobs,
+            intrinsics=intr, progress=progress, jobs=args.jobs, shared_route=not args.own_routes,
         )
         print(f"{args.dataset}: wrote {len(res['written'])}, skipped {len(res['skipped'])} complete item(s)")
         return 0

@@ -22,6 +22,7 @@ from .trajectory import (
     limit_turn_rate,
     make_sweep_trajectories,
     make_trajectory,
+    route_waypoints,
     scene_levels,
 )
 
@@ -38,6 +39,7 @@ __all__ = [
     "free_space",
     "scene_levels",
     "make_trajectory",
+    "route_waypoints",
     "limit_turn_rate",
     "make_sweep_trajectories",
     "camera_elevation_deg",

@@ -32,7 +32,7 @@ from .noise import NoiseConfig, estimated_poses, exposure_gains, noisy_depth, no
 from .procedural import SCENE_KINDS, generate_scene
 from .render import Renderer
 from .scene import Scene
-from .trajectory import make_sweep_trajectories, make_trajectory
+from .trajectory import make_sweep_trajectories, make_trajectory, route_waypoints
 
 __all__ = ["simulate_sequence", "generate_dataset", "sweep_name", "DEFAULT_SWEEP"]
 
@@ -207,9 +207,13 @@ def _write_scene(root: Path, o: dict, split: str, seed: int, kind: str,
     if not pending and not sweep:
         return written, skipped
     renderer = Renderer(scene, intrinsics)
+    # the robot (lower) follows the person's (upper) route: the upper map covers its view
+    route = (route_waypoints(scene, o["upper_height"], seed=seed, kind="upper")
+             if o["shared_route"] and any(t[3] == "lower" for t in pending) else None)
     for name, height, n, tkind, cfg in pending:
         _drop_partials(sdir, name)
-        poses = make_trajectory(scene, height, n, tilt_deg=tilt_deg, seed=seed, kind=tkind)
+        poses = make_trajectory(scene, height, n, tilt_deg=tilt_deg, seed=seed, kind=tkind,
+                                waypoints=route if tkind == "lower" else None)
         simulate_sequence(scene, poses, sdir / name, intrinsics=intrinsics, noise=cfg, overwrite=True,
                           progress=progress, renderer=renderer,
                           meta={"trajectory": name, "seed": seed, "tilt_deg": tilt_deg})
@@ -242,6 +246,7 @@ def generate_dataset(
     intrinsics: Intrinsics = DEFAULT_INTRINSICS,
     progress: bool = True,
     jobs: int = 1,
+    shared_route: bool = True,
 ) -> dict:
     """Write the generated data layout of DESIGN.md §3 (resumable).
 
@@ -249,7 +254,7 @@ def generate_dataset(
 
         <root>/<split>/<scene_id>/scene.ply         GT semantic mesh (split: train | eval)
         <root>/<split>/<scene_id>/upper/            sequence at ``upper_height``
-        <root>/eval/<scene_id>/lower/               sequence at ``lower_height`` (another path)
+        <root>/eval/<scene_id>/lower/               sequence at ``lower_height`` (the upper route)
         <root>/eval/<scene_id>/h020 .. h160/        height sweep: one path at every height
         <root>/eval/<scene_id>/upper_noisy/, lower_noisy/   with ``noise``: the same paths,
                                                     sensor noise and estimated poses
@@ -280,6 +285,11 @@ def generate_dataset(
     jobs : int
         Scenes written in parallel by this many worker processes (each renders on one
         thread); the output does not depend on it.
+    shared_route : bool
+        The lower camera visits the waypoints of the upper route (planned in its own free
+        space, with its own sweep), as a robot following the person who mapped the room;
+        False: each height plans its own tour (the two may cover different parts of a large
+        scene, and the lower view then sees much the upper map lacks).
 
     Returns
     -------
@@ -313,7 +323,7 @@ def generate_dataset(
     opts = dict(n_train=n_train, n_frames_upper=int(n_frames_upper), n_frames_lower=int(n_frames_lower),
                 heights_sweep=tuple(heights_sweep or ()), n_frames_sweep=int(n_frames_sweep),
                 upper_height=upper_height, lower_height=lower_height, tilt_deg=tilt_deg, noise=noise,
-                intrinsics=intrinsics)
+                intrinsics=intrinsics, shared_route=bool(shared_route))
     jobs = max(1, min(int(jobs), len(todo)))
     if jobs == 1:
         results = (_write_scene(root, opts, *job, progress=progress) for job in todo)
@@ -339,7 +349,7 @@ def generate_dataset(
         "params": {"n_frames_upper": n_frames_upper, "n_frames_lower": n_frames_lower,
                    "n_frames_train": n_train, "heights_sweep": list(heights_sweep or []),
                    "n_frames_sweep": n_frames_sweep, "upper_height": upper_height,
-                   "lower_height": lower_height, "tilt_deg": tilt_deg,
+                   "lower_height": lower_height, "tilt_deg": tilt_deg, "shared_route": bool(shared_route),
                    "noise": noise.to_dict() if noise is not None else None,
                    "intrinsics": intrinsics.to_dict()},
     })

@@ -6,9 +6,15 @@ obstacle (anything but floor and ceiling) lies within ``margin`` of it between t
 and ``h + 0.1`` m, the cell is inside the scene (a ray down or up hits the mesh) and the ceiling
 is above the camera. The path visits waypoints spread over the free space (farthest-point
 sampling), joins them by least-cost grid paths that keep away from obstacles
-(:class:`skimage.graph.MCP_Geometric`), is smoothed and resampled to ``n_frames``. The
-camera looks along the path with a slow side-to-side sweep and tilts periodically by
-``±tilt_deg`` (paper §4.2).
+(:class:`skimage.graph.MCP_Geometric`), is smoothed and resampled to ``n_frames``. A tour
+shorter than the frames allow is walked there and back (the way back sees what the way out
+turned its back on). The camera looks along the path with a slow side-to-side sweep and tilts
+periodically by ``±tilt_deg`` (paper §4.2).
+
+Two carriers can share a route: :func:`route_waypoints` gives the waypoints a trajectory of
+one kind visits, and ``make_trajectory(..., waypoints=...)`` flies them at another height (the
+robot follows the person's route through the room, so that the upper map covers what the
+lower camera sees).
 """
 
 from __future__ import annotations
@@ -27,6 +33,7 @@ __all__ = [
     "free_space",
     "limit_turn_rate",
     "TRAJECTORY_VERSION",
+    "route_waypoints",
     "make_trajectory",
     "make_sweep_trajectories",
     "camera_elevation_deg",
@@ -35,8 +42,9 @@ __all__ = [
 _FLOOR, _CEILING = id_of("floor"), id_of("ceiling")
 
 #: bumped whenever :func:`make_trajectory` returns other poses for the same arguments (caches of
-#: rendered views key on it); 2: heading turn rate limited (``max_turn_deg``)
-TRAJECTORY_VERSION = 2
+#: rendered views key on it); 2: heading turn rate limited (``max_turn_deg``); 3: short tours
+#: walked there and back
+TRAJECTORY_VERSION = 3
 
 
 @dataclass
@@ -246,6 +254,61 @@ def _waypoints(fs: FreeSpace, rng: np.random.Generator, spacing: float) -> np.nd
     return pts[order]
 
 
+def _snap_to_free(fs: FreeSpace, xy: np.ndarray) -> np.ndarray:
+    """The free cells ``(row, col)`` nearest to world points ``xy`` (N,2) (consecutive repeats dropped)."""
+    from scipy import ndimage
+
+    _d, (ri, ci) = ndimage.distance_transform_edt(~fs.free, return_indices=True)
+    rc = np.clip(fs.cell_of(xy), 0, np.array(fs.free.shape) - 1)
+    cells = np.stack([ri[rc[:, 0], rc[:, 1]], ci[rc[:, 0], rc[:, 1]]], axis=1)
+    keep = np.concatenate([[True], (np.diff(cells, axis=0) != 0).any(axis=1)])
+    return cells[keep]
+
+
+def _rng(seed: int, kind: str) -> np.random.Generator:
+    return np.random.default_rng([int(seed), _kind_seed(kind)])
+
+
+def route_waypoints(
+    scene: Scene,
+    height: float,
+    *,
+    seed: int = 0,
+    kind: str = "upper",
+    margin: float = 0.3,
+    spacing: float = 1.2,
+    free: FreeSpace | None = None,
+) -> np.ndarray:
+    """The waypoints, in visiting order, of the trajectory :func:`make_trajectory` plans.
+
+    Parameters
+    ----------
+    scene : Scene
+    height : float
+        Camera height (m) whose free space the route is planned in.
+    seed, kind, margin, spacing, free
+        As for :func:`make_trajectory`.
+
+    Returns
+    -------
+    ndarray (K, 2)
+        World ``(x, y)`` of the waypoints. ``make_trajectory(scene, other_height, n,
+        waypoints=route_waypoints(scene, height, ...))`` flies the same route at another height.
+    """
+    fs = free or free_space(scene, height, margin=margin)
+    return fs.xy_of(_waypoints(fs, _rng(seed, kind), spacing))
+
+
+def _there_and_back(path: np.ndarray, length: float) -> np.ndarray:
+    """``path`` followed by its reverse, up to a total length of ``length`` (m) (at least ``path``)."""
+    seg = np.linalg.norm(np.diff(path, axis=0), axis=1)
+    if len(path) < 2 or seg.sum() >= length:
+        return path
+    both = np.concatenate([path, path[-2::-1]])
+    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(both, axis=0), axis=1))])
+    return both[: max(len(path), int((s <= length).sum()))]
+
+
 def _grid_path(fs: FreeSpace, waypoints: np.ndarray) -> np.ndarray:
     from skimage.graph import MCP_Geometric
 
@@ -310,6 +373,8 @@ def make_trajectory(
     free: FreeSpace | None = None,
     max_step: float | None = 0.15,
     max_turn_deg: float | None = 30.0,
+    waypoints: np.ndarray | None = None,
+    there_and_back: bool = True,
 ) -> np.ndarray:
     """A smooth, collision-free camera trajectory at ``height`` above the floor.
 
@@ -343,10 +408,18 @@ def make_trajectory(
         Largest camera step between frames (m): when the tour is longer than
         ``(n_frames - 1) * max_step`` only its first part is flown. None = no limit (the
         whole tour, however few the frames).
+        A shorter tour is walked there and back (see ``there_and_back``).
     max_turn_deg : float, optional
         Largest change of heading between consecutive frames (degrees): where the path
         doubles back the camera turns at this rate instead of flipping round in one frame
         (which no RGB-D odometry could follow). None = no limit.
+    waypoints : ndarray (K, 2), optional
+        World ``(x, y)`` points to visit in this order instead of the kind's own tour, e.g.
+        :func:`route_waypoints` of another height (each is moved to the nearest free cell of
+        this height). The side-to-side sweep still depends on ``seed`` and ``kind``.
+    there_and_back : bool
+        With ``max_step``, a tour shorter than ``(n_frames - 1) * max_step`` continues back
+        along itself up to that length (a small room is otherwise seen only facing one way).
 
     Returns
     -------
@@ -375,13 +448,20 @@ def make_trajectory(
                 f"scene {scene.name!r}: camera height {height:.2f} m is above the ceiling "
                 f"({ceiling - fs.floor_z:.2f} m above the floor)"
             )
-    rng = np.random.default_rng([int(seed), _kind_seed(kind)])
+    rng = _rng(seed, kind)
     wp = _waypoints(fs, rng, spacing)
+    if waypoints is not None:
+        waypoints = np.asarray(waypoints, dtype=np.float64)
+        if waypoints.ndim != 2 or waypoints.shape[1] != 2 or len(waypoints) == 0 or not np.isfinite(waypoints).all():
+            raise ValueError(f"waypoints must be finite world (x, y) points (K, 2), got shape {waypoints.shape}")
+        wp = _snap_to_free(fs, waypoints)
     path = fs.xy_of(_grid_path(fs, wp))
     path = _smooth_path(fs, path, margin)
     if len(path) < 2:
         path = np.concatenate([path, path])
     if max_step is not None and n_frames > 1:
+        if there_and_back:
+            path = _there_and_back(path, max_step * (n_frames - 1))
         seg = np.linalg.norm(np.diff(path, axis=0), axis=1)
         keep = np.concatenate([[0.0], np.cumsum(seg)]) <= max_step * (n_frames - 1)
         path = path[: max(2, int(keep.sum()))]
