@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from semmatch.geometry import DEFAULT_INTRINSICS
-from semmatch.io import SemanticMap, SequenceWriter, read_image, write_map
+from semmatch.io import SemanticMap, SequenceWriter, read_image, read_sequence, write_map
 from semmatch.transfer import (
     METHODS,
     MapIndex,
@@ -276,6 +276,27 @@ def test_transfer_sequence_jobs(seq_and_map, gt_map):
         gt = read_image(root / "lower" / "labels" / f"{i:06d}.png")
         assert (a == b).all() and _acc(a, gt)[0] > 0.95
     assert not list(root.glob(".lab*"))  # no temporary folders left
+
+
+def test_transfer_sequence_other_poses(seq_and_map, gt_map):
+    # poses= replaces the folder's poses, in this process and in workers alike
+    root = seq_and_map
+    idx = MapIndex(gt_map, **FAST)
+    seq = read_sequence(root / "lower")
+    shifted = seq.poses.copy()
+    shifted[:, 0, 3] += 0.3  # 30 cm off: labels land on the wrong surfaces
+    same = transfer_sequence("3d-neighborhood", seq, idx, root / "p0", poses=seq.poses, progress=False)
+    one = transfer_sequence("3d-neighborhood", seq, idx, root / "p1", poses=shifted, progress=False)
+    two = transfer_sequence("3d-neighborhood", root / "lower", idx, root / "p2", poses=shifted, jobs=2,
+                            progress=False)
+    assert same["frames"] == one["frames"] == two["frames"] == 3
+    for i in range(3):
+        gt = read_image(root / "lower" / "labels" / f"{i:06d}.png")
+        a, b = read_image(root / "p1" / f"{i:06d}.png"), read_image(root / "p2" / f"{i:06d}.png")
+        assert (a == b).all()
+        assert _acc(read_image(root / "p0" / f"{i:06d}.png"), gt)[0] > 0.95 > _acc(a, gt)[0]
+    with pytest.raises(ValueError, match="poses must have shape"):
+        transfer_sequence("3d-neighborhood", seq, idx, root / "p3", poses=shifted[:2], progress=False)
 
 
 def test_cli_transfer(seq_and_map, capsys):

@@ -90,6 +90,7 @@ def evaluate_real_like(
     voxel_size: float = 0.04,
     eval_voxel_size: float = 0.05,
     include_ground_truth: bool = True,
+    jobs: int = 1,
     progress: bool = True,
 ) -> tuple[pd.DataFrame, pd.DataFrame]:
     """Run the whole real-like chain for every evaluation scene and score it.
@@ -99,6 +100,18 @@ def evaluate_real_like(
     the noisy lower frames by each method from each upper map, and by each network directly;
     fuse each with the estimated lower poses; compare with the reference (the noisy lower
     frames fused with ground-truth labels at the estimated poses).
+
+    Parameters
+    ----------
+    data_root : path
+    methods, networks : sequences of str
+    voxel_size, eval_voxel_size : float
+        Fusion and evaluation voxel sizes (m).
+    include_ground_truth : bool
+        Also transfer from a ground-truth upper map (fused from the noisy upper frames).
+    jobs : int
+        Worker processes for the label transfer.
+    progress : bool
 
     Returns
     -------
@@ -154,6 +167,7 @@ def evaluate_real_like(
             index = prepare(upper_map)
             for method in methods:
                 lab_dir = work / f"lower_labels_{source}" / method
-                transfer_sequence(method, seqs["lower"], index, lab_dir, progress=False)
+                transfer_sequence(method, seqs["lower"].path, index, lab_dir, poses=seqs["lower"].poses,
+                                  jobs=jobs, progress=False)
                 score(reconstruct(seqs["lower"], lab_dir, voxel_size), model_name(source), method)
     return pd.DataFrame(rows), pd.DataFrame(traj_rows)

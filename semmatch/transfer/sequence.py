@@ -5,12 +5,13 @@ from __future__ import annotations
 import os
 from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 from tqdm import tqdm
 
-from ..io import SemanticMap, read_sequence, write_labels_folder
+from ..io import SemanticMap, SequenceReader, read_sequence, write_labels_folder
 from .index import MapIndex, prepare
 from .registry import ALL_METHODS, check_params, transfer_frame
 
@@ -30,13 +31,19 @@ def _frame_params(params: dict, i: int) -> dict:
     return params
 
 
-def _init_worker(index: MapIndex, seq_path, method: str, params: dict) -> None:
-    _WORKER.update(index=index, seq=read_sequence(seq_path), method=method, params=params)
+def _frame(frames, poses: np.ndarray | None, i: int):
+    """Frame ``i``, carrying ``poses[i]`` when other poses are given."""
+    f = frames[i]
+    return f if poses is None else replace(f, pose=np.array(poses[i], dtype=np.float64))
+
+
+def _init_worker(index: MapIndex, seq_path, method: str, params: dict, poses) -> None:
+    _WORKER.update(index=index, seq=read_sequence(seq_path), method=method, params=params, poses=poses)
 
 
 def _run_one(i: int):
     w = _WORKER
-    r = transfer_frame(w["method"], w["seq"][i], w["index"], **_frame_params(w["params"], i))
+    r = transfer_frame(w["method"], _frame(w["seq"], w["poses"], i), w["index"], **_frame_params(w["params"], i))
     return i, r.labels, r.coverage, r.seconds
 
 
@@ -49,6 +56,7 @@ def transfer_sequence(
     jobs: int = 1,
     progress: bool = True,
     max_distance: float | None = None,
+    poses: np.ndarray | None = None,
     **params,
 ) -> dict:
     """Transfer labels into every frame of a sequence and write a labels folder.
@@ -66,11 +74,15 @@ def transfer_sequence(
         complete (:func:`semmatch.io.write_labels_folder`), so an interrupted run leaves no
         partial folder.
     jobs : int
-        Worker processes (needs a sequence folder; 1 = in this process).
+        Worker processes (for a sequence folder or :class:`~semmatch.io.SequenceReader`;
+        other sequences, and 1, run in this process).
     progress : bool
         Show a tqdm progress bar.
     max_distance : float, optional
         Distance threshold (see :func:`~semmatch.transfer.transfer_frame`).
+    poses : ndarray (N,4,4), optional
+        ``T_world_camera`` poses to use instead of the sequence's own, e.g. poses estimated
+        by RGB-D odometry for a recording whose ``poses.txt`` drifts.
     **params
         Method parameters. For ``fused``, ``probs`` may be a folder of per-frame
         ``000000.npy ...`` arrays (H,W,C) (e.g. written by ``semmatch predict``).
@@ -92,10 +104,16 @@ def transfer_sequence(
         frames: Sequence = read_sequence(seq_path)
     else:
         frames = sequence
-        seq_path = getattr(sequence, "path", None)
+        # workers re-open the folder: only a plain reader of one reads the same frames and poses
+        if type(sequence) is SequenceReader and sequence.labels_dir == sequence.path / "labels":
+            seq_path = sequence.path
     n = len(frames)
     if n == 0:
         raise ValueError("the sequence has no frames")
+    if poses is not None:
+        poses = np.asarray(poses, dtype=np.float64)
+        if poses.shape != (n, 4, 4):
+            raise ValueError(f"{seq_path or 'sequence'}: poses must have shape ({n}, 4, 4), got {poses.shape}")
     index = prepare(semantic_map, max_distance=max_distance)
     labels: list = [None] * n
     cov = np.zeros(n)
@@ -103,14 +121,14 @@ def transfer_sequence(
     bar = tqdm(total=n, desc=f"transfer {method}", disable=not progress, unit="frame")
     if int(jobs) > 1 and seq_path is not None:
         with ProcessPoolExecutor(
-            max_workers=int(jobs), initializer=_init_worker, initargs=(index, seq_path, method, params)
+            max_workers=int(jobs), initializer=_init_worker, initargs=(index, seq_path, method, params, poses)
         ) as ex:
             for i, lab, c, s in ex.map(_run_one, range(n), chunksize=max(1, n // (4 * int(jobs)))):
                 labels[i], cov[i], secs[i] = lab, c, s
                 bar.update()
     else:
         for i in range(n):
-            r = transfer_frame(method, frames[i], index, **_frame_params(params, i))
+            r = transfer_frame(method, _frame(frames, poses, i), index, **_frame_params(params, i))
             labels[i], cov[i], secs[i] = r.labels, r.coverage, r.seconds
             bar.update()
     bar.close()
