@@ -55,6 +55,7 @@ def estimate_poses(
     robust: bool = True,
     max_step: float = 0.5,
     prior: np.ndarray | None = None,
+    prior_tolerance: tuple[float, float] | None = (0.1, 10.0),
     init_pose: np.ndarray | None = None,
     depth_max: float = 5.0,
     pose_graph: bool = True,
@@ -87,6 +88,11 @@ def estimate_poses(
         Rough poses from another sensor (wheel odometry, IMU, a simulated noisy estimate): their
         frame-to-frame motions seed the tracker, which then refines them with RGB-D data. Needed
         when the camera turns faster than RGB-D odometry converges (tens of degrees per frame).
+    prior_tolerance : (metres, degrees) or None
+        With a prior: a frame-to-frame motion that differs from the prior's by more than this
+        translation or rotation is rejected as a false convergence (a repetitive or planar
+        view can pull the tracker half a metre off); when every candidate is rejected the
+        prior's motion is used. None: the prior only seeds the tracker.
     init_pose : (4, 4), optional
         Pose of the first frame (default identity).
     depth_max : float
@@ -116,8 +122,8 @@ def estimate_poses(
     Warns
     -----
     UserWarning
-        Frames for which no residual converged to a plausible motion (their motion is
-        extrapolated); the message lists them.
+        Frames for which no residual converged to a plausible motion (their motion is the
+        prior's, or extrapolated without a prior); the message lists them.
     """
     import open3d as o3d
     import open3d.core as o3c
@@ -173,8 +179,10 @@ def estimate_poses(
                 # candidate with the smaller photometric + depth misfit wins
                 cands = [odo_method] + [m for m in candidates if m != odo_method]
                 inits = [motion]
+                prior_motion = None
                 if prior is not None:
-                    inits = [np.linalg.inv(prior[i - 1]) @ prior[i]] + inits
+                    prior_motion = np.linalg.inv(prior[i - 1]) @ prior[i]
+                    inits = [prior_motion] + inits
                 best, best_cost = None, np.inf
                 for init in inits + [np.eye(4)]:
                     if best is not None:
@@ -190,12 +198,15 @@ def estimate_poses(
                         Tm = res.transformation.cpu().numpy()
                         if not _plausible(Tm, max_step):
                             continue
+                        if (prior_motion is not None and prior_tolerance is not None
+                                and not _agrees(Tm, prior_motion, *prior_tolerance)):
+                            continue
                         cost = _misfit(f, prev_frame, Tm, depth_max) if robust else 0.0
                         if cost < best_cost:
                             best, best_cost = Tm, cost
-                if best is None:  # tracking lost: keep the previous motion (constant velocity)
+                if best is None:  # tracking lost: the prior's motion, else constant velocity
                     lost.append(getattr(f, "index", i))
-                    best = motion
+                    best = motion if prior_motion is None else prior_motion
                 motion = best  # T_prev_cur
                 T = T @ motion
             prev, prev_frame = rgbd, f
@@ -207,7 +218,8 @@ def estimate_poses(
 
         warnings.warn(
             f"{name}: RGB-D odometry found no solution for {len(lost)} frame(s) (first: {lost[:5]}); "
-            "their motion was extrapolated from the previous frame",
+            + ("their motion was taken from the prior" if prior is not None
+               else "their motion was extrapolated from the previous frame"),
             UserWarning,
             stacklevel=2,
         )
@@ -419,6 +431,12 @@ def _plausible(T: np.ndarray, max_step: float) -> bool:
         return False
     angle = np.arccos(np.clip((np.trace(T[:3, :3]) - 1) / 2, -1.0, 1.0))
     return bool(np.linalg.norm(T[:3, 3]) <= max_step and angle <= np.radians(90.0))
+
+
+def _agrees(T: np.ndarray, ref: np.ndarray, max_t: float, max_deg: float) -> bool:
+    """True when motions ``T`` and ``ref`` (4,4) differ by at most ``max_t`` m and ``max_deg`` degrees."""
+    D = np.linalg.inv(ref) @ T
+    return bool(np.linalg.norm(D[:3, 3]) <= max_t and _rotation_deg(D[:3, :3]) <= max_deg)
 
 
 def _misfit(cur: Frame, prev: Frame, T_prev_cur: np.ndarray, depth_max: float, stride: int = 4) -> float:

@@ -84,6 +84,23 @@ def test_estimate_poses_tracks_a_rendered_camera():
         estimate_poses(bad)
 
 
+def test_prior_tolerance_rejects_motions_far_from_the_prior():
+    frames, gt = rendered_slide(160, 120, n=6)
+    prior = gt.copy()
+    prior[4:, 0, 3] += 0.5  # the prior claims a 50 cm jump between frames 3 and 4 (truth: 3 cm)
+    free = estimate_poses(frames, init_pose=gt[0], prior=prior, prior_tolerance=None, pose_graph=False)
+    with pytest.warns(UserWarning, match=r"1 frame\(s\) \(first: \[4\]\); their motion was taken from the prior"):
+        gated = estimate_poses(frames, init_pose=gt[0], prior=prior, pose_graph=False)
+    step = lambda P: np.linalg.inv(P[3]) @ P[4]  # noqa: E731
+    # ungated, the tracker started at the prior's jump settles > 10 cm away from it and is kept;
+    # gated, that motion is rejected and the prior's is used
+    assert np.linalg.norm(step(free)[:3, 3] - step(prior)[:3, 3]) > 0.1
+    np.testing.assert_allclose(step(gated), step(prior), atol=1e-9)
+    # where the prior agrees with the images, no motion is rejected and both track the truth
+    for est in (free, gated):
+        assert np.abs(est[:4, :3, 3] - gt[:4, :3, 3]).max() < 0.01
+
+
 def test_tracking_on_shrunk_frames():
     frames, gt = rendered_slide(320, 240)
     intr = frames[0].intrinsics

@@ -61,9 +61,10 @@ def estimate_or_load_poses(seq_dir: Path, out: Path, *, progress: bool = True) -
     """Estimated poses of a noisy sequence (cached in ``out``) and its true poses.
 
     The poses are :func:`semmatch.odometry.estimate_poses` with the pose graph on, tracked on
-    frames shrunk by :data:`ODOMETRY_DOWNSAMPLE`; the cache file name of
-    :func:`evaluate_real_like` (``*_estimated_posegraph_ds2.txt``) names both, so that caches
-    of other settings are not reused.
+    frames shrunk by :data:`ODOMETRY_DOWNSAMPLE`, frame-to-frame motions gated by the recorded
+    (prior) motions; the cache file name of :func:`evaluate_real_like`
+    (``*_estimated_posegraph_ds2_gated.txt``) names these, so that caches of other settings
+    are not reused.
 
     Returns
     -------
@@ -139,7 +140,7 @@ def evaluate_real_like(
         work.mkdir(parents=True, exist_ok=True)
         seqs = {}
         for name in ("upper", "lower"):
-            cache = work / f"{name}_estimated_posegraph_ds{ODOMETRY_DOWNSAMPLE}.txt"
+            cache = work / f"{name}_estimated_posegraph_ds{ODOMETRY_DOWNSAMPLE}_gated.txt"
             est, true = estimate_or_load_poses(sd / f"{name}_noisy", cache, progress=progress)
             noisy = read_sequence(sd / f"{name}_noisy")
             for what, poses in (("recorded (drifting prior)", noisy.poses), ("estimated (RGB-D odometry)", est)):
