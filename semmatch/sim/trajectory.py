@@ -299,16 +299,6 @@ def route_waypoints(
     return fs.xy_of(_waypoints(fs, _rng(seed, kind), spacing))
 
 
-def _there_and_back(path: np.ndarray, length: float) -> np.ndarray:
-    """``path`` followed by its reverse, up to a total length of ``length`` (m) (at least ``path``)."""
-    seg = np.linalg.norm(np.diff(path, axis=0), axis=1)
-    if len(path) < 2 or seg.sum() >= length:
-        return path
-    both = np.concatenate([path, path[-2::-1]])
-    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(both, axis=0), axis=1))])
-    return both[: max(len(path), int((s <= length).sum()))]
-
-
 def _grid_path(fs: FreeSpace, waypoints: np.ndarray) -> np.ndarray:
     from skimage.graph import MCP_Geometric
 
@@ -449,7 +439,7 @@ def make_trajectory(
                 f"({ceiling - fs.floor_z:.2f} m above the floor)"
             )
     rng = _rng(seed, kind)
-    wp = _waypoints(fs, rng, spacing)
+    wp = _waypoints(fs, rng, spacing)  # drawn even when replaced: the sweep phase below stays the same
     if waypoints is not None:
         waypoints = np.asarray(waypoints, dtype=np.float64)
         if waypoints.ndim != 2 or waypoints.shape[1] != 2 or len(waypoints) == 0 or not np.isfinite(waypoints).all():
@@ -460,9 +450,10 @@ def make_trajectory(
     if len(path) < 2:
         path = np.concatenate([path, path])
     if max_step is not None and n_frames > 1:
-        if there_and_back:
-            path = _there_and_back(path, max_step * (n_frames - 1))
         seg = np.linalg.norm(np.diff(path, axis=0), axis=1)
+        if there_and_back and seg.sum() < max_step * (n_frames - 1):  # back along itself, cut below
+            path = np.concatenate([path, path[-2::-1]])
+            seg = np.concatenate([seg, seg[::-1]])
         keep = np.concatenate([[0.0], np.cumsum(seg)]) <= max_step * (n_frames - 1)
         path = path[: max(2, int(keep.sum()))]
     xy, s = _resample(path, n_frames)
