@@ -220,10 +220,12 @@ def test_cli_train_and_bench(tmp_path, capsys):
 
     out = tmp_path / "m.pt"
     assert main(["train", "--profile", "smoke", "--arch", "strong", "--out", str(out), "--steps", "2",
-                 "--width", "64", "--height", "48", "--kinds", "living_room", "--train-seeds", "11",
-                 "--val-seeds", "511", "--quiet"]) == 0
+                 "--width", "64", "--height", "48", "--net-width", "32", "--net-height", "24", "--kinds",
+                 "living_room", "--train-seeds", "11", "--val-seeds", "511", "--quiet"]) == 0
     assert "val mIoU" in capsys.readouterr().out
-    assert load_model(out, arch="strong").config.width == 64
+    assert load_model(out, arch="strong").config.width == 32
+    assert main(["train", "--out", str(out), "--net-width", "32"]) == 2
+    assert "give both --net-width and --net-height" in capsys.readouterr().err
     assert main(["train", "--out", str(out), "--train-seeds", "1001"]) == 2  # overlaps the eval scenes
     assert "overlap" in capsys.readouterr().err
     assert main(["bench", "segment", "--json", "--frames", "1", "--model", str(out)]) == 0
@@ -249,3 +251,31 @@ def test_viewpoint_gap_table_and_figure(trained, tmp_path):
     plot_viewpoint_gap(df, path=tmp_path / "fig3.png")
     plot_training_curves({"tiny": trained}, path=tmp_path / "curves.png")
     assert (tmp_path / "fig3.png").stat().st_size > 1000 and (tmp_path / "curves.png").stat().st_size > 1000
+
+
+def test_network_smaller_than_the_views_sees_whole_frames(views, tmp_path):
+    tr, va = views
+    small = (tr.subset(np.arange(8)), va.subset(np.arange(2)))
+    cfg = _config(tmp_path, net_width=W // 2, net_height=H // 2, zoom=(1.5, 2.0), steps=4, eval_every=4)
+    assert cfg.crop_size == (W // 2, H // 2) and cfg.model_config().width == W // 2
+    net = load_model(train(cfg, views=small))
+    assert (net.config.width, net.config.height) == (W // 2, H // 2)
+    p = net.predict(va.rgb[0])  # view-sized input: resized in, restored out
+    assert p.shape == (H, W, NUM_CLASSES)
+    with pytest.raises(ValueError, match="crop 200x72 must lie within"):
+        _config(tmp_path, crop_width=200, crop_height=72)
+
+
+def test_augment_scales_depth_relative_to_the_prediction_zoom():
+    from semmatch.segment.models import DEPTH_NORM
+    from semmatch.segment.training import augment
+
+    rgb = np.zeros((2, 48, 64, 3), np.uint8)
+    depth = np.full((2, 48, 64), 2.0, np.float32)
+    lab = np.ones((2, 48, 64), np.uint8)
+    for base, want in ((1.0, 4.0), (2.0, 2.0)):
+        x, y = augment(rgb, depth, lab, np.random.default_rng(0), crop=(32, 24), zoom=(2.0, 2.0), jitter=0,
+                       use_depth=True, base_zoom=base)
+        assert x.shape == (2, 4, 24, 32) and y.shape == (2, 24, 32)
+        # a window twice the crop seen at the prediction zoom keeps the measured depth
+        np.testing.assert_allclose(x[:, 3].numpy(), want / DEPTH_NORM, rtol=1e-6)

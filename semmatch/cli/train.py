@@ -21,8 +21,11 @@ def register(sub) -> None:
     p.add_argument("--batch-size", type=int)
     p.add_argument("--lr", type=float)
     p.add_argument("--eval-every", type=int, help="validate every N steps")
-    p.add_argument("--width", type=int, help="render/network width (profile default otherwise)")
-    p.add_argument("--height", type=int, help="render/network height")
+    p.add_argument("--width", type=int, help="render width of the views (profile default otherwise)")
+    p.add_argument("--height", type=int, help="render height of the views")
+    p.add_argument("--net-width", type=int, help="network input width (default: the profile's, else --width); "
+                   "smaller than the views = whole frames at reduced scale")
+    p.add_argument("--net-height", type=int, help="network input height")
     p.add_argument("--kinds", nargs="+", help="scene kinds")
     p.add_argument("--train-seeds", nargs="+", type=int, help="training scene seeds")
     p.add_argument("--val-seeds", nargs="+", type=int, help="validation scene seeds")
@@ -39,14 +42,16 @@ def run(args: argparse.Namespace) -> int:
     """Train and print the checkpoint path and validation scores."""
     from semmatch.segment.training import make_config, train
 
+    for a, b in (("width", "height"), ("net_width", "net_height")):
+        if bool(getattr(args, a)) != bool(getattr(args, b)):
+            raise ValueError(f"give both --{a.replace('_', '-')} and --{b.replace('_', '-')}")
     cfg = make_config(
         args.profile, out=args.out, arch=args.arch, use_depth=args.depth or None, steps=args.steps,
-        batch_size=args.batch_size, lr=args.lr, eval_every=args.eval_every, width=args.width, height=args.height, kinds=args.kinds,
+        batch_size=args.batch_size, lr=args.lr, eval_every=args.eval_every, width=args.width, height=args.height,
+        net_width=args.net_width, net_height=args.net_height, kinds=args.kinds,
         train_seeds=args.train_seeds, val_seeds=args.val_seeds, eval_seeds=args.eval_seeds, seed=args.seed,
         device=args.device, threads=args.threads, cache_dir=args.cache_dir, progress=not args.quiet,
     )
-    if args.width and not args.height or args.height and not args.width:
-        raise ValueError("give both --width and --height")
     path = train(cfg)
     from semmatch.segment import load_model
 

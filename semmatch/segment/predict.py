@@ -76,7 +76,7 @@ class Segmenter:
         if device is None:
             device = "cuda" if torch.cuda.is_available() else "cpu"
         self.device = torch.device(device)
-        self.net = net.to(self.device)
+        self.net = net.to(self.device, memory_format=torch.channels_last)
         self.config = config
         self.info = dict(info or {})
         self.name = name or config.arch
@@ -120,7 +120,7 @@ class Segmenter:
                 dep = F.interpolate(dep, size=net_hw, mode="nearest")
         if dep is not None:
             dep = dep.to(self.device)
-        return normalise_inputs(x, dep), tuple(shape)
+        return normalise_inputs(x, dep).contiguous(memory_format=torch.channels_last), tuple(shape)
 
     @torch.inference_mode()
     def _probs(self, rgbs, depths) -> torch.Tensor:
