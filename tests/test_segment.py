@@ -231,6 +231,10 @@ def test_cli_train_and_bench(tmp_path, capsys):
     assert main(["bench", "segment", "--json", "--frames", "1", "--model", str(out)]) == 0
     res = json.loads(capsys.readouterr().out)
     assert res["networks"]["m"]["fps_320x240"] > 0 and res["networks"]["m"]["fps_640x480"] > 0
+    assert res["networks"]["m"]["flip"] is True and res["networks"]["m"]["input"] == "32x24"
+    assert main(["bench", "segment", "--json", "--frames", "1", "--no-flip"]) == 0
+    res = json.loads(capsys.readouterr().out)
+    assert res["networks"]["compact"]["flip"] is False and res["networks"]["strong"]["input"] == "160x120"
 
 
 def test_viewpoint_gap_table_and_figure(trained, tmp_path):
@@ -279,3 +283,17 @@ def test_augment_scales_depth_relative_to_the_prediction_zoom():
         assert x.shape == (2, 4, 24, 32) and y.shape == (2, 24, 32)
         # a window twice the crop seen at the prediction zoom keeps the measured depth
         np.testing.assert_allclose(x[:, 3].numpy(), want / DEPTH_NORM, rtol=1e-6)
+
+
+def test_flip_average_is_mirror_symmetric_and_sums_to_one(trained, views):
+    rgb = views[1].rgb[0]
+    mirror = rgb[:, ::-1].copy()
+    one = load_model(trained, flip=False)
+    q, qm = one.predict(rgb), one.predict(mirror)
+    assert not np.allclose(qm, q[:, ::-1], atol=1e-4)  # a single pass is not mirror symmetric
+    both = load_model(trained)
+    assert both.flip and not one.flip
+    p, pm = both.predict(rgb), both.predict(mirror)
+    np.testing.assert_allclose(p, 0.5 * (q + qm[:, ::-1]), atol=1e-5)
+    np.testing.assert_allclose(pm, p[:, ::-1], atol=1e-5)
+    np.testing.assert_allclose(p.sum(-1), 1.0, atol=1e-5)
