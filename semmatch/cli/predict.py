@@ -19,11 +19,13 @@ def register(sub) -> None:
     p.add_argument("--probs", action="store_true", help="also write probabilities to OUT/probs/*.npy (float16)")
     p.add_argument("--seed", type=int, default=0, help="seed of the noisy oracle")
     p.add_argument("--device", choices=("auto", "cpu", "cuda"), default="auto")
+    p.add_argument("--no-flip", action="store_true",
+                   help="one network pass (default: average with the mirror image, twice the time)")
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(func=run)
 
 
-def make_segmenter(spec: str, *, seed: int = 0, device: str = "auto"):
+def make_segmenter(spec: str, *, seed: int = 0, device: str = "auto", flip: bool = True):
     """A segmenter from a ``--model`` value: checkpoint path, ``oracle`` or ``noisy:RATE``."""
     from semmatch.segment.oracle import NoisyOracle, OracleSegmenter
 
@@ -37,7 +39,7 @@ def make_segmenter(spec: str, *, seed: int = 0, device: str = "auto"):
         return NoisyOracle(rate, seed=seed)
     from semmatch.segment import load_model
 
-    return load_model(spec, device=None if device == "auto" else device)
+    return load_model(spec, device=None if device == "auto" else device, flip=flip)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -46,7 +48,7 @@ def run(args: argparse.Namespace) -> int:
     from semmatch.segment import predict_sequence
 
     seq = read_sequence(args.sequence)
-    model = make_segmenter(args.model, seed=args.seed, device=args.device)
+    model = make_segmenter(args.model, seed=args.seed, device=args.device, flip=not args.no_flip)
     out = predict_sequence(model, seq, args.out, probs=args.probs, progress=not args.quiet)
     print(f"{out}: {len(seq)} label images from {getattr(model, 'name', args.model)}")
     return 0

@@ -10,6 +10,11 @@ Input conventions (documented conversions, everything else is a ``ValueError``):
 - An image of another size than the network's is resized to it (area interpolation; depth
   nearest) and the probabilities are restored to the input size (bilinear interpolation of
   the probabilities, which keeps them summing to 1).
+
+By default a prediction averages the probabilities of the image and of its mirror image
+(horizontal-flip test-time augmentation, ``flip=True``): on the evaluation scenes at 1.6 m it
+raised the compact network's mIoU from 0.691 to 0.709 (strong 0.677 -> 0.686) for twice the
+network time. ``flip=False`` gives the single pass (used for validation during training).
 """
 
 from __future__ import annotations
@@ -69,10 +74,13 @@ class Segmenter:
     info : dict, optional
         Checkpoint metadata (``metrics``, ``history``, ``train_config``...).
     name : str, optional
+    flip : bool
+        Average the probabilities of the image and of its mirror image (test-time augmentation;
+        see the module notes). False: one pass.
     """
 
     def __init__(self, net: torch.nn.Module, config: ModelConfig, *, device=None, info: dict | None = None,
-                 name: str | None = None) -> None:
+                 name: str | None = None, flip: bool = True) -> None:
         if device is None:
             device = "cuda" if torch.cuda.is_available() else "cpu"
         self.device = torch.device(device)
@@ -80,6 +88,7 @@ class Segmenter:
         self.config = config
         self.info = dict(info or {})
         self.name = name or config.arch
+        self.flip = bool(flip)
 
     @property
     def metrics(self) -> dict:
@@ -92,7 +101,7 @@ class Segmenter:
         return self.config.use_depth
 
     def __repr__(self) -> str:
-        return f"Segmenter({self.name!r}, arch={self.config.arch}, {self.config.width}x{self.config.height}, depth={self.uses_depth})"
+        return f"Segmenter({self.name!r}, arch={self.config.arch}, {self.config.width}x{self.config.height}, depth={self.uses_depth}, flip={self.flip})"
 
     def _inputs(self, rgbs: np.ndarray, depths) -> tuple[torch.Tensor, tuple[int, int]]:
         rgbs = np.asarray(rgbs)
@@ -126,12 +135,19 @@ class Segmenter:
     def _probs(self, rgbs, depths) -> torch.Tensor:
         """Softmax at the network's resolution, bilinearly restored to the input size.
 
-        Interpolating probabilities (convex weights) keeps them summing to 1; the result is
-        channels-last so that the NumPy ``(N,H,W,C)`` view needs no copy.
+        Interpolating probabilities (convex weights) keeps them summing to 1, and so does the
+        mean over the image and its mirror image (``flip``); the result is channels-last so that
+        the NumPy ``(N,H,W,C)`` view needs no copy.
         """
         x, shape = self._inputs(rgbs, depths)
         self.net.eval()
-        p = torch.softmax(self.net(x).float(), dim=1).contiguous(memory_format=torch.channels_last)
+        n = len(x)
+        if self.flip:
+            x = torch.cat([x, x.flip(-1)])
+        p = torch.softmax(self.net(x).float(), dim=1)
+        if self.flip:
+            p = 0.5 * (p[:n] + p[n:].flip(-1))
+        p = p.contiguous(memory_format=torch.channels_last)
         if tuple(p.shape[-2:]) != shape:
             p = F.interpolate(p, size=shape, mode="bilinear", align_corners=False)
         return p
@@ -187,7 +203,7 @@ def _check_table(found, path: Path) -> None:
         raise ValueError(f"{path}: checkpoint was trained for another category table ({diff}); retrain it")
 
 
-def load_model(checkpoint: str | os.PathLike, *, arch: str | None = None, device=None) -> Segmenter:
+def load_model(checkpoint: str | os.PathLike, *, arch: str | None = None, device=None, flip: bool = True) -> Segmenter:
     """Load a network saved by :func:`semmatch.segment.train`.
 
     Parameters
@@ -198,6 +214,8 @@ def load_model(checkpoint: str | os.PathLike, *, arch: str | None = None, device
         Expected architecture; a checkpoint of another one is refused.
     device : str or torch.device, optional
         Default: CUDA when present, else CPU.
+    flip : bool
+        Average over the image and its mirror image (:class:`Segmenter`; default on).
 
     Returns
     -------
@@ -238,7 +256,7 @@ def load_model(checkpoint: str | os.PathLike, *, arch: str | None = None, device
     except (KeyError, RuntimeError) as e:
         raise ValueError(f"{path}: weights do not fit the {config.arch!r} architecture ({str(e)[:300]})") from None
     info = {k: v for k, v in ckpt.items() if k != "state_dict"}
-    return Segmenter(net, config, device=device, info=info, name=path.stem)
+    return Segmenter(net, config, device=device, info=info, name=path.stem, flip=flip)
 
 
 def predict_sequence(

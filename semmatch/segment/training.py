@@ -393,7 +393,7 @@ def train(config: TrainConfig, *, views: tuple[D.Views, D.Views] | None = None) 
     best: dict | None = None
     best_state = None
     running: list[float] = []
-    seg = Segmenter(net, mc, device=device)
+    seg = Segmenter(net, mc, device=device, flip=False)  # validation measures the single pass
     bar = tqdm(range(config.steps), desc=f"train {config.arch}", disable=not config.progress)
     for step in bar:
         net.train()

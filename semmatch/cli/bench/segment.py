@@ -12,11 +12,13 @@ def register(sub) -> None:
     """Add ``semmatch bench segment``."""
     p = sub.add_parser("segment", help="segmentation networks: frames per second at 320x240 and 640x480")
     p.add_argument("--model", nargs="*", default=[],
-                   help="checkpoints to time (default: untrained compact and strong networks; speed does "
-                        "not depend on the weights)")
+                   help="checkpoints to time (default: untrained compact and strong networks at the full "
+                        "training profile's input size; speed does not depend on the weights)")
     p.add_argument("--frames", type=int, default=20, help="timed frames per size (default 20)")
     p.add_argument("--threads", type=int, help="torch threads (default: torch's choice)")
     p.add_argument("--device", choices=("auto", "cpu", "cuda"), default="cpu")
+    p.add_argument("--no-flip", action="store_true",
+                   help="time one network pass (default: with the mirror-image average, as predictions run)")
     add_json_flag(p)
     p.set_defaults(func=run)
 
@@ -41,8 +43,9 @@ def run(args: argparse.Namespace) -> int:
     import torch
 
     from semmatch.segment import load_model
-    from semmatch.segment.models import ModelConfig, build_network
+    from semmatch.segment.models import build_network
     from semmatch.segment.predict import Segmenter
+    from semmatch.segment.training import make_config
 
     if args.frames < 1:
         raise ValueError("--frames must be >= 1")
@@ -52,19 +55,20 @@ def run(args: argparse.Namespace) -> int:
     nets = {}
     if args.model:
         for path in args.model:
-            seg = load_model(path, device=device)
+            seg = load_model(path, device=device, flip=not args.no_flip)
             nets[seg.name] = seg
     else:
         for arch in ("compact", "strong"):
             torch.manual_seed(0)
-            cfg = ModelConfig(arch=arch, width=320, height=240)
-            nets[arch] = Segmenter(build_network(cfg), cfg, device=device or "cpu")
+            cfg = make_config("full", arch=arch).model_config()
+            nets[arch] = Segmenter(build_network(cfg), cfg, device=device or "cpu", flip=not args.no_flip)
     result = {"networks": {}, "threads": torch.get_num_threads(), "frames": args.frames}
     rows = []
     for name, seg in nets.items():
         r = {f"fps_{w}x{h}": round(time_predict(seg, w, h, args.frames), 2) for w, h in ((320, 240), (640, 480))}
         r["input"] = f"{seg.config.width}x{seg.config.height}"
         r["device"] = str(seg.device)
+        r["flip"] = seg.flip
         result["networks"][name] = r
         rows.append(f"{name:<12} {r['input']:>9} {r['fps_320x240']:>12.1f} {r['fps_640x480']:>12.1f}")
     table = "\n".join([f"{'network':<12} {'runs at':>9} {'FPS 320x240':>12} {'FPS 640x480':>12}", *rows,
