@@ -115,6 +115,23 @@ def test_sequence_round_trip(tmp_path):
         assert np.allclose(f.pose, pose, atol=1e-6)
 
 
+def test_loaded_sequence_matches_reader_and_is_read_only(tmp_path):
+    _write_seq(tmp_path / "seq", n=4)
+    seq = read_sequence(tmp_path / "seq")
+    mem = seq.load()
+    assert len(mem) == 4 and mem.intrinsics == seq.intrinsics and mem.path == seq.path
+    assert np.array_equal(mem.poses, seq.poses)
+    for i in (0, 3, -1):
+        a, b = seq[i], mem[i]
+        assert b.index == a.index and np.array_equal(b.rgb, a.rgb) and np.array_equal(b.depth, a.depth)
+        assert np.array_equal(mem.read_labels(i), seq.read_labels(i)) and np.array_equal(b.pose, a.pose)
+    assert [f.index for f in mem[1:3]] == [1, 2] and [f.index for f in mem] == [0, 1, 2, 3]
+    with pytest.raises(ValueError, match="read-only"):
+        mem[0].depth[0, 0] = 1.0
+    with pytest.raises(IndexError, match="out of range"):
+        mem[4]
+
+
 def test_sequence_writer_refuses_existing_and_interrupted_leaves_nothing(tmp_path):
     _write_seq(tmp_path / "seq")
     with pytest.raises(FileExistsError, match="already holds another sequence"):

@@ -95,6 +95,10 @@ def test_labels_from_folder_and_outputs(tmp_path, room_frames):
     rgb = read_map(rgb_out, require_labels=False)
     assert (rgb.labels == back.labels).all()  # the label property wins over the RGB colours
     assert len(read_map(pts_out)) > 100
+    # the frames decoded once into memory fuse to the same map (vertex order may differ)
+    mem = reconstruct(read_sequence(seq_dir).load(), labels=tmp_path / "sofa", voxel_size=VS)
+    o_m, o_mem = np.lexsort(m.points.T), np.lexsort(mem.points.T)
+    assert np.allclose(m.points[o_m], mem.points[o_mem]) and (m.labels[o_m] == mem.labels[o_mem]).all()
     with pytest.raises(ValueError, match="5 images for 6 frames"):
         write_labels_folder(tmp_path / "short", [np.zeros(INTR.shape, np.uint8)] * 5)
         reconstruct(read_sequence(seq_dir), labels=tmp_path / "short")

@@ -27,7 +27,7 @@ import numpy as np
 import pandas as pd
 from tqdm.auto import tqdm
 
-from ..io import Frame, SequenceReader, read_sequence, read_tum, write_tum
+from ..io import Frame, InMemorySequence, SequenceReader, read_sequence, read_tum, write_tum
 from .layout import GT, Layout, model_name
 from .synthetic import MEASURE_COLUMNS
 
@@ -37,7 +37,7 @@ __all__ = ["PosedSequence", "estimate_or_load_poses", "evaluate_real_like"]
 class PosedSequence(_SequenceABC):
     """A sequence whose frames carry other poses (e.g. estimated ones) than the recorded ones."""
 
-    def __init__(self, seq: SequenceReader, poses: np.ndarray) -> None:
+    def __init__(self, seq: SequenceReader | InMemorySequence, poses: np.ndarray) -> None:
         if len(poses) != len(seq):
             raise ValueError(f"{seq.path}: {len(poses)} poses for {len(seq)} frames")
         self.seq, self.poses, self.intrinsics, self.path = seq, np.asarray(poses), seq.intrinsics, seq.path
@@ -57,7 +57,8 @@ class PosedSequence(_SequenceABC):
 ODOMETRY_DOWNSAMPLE = 2
 
 
-def estimate_or_load_poses(seq_dir: Path, out: Path, *, progress: bool = True) -> tuple[np.ndarray, np.ndarray]:
+def estimate_or_load_poses(seq_dir: Path, out: Path, *, seq: _SequenceABC | None = None,
+                           progress: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """Estimated poses of a noisy sequence (cached in ``out``) and its true poses.
 
     The poses are :func:`semmatch.odometry.estimate_poses` with the pose graph on, tracked on
@@ -66,13 +67,23 @@ def estimate_or_load_poses(seq_dir: Path, out: Path, *, progress: bool = True) -
     (``*_estimated_posegraph_ds2_gated.txt``) names these, so that caches of other settings
     are not reused.
 
+    Parameters
+    ----------
+    seq_dir : path
+        The noisy sequence folder (with ``poses_gt.txt``).
+    out : path
+        Cache file (TUM format).
+    seq : sequence, optional
+        The frames of ``seq_dir`` when already read (e.g. an :class:`~semmatch.io.InMemorySequence`).
+    progress : bool
+
     Returns
     -------
     estimated, true : ndarray (N,4,4)
     """
     from ..odometry import estimate_poses
 
-    seq = read_sequence(seq_dir)
+    seq = read_sequence(seq_dir) if seq is None else seq
     _, true = read_tum(seq_dir / "poses_gt.txt")
     if out.is_file():
         _, est = read_tum(out)
@@ -141,8 +152,9 @@ def evaluate_real_like(
         seqs = {}
         for name in ("upper", "lower"):
             cache = work / f"{name}_estimated_posegraph_ds{ODOMETRY_DOWNSAMPLE}_gated.txt"
-            est, true = estimate_or_load_poses(sd / f"{name}_noisy", cache, progress=progress)
-            noisy = read_sequence(sd / f"{name}_noisy")
+            # read once: the lower frames are fused once per labels folder (~18 times)
+            noisy = read_sequence(sd / f"{name}_noisy").load()
+            est, true = estimate_or_load_poses(sd / f"{name}_noisy", cache, seq=noisy, progress=progress)
             for what, poses in (("recorded (drifting prior)", noisy.poses), ("estimated (RGB-D odometry)", est)):
                 err = trajectory_errors(poses, true)
                 traj_rows.append(dict(scene=sid, sequence=name, poses=what, **{
