@@ -220,12 +220,14 @@ def test_cli_train_and_bench(tmp_path, capsys):
 
     out = tmp_path / "m.pt"
     assert main(["train", "--profile", "smoke", "--arch", "strong", "--out", str(out), "--steps", "2",
-                 "--width", "64", "--height", "48", "--net-width", "32", "--net-height", "24", "--kinds",
-                 "living_room", "--train-seeds", "11", "--val-seeds", "511", "--quiet"]) == 0
+                 "--width", "64", "--height", "48", "--net-width", "32", "--net-height", "24", "--zoom", "1.5", "2",
+                 "--kinds", "living_room", "--train-seeds", "11", "--val-seeds", "511", "--quiet"]) == 0
     assert "val mIoU" in capsys.readouterr().out
     assert load_model(out, arch="strong").config.width == 32
     assert main(["train", "--out", str(out), "--net-width", "32"]) == 2
     assert "give both --net-width and --net-height" in capsys.readouterr().err
+    assert main(["train", "--out", str(out), "--net-width", "40", "--net-height", "30"]) == 2  # 160x120 views
+    assert "outside the training zoom range" in capsys.readouterr().err
     assert main(["train", "--out", str(out), "--train-seeds", "1001"]) == 2  # overlaps the eval scenes
     assert "overlap" in capsys.readouterr().err
     assert main(["bench", "segment", "--json", "--frames", "1", "--model", str(out)]) == 0
@@ -268,6 +270,10 @@ def test_network_smaller_than_the_views_sees_whole_frames(views, tmp_path):
     assert p.shape == (H, W, NUM_CLASSES)
     with pytest.raises(ValueError, match="crop 200x72 must lie within"):
         _config(tmp_path, crop_width=200, crop_height=72)
+    # views 4x the network, trained at zoom 1.5-2: training never sees the prediction scale
+    with pytest.raises(ValueError, match=r"seen at scale 4 \(width\) when predicting, outside the training zoom"):
+        _config(tmp_path, width=4 * (W // 2), height=4 * (H // 2), net_width=W // 2, net_height=H // 2,
+                zoom=(1.5, 2.0))
 
 
 def test_augment_scales_depth_relative_to_the_prediction_zoom():

@@ -26,6 +26,8 @@ def register(sub) -> None:
     p.add_argument("--net-width", type=int, help="network input width (default: the profile's, else --width); "
                    "smaller than the views = whole frames at reduced scale")
     p.add_argument("--net-height", type=int, help="network input height")
+    p.add_argument("--zoom", nargs=2, type=float, metavar=("LO", "HI"),
+                   help="scale augmentation range; must hold width / net-width (profile default otherwise)")
     p.add_argument("--kinds", nargs="+", help="scene kinds")
     p.add_argument("--train-seeds", nargs="+", type=int, help="training scene seeds")
     p.add_argument("--val-seeds", nargs="+", type=int, help="validation scene seeds")
@@ -48,7 +50,7 @@ def run(args: argparse.Namespace) -> int:
     cfg = make_config(
         args.profile, out=args.out, arch=args.arch, use_depth=args.depth or None, steps=args.steps,
         batch_size=args.batch_size, lr=args.lr, eval_every=args.eval_every, width=args.width, height=args.height,
-        net_width=args.net_width, net_height=args.net_height, kinds=args.kinds,
+        net_width=args.net_width, net_height=args.net_height, zoom=args.zoom, kinds=args.kinds,
         train_seeds=args.train_seeds, val_seeds=args.val_seeds, eval_seeds=args.eval_seeds, seed=args.seed,
         device=args.device, threads=args.threads, cache_dir=args.cache_dir, progress=not args.quiet,
     )

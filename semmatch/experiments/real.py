@@ -180,7 +180,7 @@ def evaluate_real_like(
             index = prepare(upper_map)
             for method in methods:
                 lab_dir = work / f"lower_labels_{source}" / method
-                transfer_sequence(method, seqs["lower"].path, index, lab_dir, poses=seqs["lower"].poses,
+                transfer_sequence(method, seqs["lower"].seq, index, lab_dir, poses=seqs["lower"].poses,
                                   jobs=jobs, progress=False)
                 score(reconstruct(seqs["lower"], lab_dir, voxel_size), model_name(source), method)
     return pd.DataFrame(rows), pd.DataFrame(traj_rows)

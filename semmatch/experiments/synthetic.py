@@ -108,11 +108,11 @@ def transfer_lower_labels(
     rows = []
     for sd in layout.scene_dirs("eval"):
         sid = sd.name
-        lower = read_sequence(sd / "lower")
+        lower = read_sequence(sd / "lower").load()  # 3 sources x 5 methods read every frame
         for source in (GT, *networks):
             index = prepare(read_map(layout.upper_map(sid, source)))
             for method in methods:
-                st = transfer_sequence(method, sd / "lower", index, layout.lower_labels(sid, source, method),
+                st = transfer_sequence(method, lower, index, layout.lower_labels(sid, source, method),
                                        jobs=jobs, progress=progress)
                 rows.append(dict(scene=sid, model=model_name(source), method=method,
                                  coverage=float(st["coverage"]), fps=float(st["fps"])))

@@ -83,12 +83,13 @@ def normalise_inputs(rgb: torch.Tensor, depth: torch.Tensor | None) -> torch.Ten
     """Stack network inputs: ``rgb`` float in [0, 1] (B,3,H,W), ``depth`` metres (B,1,H,W) or None.
 
     RGB is centred on 0 (``x - 0.5``); depth is divided by :data:`DEPTH_NORM` and clipped to
-    [0, 2] (0 = no measurement).
+    [0, 2] (0 = no measurement). The result is channels-last in memory, the layout the networks
+    run in (their depthwise convolutions are ~1.6x faster so on CPU).
     """
     x = rgb - 0.5
     if depth is not None:
         x = torch.cat([x, torch.clamp(depth / DEPTH_NORM, 0.0, 2.0)], dim=1)
-    return x
+    return x.contiguous(memory_format=torch.channels_last)
 
 
 def _conv_bn(cin: int, cout: int, k: int = 3, stride: int = 1, dilation: int = 1, groups: int = 1,

@@ -129,7 +129,7 @@ class Segmenter:
                 dep = F.interpolate(dep, size=net_hw, mode="nearest")
         if dep is not None:
             dep = dep.to(self.device)
-        return normalise_inputs(x, dep).contiguous(memory_format=torch.channels_last), tuple(shape)
+        return normalise_inputs(x, dep), tuple(shape)
 
     @torch.inference_mode()
     def _probs(self, rgbs, depths) -> torch.Tensor:

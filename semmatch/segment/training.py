@@ -147,6 +147,14 @@ class TrainConfig:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
         if not 0 < self.zoom[0] <= self.zoom[1]:
             raise ValueError(f"zoom range must satisfy 0 < lo <= hi, got {self.zoom}")
+        nw, nh = self.net_size
+        for axis, scale in (("width", self.width / nw), ("height", self.height / nh)):
+            if not self.zoom[0] - 1e-6 <= scale <= self.zoom[1] + 1e-6:
+                raise ValueError(
+                    f"views {self.width}x{self.height} on a {nw}x{nh} network are seen at scale {scale:g} "
+                    f"({axis}) when predicting, outside the training zoom range {tuple(self.zoom)}: "
+                    f"set net_width/net_height (--net-width/--net-height) or zoom so that it lies inside"
+                )
         if self.device not in ("auto", "cpu", "cuda"):
             raise ValueError(f"device must be auto, cpu or cuda, got {self.device!r}")
         return self
@@ -288,7 +296,7 @@ def augment(
         d = torch.from_numpy(depth).to(device)[:, None].float()
         d = F.grid_sample(d, grid, mode="nearest", padding_mode="border", align_corners=False)
         dep = d * torch.from_numpy((z / base_zoom).astype(np.float32)).to(device)[:, None, None, None]
-    return normalise_inputs(img, dep).contiguous(memory_format=torch.channels_last), y
+    return normalise_inputs(img, dep), y
 
 
 def evaluate_views(segmenter, views: D.Views, *, batch_size: int = 16) -> dict:

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from ..io import SemanticMap, SequenceReader, read_sequence, write_labels_folder
+from ..io import InMemorySequence, SemanticMap, SequenceReader, read_sequence, write_labels_folder
 from .index import MapIndex, prepare
 from .registry import ALL_METHODS, check_params, transfer_frame
 
@@ -37,8 +37,9 @@ def _frame(frames, poses: np.ndarray | None, i: int):
     return f if poses is None else replace(f, pose=np.array(poses[i], dtype=np.float64))
 
 
-def _init_worker(index: MapIndex, seq_path, method: str, params: dict, poses) -> None:
-    _WORKER.update(index=index, seq=read_sequence(seq_path), method=method, params=params, poses=poses)
+def _init_worker(index: MapIndex, source, method: str, params: dict, poses) -> None:
+    seq = source if isinstance(source, InMemorySequence) else read_sequence(source)
+    _WORKER.update(index=index, seq=seq, method=method, params=params, poses=poses)
 
 
 def _run_one(i: int):
@@ -66,7 +67,9 @@ def transfer_sequence(
     method : str
         A name of :data:`~semmatch.transfer.ALL_METHODS`.
     sequence : path or sequence of Frame
-        A sequence folder (or :class:`~semmatch.io.SequenceReader`, or a list of frames).
+        A sequence folder, a :class:`~semmatch.io.SequenceReader`, an
+        :class:`~semmatch.io.InMemorySequence` (workers share its decoded frames instead of
+        reading the folder again) or a list of frames.
     semantic_map : SemanticMap or MapIndex
         The upper map (indexed once here) or a prebuilt index.
     out_dir : path
@@ -74,8 +77,8 @@ def transfer_sequence(
         complete (:func:`semmatch.io.write_labels_folder`), so an interrupted run leaves no
         partial folder.
     jobs : int
-        Worker processes (for a sequence folder or :class:`~semmatch.io.SequenceReader`;
-        other sequences, and 1, run in this process).
+        Worker processes (for a sequence folder, :class:`~semmatch.io.SequenceReader` or
+        :class:`~semmatch.io.InMemorySequence`; other sequences, and 1, run in this process).
     progress : bool
         Show a tqdm progress bar.
     max_distance : float, optional
@@ -99,14 +102,18 @@ def transfer_sequence(
         raise ValueError(f"jobs must be >= 1, got {jobs}")
     check_params(method, params)
     seq_path = None
+    source = None  # what the workers open: a folder, or frames already in memory
     if isinstance(sequence, (str, os.PathLike)):
         seq_path = Path(sequence)
         frames: Sequence = read_sequence(seq_path)
+        source = seq_path
     else:
         frames = sequence
         # workers re-open the folder: only a plain reader of one reads the same frames and poses
         if type(sequence) is SequenceReader and sequence.labels_dir == sequence.path / "labels":
-            seq_path = sequence.path
+            seq_path = source = sequence.path
+        elif isinstance(sequence, InMemorySequence):
+            seq_path, source = sequence.path, sequence  # forked workers share the frames' memory
     n = len(frames)
     if n == 0:
         raise ValueError("the sequence has no frames")
@@ -119,9 +126,9 @@ def transfer_sequence(
     cov = np.zeros(n)
     secs = np.zeros(n)
     bar = tqdm(total=n, desc=f"transfer {method}", disable=not progress, unit="frame")
-    if int(jobs) > 1 and seq_path is not None:
+    if int(jobs) > 1 and source is not None:
         with ProcessPoolExecutor(
-            max_workers=int(jobs), initializer=_init_worker, initargs=(index, seq_path, method, params, poses)
+            max_workers=int(jobs), initializer=_init_worker, initargs=(index, source, method, params, poses)
         ) as ex:
             for i, lab, c, s in ex.map(_run_one, range(n), chunksize=max(1, n // (4 * int(jobs)))):
                 labels[i], cov[i], secs[i] = lab, c, s
