@@ -24,6 +24,7 @@ from semmatch.sim import (
     make_trajectory,
     route_waypoints,
     simulate_sequence,
+    simulate_sequences,
 )
 
 SMALL = DEFAULT_INTRINSICS.scaled(160, 120)
@@ -325,6 +326,46 @@ def test_noise_is_off_by_default_and_grows_with_distance(tmp_path, living):
     assert not np.allclose(sn.poses, sc.poses)
     np.testing.assert_allclose(read_tum(noisy / "poses_gt.txt")[1], sc.poses, atol=1e-6)
     assert not np.array_equal(sn[2].rgb, sc[2].rgb)
+
+
+def test_one_render_pass_writes_clean_and_noisy_copies(tmp_path, living):
+    """simulate_sequences renders once; each folder equals its own simulate_sequence run."""
+    import filecmp
+
+    poses = make_trajectory(living, 1.6, 3, seed=1)
+    noise = NoiseConfig.kinect(seed=9)
+    simulate_sequences(living, poses, [(tmp_path / "both" / "c", None, {"trajectory": "c"}),
+                                       (tmp_path / "both" / "n", noise, {"trajectory": "n"})],
+                       intrinsics=SMALL, progress=False)
+    simulate_sequence(living, poses, tmp_path / "one" / "c", intrinsics=SMALL, progress=False,
+                      meta={"trajectory": "c"})
+    simulate_sequence(living, poses, tmp_path / "one" / "n", intrinsics=SMALL, noise=noise, progress=False,
+                      meta={"trajectory": "n"})
+    for name in ("c", "n"):
+        cmp = filecmp.dircmp(tmp_path / "both" / name, tmp_path / "one" / name)
+        files = [f for sub in ("rgb", "depth", "labels", "instances") for f in
+                 (Path(sub) / p.name for p in sorted((tmp_path / "one" / name / sub).iterdir()))]
+        files += ["poses.txt", "poses_gt.txt", "meta.json", "intrinsics.json"]
+        match, mismatch, errors = filecmp.cmpfiles(tmp_path / "both" / name, tmp_path / "one" / name,
+                                                   [str(f) for f in files], shallow=False)
+        assert not mismatch and not errors and len(match) == 4 * 3 + 4, (name, mismatch, errors)
+        assert not cmp.left_only and not cmp.right_only
+    assert not np.array_equal(read_sequence(tmp_path / "both" / "n")[1].rgb,
+                              read_sequence(tmp_path / "both" / "c")[1].rgb)
+    with pytest.raises(ValueError, match="named twice"):
+        simulate_sequences(living, poses, [(tmp_path / "x", None, None), (tmp_path / "x", noise, None)],
+                           intrinsics=SMALL, progress=False)
+
+    class Boom(Renderer):
+        def render(self, pose):
+            if pose is poses[2] or np.array_equal(pose, poses[2]):
+                raise KeyboardInterrupt
+            return super().render(pose)
+
+    with pytest.raises(KeyboardInterrupt):
+        simulate_sequences(living, poses, [(tmp_path / "cut" / "c", None, None), (tmp_path / "cut" / "n", noise, None)],
+                           intrinsics=SMALL, progress=False, renderer=Boom(living, SMALL))
+    assert list((tmp_path / "cut").iterdir()) == []
 
 
 def test_generate_dataset_layout_and_resume(tmp_path):

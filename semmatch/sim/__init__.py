@@ -14,7 +14,7 @@ from .plyscene import scene_from_ply
 from .procedural import SCENE_KINDS, box_room, generate_scene
 from .render import Renderer, RenderResult
 from .scene import Scene
-from .sequence import DEFAULT_SWEEP, generate_dataset, simulate_sequence, sweep_name
+from .sequence import DEFAULT_SWEEP, generate_dataset, simulate_sequence, simulate_sequences, sweep_name
 from .trajectory import (
     FreeSpace,
     camera_elevation_deg,
@@ -45,6 +45,7 @@ __all__ = [
     "camera_elevation_deg",
     "NoiseConfig",
     "simulate_sequence",
+    "simulate_sequences",
     "generate_dataset",
     "sweep_name",
     "DEFAULT_SWEEP",

@@ -21,6 +21,7 @@ import os
 import shutil
 import tempfile
 from collections.abc import Sequence
+from contextlib import ExitStack
 from pathlib import Path
 
 import numpy as np
@@ -34,7 +35,7 @@ from .render import Renderer
 from .scene import Scene
 from .trajectory import make_sweep_trajectories, make_trajectory, route_waypoints
 
-__all__ = ["simulate_sequence", "generate_dataset", "sweep_name", "DEFAULT_SWEEP"]
+__all__ = ["simulate_sequence", "simulate_sequences", "generate_dataset", "sweep_name", "DEFAULT_SWEEP"]
 
 DEFAULT_SWEEP = (0.2, 0.4, 0.6, 0.8, 1.0, 1.2, 1.4, 1.6)
 
@@ -98,41 +99,95 @@ def simulate_sequence(
     ValueError
         Poses that are not (N,4,4) rigid transforms, or a renderer with other intrinsics.
     """
+    return simulate_sequences(scene, poses, [(out_dir, noise, meta)], intrinsics=intrinsics,
+                              overwrite=overwrite, progress=progress, renderer=renderer, fast=fast)[0]
+
+
+def simulate_sequences(
+    scene: Scene,
+    poses: np.ndarray,
+    targets: Sequence[tuple[str | os.PathLike, NoiseConfig | None, dict | None]],
+    *,
+    intrinsics: Intrinsics = DEFAULT_INTRINSICS,
+    overwrite: bool = False,
+    progress: bool = True,
+    renderer: Renderer | None = None,
+    fast: bool = False,
+) -> list[Path]:
+    """Render ``poses`` once and write several sequence folders from the same frames.
+
+    E.g. a clean and a noisy copy of one trajectory (``upper`` and ``upper_noisy``): every
+    frame is rendered once and each target adds its own sensor noise (its own random stream
+    from its noise seed), so each folder equals what :func:`simulate_sequence` writes for it.
+
+    Parameters
+    ----------
+    scene : Scene
+    poses : ndarray (N,4,4)
+        True ``T_world_camera`` poses.
+    targets : sequence of (out_dir, noise, meta)
+        The folders to create, each with its :class:`NoiseConfig` (None: clean) and extra
+        ``meta.json`` entries (None: none).
+    intrinsics, overwrite, progress, renderer, fast
+        As in :func:`simulate_sequence`.
+
+    Returns
+    -------
+    list of Path
+        The sequence folders, in the order of ``targets``.
+
+    Raises
+    ------
+    FileExistsError, ValueError
+        As :func:`simulate_sequence`; also no targets, or one folder named twice.
+    """
     poses = np.asarray(poses, dtype=np.float64)
-    out_dir = Path(out_dir)
+    outs = [Path(t[0]) for t in targets]
+    if not outs:
+        raise ValueError("simulate_sequences: no target folders")
+    if len({o.resolve() for o in outs}) != len(outs):
+        raise ValueError(f"simulate_sequences: a folder is named twice in {[str(o) for o in outs]}")
+    where = outs[0] if len(outs) == 1 else outs[0].parent
     if poses.ndim != 3 or poses.shape[1:] != (4, 4) or len(poses) == 0:
-        raise ValueError(f"{out_dir}: poses must have shape (N, 4, 4) with N >= 1, got {poses.shape}")
+        raise ValueError(f"{where}: poses must have shape (N, 4, 4) with N >= 1, got {poses.shape}")
     if renderer is None:
         renderer = Renderer(scene, intrinsics, fast=fast)
     elif renderer.intrinsics != intrinsics:
-        raise ValueError(f"{out_dir}: the renderer's intrinsics differ from the requested ones")
-    cfg = noise or NoiseConfig()
-    rng = np.random.default_rng(cfg.seed)
-    est = estimated_poses(poses, cfg, rng)
-    gains = exposure_gains(len(poses), cfg, rng)
-    info = {
-        "scene": scene.name,
-        "scene_meta": {k: v for k, v in scene.meta.items() if k in ("kind", "seed", "ceiling_height", "floor_z")},
-        "frames": len(poses),
-        "noise": cfg.to_dict() if cfg.enabled else None,
-        "poses": "poses.txt = estimated poses" + (" (noisy)" if cfg.pose_noise else " (= poses_gt.txt)"),
-        **(meta or {}),
-    }
-    with SequenceWriter(out_dir, intrinsics, overwrite=overwrite) as w:
-        for i in tqdm(range(len(poses)), desc=out_dir.name, disable=not progress, leave=False):
+        raise ValueError(f"{where}: the renderer's intrinsics differ from the requested ones")
+    streams = []  # per target: (noise config, its random stream, estimated poses, exposure gains)
+    for _, noise, _ in targets:
+        cfg = noise or NoiseConfig()
+        rng = np.random.default_rng(cfg.seed)
+        est = estimated_poses(poses, cfg, rng)
+        streams.append((cfg, rng, est, exposure_gains(len(poses), cfg, rng)))
+    scene_meta = {k: v for k, v in scene.meta.items() if k in ("kind", "seed", "ceiling_height", "floor_z")}
+    with ExitStack() as stack:
+        writers = [stack.enter_context(SequenceWriter(o, intrinsics, overwrite=overwrite)) for o in outs]
+        desc = outs[0].name if len(outs) == 1 else "+".join(o.name for o in outs)
+        for i in tqdm(range(len(poses)), desc=desc, disable=not progress, leave=False):
             try:
                 r = renderer.render(poses[i])
             except ValueError as e:
-                raise ValueError(f"{out_dir}: frame {i}: {e}") from None
-            depth, rgb = r.depth, r.rgb
-            if cfg.enabled:
-                depth = noisy_depth(depth, cfg, rng)
-                rgb = noisy_rgb(rgb, cfg, rng, float(gains[i]))
+                raise ValueError(f"{where}: frame {i}: {e}") from None
             inst = np.clip(r.instances, 0, 65535).astype(np.uint16)
-            w.add(rgb, depth, est[i], labels=r.labels, instances=inst)
-        w.write_extra("poses_gt.txt", _tum_text(poses))
-        w.write_extra("meta.json", json.dumps(info, indent=2) + "\n")
-    return out_dir
+            for w, (cfg, rng, est, gains) in zip(writers, streams, strict=True):
+                depth, rgb = r.depth, r.rgb
+                if cfg.enabled:
+                    depth = noisy_depth(depth, cfg, rng)
+                    rgb = noisy_rgb(rgb, cfg, rng, float(gains[i]))
+                w.add(rgb, depth, est[i], labels=r.labels, instances=inst)
+        for w, (_, _, meta), (cfg, *_) in zip(writers, targets, streams, strict=True):
+            info = {
+                "scene": scene.name,
+                "scene_meta": scene_meta,
+                "frames": len(poses),
+                "noise": cfg.to_dict() if cfg.enabled else None,
+                "poses": "poses.txt = estimated poses" + (" (noisy)" if cfg.pose_noise else " (= poses_gt.txt)"),
+                **(meta or {}),
+            }
+            w.write_extra("poses_gt.txt", _tum_text(poses))
+            w.write_extra("meta.json", json.dumps(info, indent=2) + "\n")
+    return outs
 
 
 def _tum_text(poses: np.ndarray) -> str:
@@ -210,14 +265,19 @@ def _write_scene(root: Path, o: dict, split: str, seed: int, kind: str,
     # the robot (lower) follows the person's (upper) route: the upper map covers its view
     route = (route_waypoints(scene, o["upper_height"], seed=seed, kind="upper")
              if o["shared_route"] and any(t[3] == "lower" for t in pending) else None)
+    # a clean sequence and its noisy copy follow one trajectory: render it once for both
+    paths: dict[tuple[float, int, str], list[tuple[str, NoiseConfig | None]]] = {}
     for name, height, n, tkind, cfg in pending:
-        _drop_partials(sdir, name)
+        paths.setdefault((height, n, tkind), []).append((name, cfg))
+    for (height, n, tkind), outs in paths.items():
+        for name, _ in outs:
+            _drop_partials(sdir, name)
         poses = make_trajectory(scene, height, n, tilt_deg=tilt_deg, seed=seed, kind=tkind,
                                 waypoints=route if tkind == "lower" else None)
-        simulate_sequence(scene, poses, sdir / name, intrinsics=intrinsics, noise=cfg, overwrite=True,
-                          progress=progress, renderer=renderer,
-                          meta={"trajectory": name, "seed": seed, "tilt_deg": tilt_deg})
-        written.append(str(sdir / name))
+        simulate_sequences(scene, poses, [(sdir / name, cfg, {"trajectory": name, "seed": seed, "tilt_deg": tilt_deg})
+                                          for name, cfg in outs],
+                           intrinsics=intrinsics, overwrite=True, progress=progress, renderer=renderer)
+        written += [str(sdir / name) for name, _ in outs]
     for name, poses in sweep.items():
         _drop_partials(sdir, name)
         simulate_sequence(scene, poses, sdir / name, intrinsics=intrinsics, overwrite=True,
