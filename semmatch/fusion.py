@@ -25,9 +25,10 @@ References
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import warnings
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -36,7 +37,7 @@ from .geometry import Intrinsics, check_pose, pixel_rays
 from .io import Frame, SemanticMap, read_image, read_labels_folder, write_map
 from .labels import NUM_CLASSES
 
-__all__ = ["SemanticTSDF", "reconstruct", "check_depth_units", "default_device"]
+__all__ = ["SemanticTSDF", "reconstruct", "reconstruct_many", "check_depth_units", "default_device"]
 
 #: median depths outside this range (metres) mean the depth unit is wrong
 DEPTH_UNIT_RANGE = (0.05, 20.0)
@@ -285,8 +286,25 @@ class SemanticTSDF:
     def _add_evidence(
         self, depth: np.ndarray, labels: np.ndarray, T: np.ndarray, intr: Intrinsics, where: str
     ) -> None:
-        import torch
+        values, has = self._sampled_labels(labels, intr, where)
+        d = self._sampled_depth(depth)
+        valid = (d > 0) & (d <= self.depth_max)
+        if has is not None:
+            valid &= has
+        sel = np.flatnonzero(valid)
+        if sel.size:
+            self._add_at(self._voxels_of(d, sel, T, intr), values[sel])
 
+    def _sampled_depth(self, depth: np.ndarray) -> np.ndarray:
+        """Depth (metres) of the label-evidence pixels (every ``label_stride``-th), flat."""
+        s = self.label_stride
+        return np.ascontiguousarray(depth[::s, ::s]).reshape(-1)
+
+    def _sampled_labels(
+        self, labels: np.ndarray, intr: Intrinsics, where: str
+    ) -> tuple[np.ndarray, np.ndarray | None]:
+        """Checked labels of the evidence pixels: ids (M,) and their ``id > 0`` mask, or
+        probabilities (M, C) and None."""
         H, W = intr.shape
         C = self.n_classes
         s = self.label_stride
@@ -296,26 +314,28 @@ class SemanticTSDF:
                 f"{where}: labels must be (H,W) ids or (H,W,{C}) probabilities with (H,W)={(H, W)}, "
                 f"got {labels.shape}"
             )
-        d = depth[::s, ::s].reshape(-1)
-        valid = (d > 0) & (d <= self.depth_max)
         if probs:
             p = labels[::s, ::s].reshape(-1, C)
             if not np.isfinite(p).all() or p.min() < 0:
                 raise ValueError(f"{where}: label probabilities hold NaN/inf or negative values")
-        else:
-            lab = labels[::s, ::s].reshape(-1)
-            if not np.issubdtype(lab.dtype, np.integer):
-                raise ValueError(f"{where}: label ids must be integers, got {lab.dtype}")
-            if lab.size and int(lab.max()) >= C:
-                raise ValueError(f"{where}: label id {int(lab.max())} outside 0..{C - 1}")
-            valid &= lab > 0
-        sel = np.flatnonzero(valid)
-        if sel.size == 0:
-            return
-        key = (intr, s)
+            return p, None
+        lab = labels[::s, ::s].reshape(-1)
+        if not np.issubdtype(lab.dtype, np.integer):
+            raise ValueError(f"{where}: label ids must be integers, got {lab.dtype}")
+        if lab.size and int(lab.max()) >= C:
+            raise ValueError(f"{where}: label id {int(lab.max())} outside 0..{C - 1}")
+        return lab, lab > 0
+
+    def _voxels_of(self, d: np.ndarray, sel: np.ndarray, T: np.ndarray, intr: Intrinsics):
+        """Flat index into the ``label`` attribute of the voxel sample nearest to the surface
+        point of each evidence pixel ``sel`` (sampled depth ``d``); -1 where its block is not
+        allocated. A torch int64 tensor on the grid's device."""
+        import torch
+
+        key = (intr, self.label_stride)
         rays = self._rays.get(key)
         if rays is None:  # (2, M) contiguous rows: x/z and y/z of every sampled pixel
-            rays = self._rays[key] = np.ascontiguousarray(pixel_rays(intr, s).reshape(-1, 3)[:, :2].T)
+            rays = self._rays[key] = np.ascontiguousarray(pixel_rays(intr, self.label_stride).reshape(-1, 3)[:, :2].T)
         # nearest voxel sample of each surface point: round(world / voxel_size); column-wise
         # arithmetic on contiguous 1-D arrays, then one selection (cheaper than (N,3) gathers)
         A = (T / self.voxel_size).astype(np.float32)
@@ -331,20 +351,28 @@ class SemanticTSDF:
         blk = k >> self._shift
         loc = k & (self.res - 1)
         buf, found = self.vbg.hashmap().find(_as_o3d(blk, self.device))
-        tdev = torch.device("cuda" if self.device.get_type().name == "CUDA" else "cpu")
         buf = _torch_view(buf).to(torch.int64)
         found = _torch_view(found).to(torch.bool)
         r = self.res
-        lin = torch.from_numpy(((loc[:, 2] * r + loc[:, 1]) * r + loc[:, 0]).astype(np.int64)).to(tdev)
-        voxel = (buf * (r**3) + lin)[found]
+        lin = torch.from_numpy(((loc[:, 2] * r + loc[:, 1]) * r + loc[:, 0]).astype(np.int64)).to(buf.device)
+        return torch.where(found, buf * (r**3) + lin, -1)
+
+    def _add_at(self, voxel, values: np.ndarray) -> None:
+        """Add the evidence of pixels with labels ``values`` (ids (M,) or probabilities (M, C))
+        to their voxels ``voxel`` (M,) from :meth:`_voxels_of` (-1: skipped)."""
+        import torch
+
+        C = self.n_classes
+        found = voxel >= 0
+        voxel = voxel[found]
         ev = _torch_view(self.vbg.attribute("label")).view(-1, C)
-        if probs:
-            logp = np.log(np.maximum(p[sel], 1e-4, dtype=np.float32))
-            ev.index_add_(0, voxel, torch.from_numpy(logp).to(tdev)[found])
+        if values.ndim == 2:
+            logp = np.log(np.maximum(values, 1e-4, dtype=np.float32))
+            ev.index_add_(0, voxel, torch.from_numpy(logp).to(ev.device)[found])
         else:
-            flat = voxel * C + torch.from_numpy(lab[sel].astype(np.int64)).to(tdev)[found]
+            flat = voxel * C + torch.from_numpy(values.astype(np.int64)).to(ev.device)[found]
             ev.view(-1).index_add_(
-                0, flat, torch.full((len(flat),), self.hard_weight, dtype=torch.float32, device=tdev)
+                0, flat, torch.full((len(flat),), self.hard_weight, dtype=torch.float32, device=ev.device)
             )
         self.n_label_points += int(len(voxel))
 
@@ -451,6 +479,45 @@ def _label_source(labels, n: int | None) -> Iterator[np.ndarray | None] | None:
     return iter(labels)
 
 
+
+def _check_poses(seq, poses) -> tuple[int | None, np.ndarray | None]:
+    """The sequence length (None: unknown) and ``poses`` as (N, 4, 4) float64, checked."""
+    n = len(seq) if hasattr(seq, "__len__") else None
+    if poses is not None:
+        poses = np.asarray(poses, dtype=np.float64)
+        if poses.ndim != 3 or poses.shape[1:] != (4, 4):
+            raise ValueError(f"poses must have shape (N,4,4), got {poses.shape}")
+        if n is not None and len(poses) != n:
+            raise ValueError(f"{len(poses)} poses for a sequence of {n} frames")
+    return n, poses
+
+
+def _posed_frames(seq, poses, n: int | None, name: str, progress: bool):
+    """Yield ``(i, where, frame, pose)``: the pose is ``poses[i]`` or the frame's own."""
+    from tqdm.auto import tqdm
+
+    for i, frame in enumerate(tqdm(seq, total=n, desc="fuse", disable=not progress, leave=False)):
+        where = f"{name} frame {getattr(frame, 'index', i)}"
+        pose = frame.pose if poses is None else (poses[i] if i < len(poses) else None)
+        if pose is None:
+            raise ValueError(f"{where}: no pose (estimate poses first, e.g. semmatch.odometry.estimate_poses)")
+        yield i, where, frame, pose
+
+
+def _next_labels(lab_iter: Iterator, i: int, where: str) -> np.ndarray:
+    try:
+        return next(lab_iter)
+    except StopIteration:
+        raise ValueError(f"labels end at frame {i}, before the sequence ({where})") from None
+
+
+def _check_counts(count: int, lab_iter: Iterator | None, name: str) -> None:
+    if count == 0:
+        raise ValueError(f"{name}: the sequence has no frames")
+    if lab_iter is not None and next(lab_iter, None) is not None:
+        raise ValueError(f"more label images than the {count} frames of {name}")
+
+
 def reconstruct(
     seq: Iterable[Frame],
     labels: str | os.PathLike | Iterable[np.ndarray] | None = None,
@@ -515,39 +582,18 @@ def reconstruct(
     >>> m = reconstruct(read_sequence("data/scenes/eval/s0/lower"), voxel_size=0.04)
     >>> write_map("lower.ply", m)
     """
-    from tqdm.auto import tqdm
-
     if output not in ("mesh", "points"):
         raise ValueError(f"output must be 'mesh' or 'points', got {output!r}")
-    n = len(seq) if hasattr(seq, "__len__") else None
-    if poses is not None:
-        poses = np.asarray(poses, dtype=np.float64)
-        if poses.ndim != 3 or poses.shape[1:] != (4, 4):
-            raise ValueError(f"poses must have shape (N,4,4), got {poses.shape}")
-        if n is not None and len(poses) != n:
-            raise ValueError(f"{len(poses)} poses for a sequence of {n} frames")
+    n, poses = _check_poses(seq, poses)
     name = str(getattr(seq, "path", "sequence"))
     lab_iter = _label_source(labels, n)
     vol = SemanticTSDF(voxel_size, **tsdf_options)
     count = 0
-    for i, frame in enumerate(tqdm(seq, total=n, desc="fuse", disable=not progress, leave=False)):
-        where = f"{name} frame {getattr(frame, 'index', i)}"
-        pose = frame.pose if poses is None else (poses[i] if i < len(poses) else None)
-        if pose is None:
-            raise ValueError(f"{where}: no pose (estimate poses first, e.g. semmatch.odometry.estimate_poses)")
-        if lab_iter is None:
-            lab = frame.labels
-        else:
-            try:
-                lab = next(lab_iter)
-            except StopIteration:
-                raise ValueError(f"labels end at frame {i}, before the sequence ({where})") from None
+    for i, where, frame, pose in _posed_frames(seq, poses, n, name, progress):
+        lab = frame.labels if lab_iter is None else _next_labels(lab_iter, i, where)
         vol.integrate(frame.depth, frame.rgb, pose, frame.intrinsics, labels=lab, where=where)
         count += 1
-    if count == 0:
-        raise ValueError(f"{name}: the sequence has no frames")
-    if lab_iter is not None and next(lab_iter, None) is not None:
-        raise ValueError(f"more label images than the {count} frames of {name}")
+    _check_counts(count, lab_iter, name)
     if vol.n_label_points == 0:
         warnings.warn(f"{name}: no label evidence was integrated; all labels are 0 (void)", stacklevel=2)
     mesh = vol.extract_mesh(min_weight=min_weight) if (output == "mesh" or out or rgb_out) else None
@@ -562,3 +608,113 @@ def reconstruct(
     if points_out is not None:
         write_map(Path(points_out), pcd)
     return (result, vol) if return_volume else result
+
+
+def reconstruct_many(
+    seq: Iterable[Frame],
+    labelings: Sequence[str | os.PathLike | Iterable[np.ndarray] | None],
+    voxel_size: float = 0.04,
+    *,
+    poses: np.ndarray | None = None,
+    outs: Sequence[str | os.PathLike | None] | None = None,
+    min_weight: float = 1.0,
+    progress: bool = False,
+    **tsdf_options,
+) -> list[SemanticMap]:
+    """Fuse one sequence with several labelings: the geometry once, then each one's labels.
+
+    The semantic meshes of, e.g., one lower sequence labelled by every transfer method share
+    their geometry (depth, colour and poses are the same); only the label evidence differs.
+    The TSDF is integrated once; then, for each labeling, the evidence of every frame is added
+    to the voxels its surface points were found to fall in, and the mesh vertices are labelled.
+    Each map equals ``reconstruct(seq, labels, voxel_size, ...)`` of that labeling (the same
+    evidence in the same order; vertex order may differ, as between two Open3D runs), at the
+    cost of one fusion plus a cheap label pass per labeling.
+
+    Parameters
+    ----------
+    seq : sequence or iterable of Frame
+        As :func:`reconstruct` (read once; the per-frame voxel lookups are kept in memory:
+        about 20 MB per 100 frames at 320x240 with ``label_stride`` 2).
+    labelings : sequence
+        Each item one ``labels`` argument of :func:`reconstruct`: None (the frames' own
+        labels), a labels folder, or an iterable with one label or probability image per frame.
+    voxel_size : float
+    poses : ndarray (N, 4, 4), optional
+        ``T_world_camera`` per frame, replacing the frames' poses.
+    outs : sequence of path or None, optional
+        One per labeling: write that semantic mesh there (PLY, atomically); None: do not.
+    min_weight : float
+    progress : bool
+    **tsdf_options
+        Passed to :class:`SemanticTSDF`.
+
+    Returns
+    -------
+    list of SemanticMap
+        The semantic meshes, in the order of ``labelings``.
+
+    Raises
+    ------
+    ValueError
+        As :func:`reconstruct`, naming the labeling's folder and frame; ``outs`` of another
+        length than ``labelings``.
+    """
+    import torch
+
+    labelings = list(labelings)
+    outs = [None] * len(labelings) if outs is None else list(outs)
+    if len(outs) != len(labelings):
+        raise ValueError(f"{len(outs)} output paths for {len(labelings)} labelings")
+    if not labelings:
+        return []
+    n, poses = _check_poses(seq, poses)
+    name = str(getattr(seq, "path", "sequence"))
+    vol = SemanticTSDF(voxel_size, **tsdf_options)
+    own_labels = any(lab is None for lab in labelings)
+    frames = []  # per frame: (where, sampled depth, pose, intrinsics, own labels)
+    for _, where, frame, pose in _posed_frames(seq, poses, n, name, progress):
+        vol.integrate(frame.depth, frame.rgb, pose, frame.intrinsics, where=where)
+        depth = np.where(np.isfinite(frame.depth), frame.depth, 0).astype(np.float32, copy=False)
+        d, T = vol._sampled_depth(depth), np.asarray(pose, dtype=np.float64)
+        # evidence pixels whose voxel block exists now, as when reconstruct() adds them here
+        # (a block that only a later frame allocates is skipped there: ~3 of 100 000 points)
+        sel = np.flatnonzero((d > 0) & (d <= vol.depth_max))
+        sel = sel[(vol._voxels_of(d, sel, T, frame.intrinsics) >= 0).cpu().numpy()]
+        frames.append((where, d, T, frame.intrinsics, sel, frame.labels if own_labels else None))
+    _check_counts(len(frames), None, name)
+    # the grid is final now (growing it moves blocks): the voxel of each evidence pixel
+    targets = [(sel, vol._voxels_of(d, sel, T, intr)) for _, d, T, intr, sel, _ in frames]
+    evidence = _torch_view(vol.vbg.attribute("label"))
+    mesh = None
+    maps = []
+    for labels, out in zip(labelings, outs, strict=True):
+        what = name if labels is None or not isinstance(labels, str | os.PathLike) else f"{name} with {labels}"
+        lab_iter = _label_source(labels, len(frames))
+        evidence.zero_()
+        vol.n_label_points = 0
+        for i, ((where, _, _, intr, _, own), (sel, voxel)) in enumerate(zip(frames, targets, strict=True)):
+            lab = own if lab_iter is None else _next_labels(lab_iter, i, where)
+            if lab is None:
+                continue
+            values, has = vol._sampled_labels(np.asarray(lab), intr, where)
+            values = values[sel]
+            if has is not None:
+                keep = has[sel]
+                values, voxel = values[keep], voxel[torch.from_numpy(keep).to(voxel.device)]
+            if len(values):
+                vol._add_at(voxel, values)
+        _check_counts(len(frames), lab_iter, what)
+        if vol.n_label_points == 0:
+            warnings.warn(f"{what}: no label evidence was integrated; all labels are 0 (void)", stacklevel=2)
+        if mesh is None:
+            mesh = vol.extract_mesh(min_weight=min_weight)
+            if len(mesh) == 0:
+                raise ValueError(f"{name}: the reconstruction is empty (no surface with weight >= {min_weight})")
+            m = mesh
+        else:
+            m = dataclasses.replace(mesh, labels=vol.labels_at(mesh.points))
+        if out is not None:
+            write_map(Path(out), m)
+        maps.append(m)
+    return maps

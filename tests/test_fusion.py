@@ -5,9 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from semmatch.fusion import SemanticTSDF, check_depth_units, reconstruct
+from semmatch.fusion import SemanticTSDF, check_depth_units, reconstruct, reconstruct_many
 from semmatch.geometry import DEFAULT_INTRINSICS, look_at
 from semmatch.io import Frame, SequenceWriter, read_map, read_sequence, write_labels_folder
+from semmatch.labels import NUM_CLASSES
 from semmatch.sim import Renderer, box_room
 
 INTR = DEFAULT_INTRINSICS.scaled(160, 120)
@@ -102,6 +103,45 @@ def test_labels_from_folder_and_outputs(tmp_path, room_frames):
     with pytest.raises(ValueError, match="5 images for 6 frames"):
         write_labels_folder(tmp_path / "short", [np.zeros(INTR.shape, np.uint8)] * 5)
         reconstruct(read_sequence(seq_dir), labels=tmp_path / "short")
+
+
+def _same_map(a, b) -> bool:
+    """Equal vertices (in any order) with equal labels."""
+    oa, ob = np.lexsort(a.points.T), np.lexsort(b.points.T)
+    return (len(a) == len(b) and np.allclose(a.points[oa], b.points[ob], atol=1e-5)
+            and bool((a.labels[oa] == b.labels[ob]).all()))
+
+
+def test_reconstruct_many_equals_one_fusion_per_labeling(tmp_path, room_frames):
+    rng = np.random.default_rng(3)
+    frames = room_frames[:10]
+    noisy = [rng.integers(0, 4, INTR.shape, dtype=np.uint8) for _ in frames]  # votes that disagree
+    probs = [rng.dirichlet(np.ones(NUM_CLASSES), INTR.shape).astype(np.float32) for _ in frames]
+    write_labels_folder(tmp_path / "noisy", noisy)
+    poses = np.stack([f.pose for f in frames])
+    poses[:, 0, 3] += np.linspace(0, 0.1, len(frames))  # other poses than the frames' own
+    labelings = [None, tmp_path / "noisy", probs, [np.zeros(INTR.shape, np.uint8)] * len(frames)]
+    outs = [tmp_path / "own.ply", None, tmp_path / "probs.ply", None]
+    # a small grid grows while fusing: the voxel lookups must survive the moved blocks
+    with pytest.warns(UserWarning, match="no label evidence"):
+        many = reconstruct_many(frames, labelings, VS, poses=poses, outs=outs, block_count=16)
+        singles = [reconstruct(frames, lab, VS, poses=poses, block_count=16) for lab in labelings]
+    assert len(many) == 4
+    for m, one in zip(many, singles, strict=True):
+        assert _same_map(m, one) and m.faces.shape == one.faces.shape
+    assert (many[3].labels == 0).all() and len(np.unique(many[1].labels)) > 1
+    assert _same_map(read_map(tmp_path / "own.ply"), many[0]) and _same_map(read_map(tmp_path / "probs.ply"), many[2])
+    assert not (tmp_path / "noisy.ply").exists()
+    assert reconstruct_many(frames, [], VS) == []
+    with pytest.raises(ValueError, match="2 output paths for 1 labelings"):
+        reconstruct_many(frames, [None], VS, outs=[None, None])
+    write_labels_folder(tmp_path / "short", noisy[:9])
+    with pytest.raises(ValueError, match="short: labels folder has 9 images for 10 frames"):
+        reconstruct_many(frames, [None, tmp_path / "short"], VS)
+    with pytest.raises(ValueError, match="frame 2: label id 30"):
+        reconstruct_many(frames[:3], [[f.labels for f in frames[:2]] + [np.full(INTR.shape, 30, np.uint8)]], VS)
+    with pytest.raises(ValueError, match="more label images than the 2 frames"):
+        reconstruct_many(frames[:2], [noisy[:3]], VS)
 
 
 def test_bad_input_is_named(room_frames):

@@ -133,7 +133,7 @@ def evaluate_real_like(
         scene, sequence, poses (recorded prior or estimated), ate_rmse (m, aligned),
         ate_rmse_unaligned, rpe_trans (m/frame), rpe_rot_deg (deg/frame), n_frames.
     """
-    from ..fusion import reconstruct
+    from ..fusion import reconstruct_many
     from ..metrics import compare
     from ..odometry import trajectory_errors
     from ..segment import predict_sequence
@@ -152,7 +152,7 @@ def evaluate_real_like(
         seqs = {}
         for name in ("upper", "lower"):
             cache = work / f"{name}_estimated_posegraph_ds{ODOMETRY_DOWNSAMPLE}_gated.txt"
-            # read once: the lower frames are fused once per labels folder (~18 times)
+            # read once: predicted, transferred and fused from memory
             noisy = read_sequence(sd / f"{name}_noisy").load()
             est, true = estimate_or_load_poses(sd / f"{name}_noisy", cache, seq=noisy, progress=progress)
             for what, poses in (("recorded (drifting prior)", noisy.poses), ("estimated (RGB-D odometry)", est)):
@@ -160,27 +160,31 @@ def evaluate_real_like(
                 traj_rows.append(dict(scene=sid, sequence=name, poses=what, **{
                     k: float(v) for k, v in err.items() if np.isscalar(v)}))
             seqs[name] = PosedSequence(noisy, est)
-        reference = reconstruct(seqs["lower"], None, voxel_size, out=work / "reference.ply")
-
-        def score(pred, model: str, method: str, sid=sid, reference=reference) -> None:
-            s = compare(reference, pred, voxel_size=eval_voxel_size)
-            rows.append(dict(scene=sid, model=model, method=method, **{k: float(s[k]) for k in MEASURE_COLUMNS}))
-
         sources = ([GT] if include_ground_truth else []) + list(networks)
-        for source in sources:
-            if source == GT:
-                labels = None
-            else:
-                labels = work / f"upper_labels_{source}"
-                predict_sequence(models[source], seqs["upper"], labels, progress=False)
+        # upper maps: one fusion of the upper frames, labelled by ground truth and each network
+        upper_labels = {GT: None}
+        for net in networks:
+            upper_labels[net] = work / f"upper_labels_{net}"
+            predict_sequence(models[net], seqs["upper"], upper_labels[net], progress=False)
+        upper_maps = reconstruct_many(seqs["upper"], [upper_labels[s] for s in sources], voxel_size,
+                                      outs=[work / f"upper_{s}.ply" for s in sources])
+        # lower labels: each network on the lower frames, each method from each upper map
+        lower = []  # (model, method, labels folder)
+        for source, upper_map in zip(sources, upper_maps, strict=True):
+            if source != GT:
                 low_dir = work / f"lower_labels_{source}" / "lower"
                 predict_sequence(models[source], seqs["lower"], low_dir, progress=False)
-                score(reconstruct(seqs["lower"], low_dir, voxel_size), model_name(source), "lower")
-            upper_map = reconstruct(seqs["upper"], labels, voxel_size, out=work / f"upper_{source}.ply")
+                lower.append((model_name(source), "lower", low_dir))
             index = prepare(upper_map)
             for method in methods:
                 lab_dir = work / f"lower_labels_{source}" / method
                 transfer_sequence(method, seqs["lower"].seq, index, lab_dir, poses=seqs["lower"].poses,
                                   jobs=jobs, progress=False)
-                score(reconstruct(seqs["lower"], lab_dir, voxel_size), model_name(source), method)
+                lower.append((model_name(source), method, lab_dir))
+        # one fusion of the lower frames: the reference (ground-truth labels) and every labeling
+        reference, *maps = reconstruct_many(seqs["lower"], [None, *(d for *_, d in lower)], voxel_size,
+                                            outs=[work / "reference.ply"] + [None] * len(lower))
+        for (model, method, _), pred in zip(lower, maps, strict=True):
+            s = compare(reference, pred, voxel_size=eval_voxel_size)
+            rows.append(dict(scene=sid, model=model, method=method, **{k: float(s[k]) for k in MEASURE_COLUMNS}))
     return pd.DataFrame(rows), pd.DataFrame(traj_rows)

@@ -55,7 +55,7 @@ def reconstruct_upper_maps(
         One row per (scene, network): the network's upper map scored against the ground-truth
         upper map (the paper's "Upper" rows), plus the 2D pixel accuracy / mIoU on the frames.
     """
-    from ..fusion import reconstruct
+    from ..fusion import reconstruct_many
     from ..metrics import pixel_metrics
     from ..segment import predict_sequence
 
@@ -64,13 +64,14 @@ def reconstruct_upper_maps(
     rows = []
     for sd in tqdm(layout.scene_dirs("eval"), desc="upper maps", disable=not progress):
         sid = sd.name
-        upper = read_sequence(sd / "upper").load()  # fused 3x, predicted 2x: decode once
-        gt_path = layout.upper_map(sid, GT)
-        gt_map = reconstruct(upper, None, voxel_size, out=gt_path)
-        for net in networks:
-            lab_dir = layout.upper_labels(sid, net)
+        upper = read_sequence(sd / "upper").load()  # predicted 2x: decode once
+        lab_dirs = [layout.upper_labels(sid, net) for net in networks]
+        for net, lab_dir in zip(networks, lab_dirs, strict=True):
             predict_sequence(models[net], upper, lab_dir, progress=False)
-            net_map = reconstruct(upper, lab_dir, voxel_size, out=layout.upper_map(sid, net))
+        # one fusion, the ground-truth labels and each network's as labelings
+        gt_map, *net_maps = reconstruct_many(upper, [None, *lab_dirs], voxel_size,
+                                             outs=[layout.upper_map(sid, s) for s in (GT, *networks)])
+        for net, lab_dir, net_map in zip(networks, lab_dirs, net_maps, strict=True):
             pred = read_sequence(sd / "upper", labels=lab_dir)
             pix = pixel_metrics((upper.read_labels(i) for i in range(len(upper))),
                                 (pred.read_labels(i) for i in range(len(pred))))
@@ -135,17 +136,17 @@ def reconstruct_lower_maps(
     Writes ``lower_maps/<scene>/reference.ply`` (ground-truth labels: the reference) and
     ``lower_maps/<scene>/<source>/<method>.ply``.
     """
-    from ..fusion import reconstruct
+    from ..fusion import reconstruct_many
 
     layout = Layout(data_root)
-    for sd in layout.scene_dirs("eval"):
+    for sd in tqdm(layout.scene_dirs("eval"), desc="lower maps", disable=not progress):
         sid = sd.name
-        lower = read_sequence(sd / "lower").load()  # fused once per labels folder: decode once
-        reconstruct(lower, None, voxel_size, out=layout.lower_reference(sid))
         jobs = [(GT, m) for m in methods] + [(n, m) for n in networks for m in ("lower", *methods)]
-        for source, method in tqdm(jobs, desc=f"lower maps {sid}", disable=not progress):
-            reconstruct(lower, layout.lower_labels(sid, source, method), voxel_size,
-                        out=layout.lower_map(sid, source, method))
+        # one fusion of the lower frames; the reference (ground-truth labels) and every
+        # labels folder as labelings of it
+        reconstruct_many(read_sequence(sd / "lower"),
+                         [None, *(layout.lower_labels(sid, s, m) for s, m in jobs)], voxel_size,
+                         outs=[layout.lower_reference(sid), *(layout.lower_map(sid, s, m) for s, m in jobs)])
 
 
 def evaluate_synthetic(

@@ -202,12 +202,19 @@ class MapIndex:
         # nearest occupied voxel of every voxel (Euclidean distance transform)
         empty = np.ones(self.shape, dtype=bool)
         empty.ravel()[occ_lin] = False
-        dist, idx = ndimage.distance_transform_edt(empty, return_indices=True)
+        idx = ndimage.distance_transform_edt(empty, return_distances=False, return_indices=True)
         del empty
         near = label_of[tuple(idx)]
-        del idx
-        near[dist > self.max_distance / s] = 0
-        del dist
+        # squared voxel distance to it, in int32 along broadcast axes (SciPy's own distances
+        # go through three float64 index volumes: twice the time of the transform itself)
+        d2 = np.zeros(self.shape, dtype=np.int32)
+        for a in range(3):
+            ax = np.arange(self.shape[a], dtype=np.int32).reshape([-1 if b == a else 1 for b in range(3)])
+            step = idx[a].astype(np.int32) - ax
+            d2 += step * step
+        del idx, step
+        near[np.sqrt(d2, dtype=np.float64) > self.max_distance / s] = 0
+        del d2
         mixed = (near & _MIXED) > 0
         grid = near & ~np.uint8(_MIXED)
         # ambiguous: a mixed nearest voxel, or the 27-neighbourhood disagrees (label edge or the
