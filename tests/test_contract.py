@@ -159,6 +159,18 @@ def test_map_round_trip(tmp_path, rng, binary):
     write_map(tmp_path / "m.ply", SemanticMap(pts, lab, faces=faces), binary=binary)
     m = read_map(tmp_path / "m.ply")
     assert np.allclose(m.points, pts) and (m.labels == lab).all() and (m.faces == faces).all()
+    # the binary mesh is byte for byte what plyfile itself writes (faces go out as one block)
+    import io
+
+    from plyfile import PlyData
+
+    buf = io.BytesIO()
+    PlyData.read(str(tmp_path / "m.ply")).write(buf)
+    assert buf.getvalue() == (tmp_path / "m.ply").read_bytes()
+    normals = rng.normal(size=(50, 3))
+    write_map(tmp_path / "n.ply", SemanticMap(pts, lab, faces=faces, normals=normals), binary=binary)
+    n = PlyData.read(str(tmp_path / "n.ply"))
+    assert np.allclose(n["vertex"]["nx"], normals[:, 0], atol=1e-6) and len(n["face"]) == 20
 
 
 def test_map_without_labels_or_colours_is_refused(tmp_path):
