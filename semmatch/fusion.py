@@ -479,7 +479,6 @@ def _label_source(labels, n: int | None) -> Iterator[np.ndarray | None] | None:
     return iter(labels)
 
 
-
 def _check_poses(seq, poses) -> tuple[int | None, np.ndarray | None]:
     """The sequence length (None: unknown) and ``poses`` as (N, 4, 4) float64, checked."""
     n = len(seq) if hasattr(seq, "__len__") else None
@@ -634,8 +633,9 @@ def reconstruct_many(
     Parameters
     ----------
     seq : sequence or iterable of Frame
-        As :func:`reconstruct` (read once; the per-frame voxel lookups are kept in memory:
-        about 20 MB per 100 frames at 320x240 with ``label_stride`` 2).
+        As :func:`reconstruct` (read once; the voxel of every evidence pixel is kept in
+        memory, 12 bytes each: with ``label_stride`` 2 about 25 MB per 100 frames at 320x240,
+        90 MB at 640x480; plus the frames' own labels when a labeling is None).
     labelings : sequence
         Each item one ``labels`` argument of :func:`reconstruct`: None (the frames' own
         labels), a labels folder, or an iterable with one label or probability image per frame.
@@ -672,7 +672,8 @@ def reconstruct_many(
     name = str(getattr(seq, "path", "sequence"))
     vol = SemanticTSDF(voxel_size, **tsdf_options)
     own_labels = any(lab is None for lab in labelings)
-    frames = []  # per frame: (where, sampled depth, pose, intrinsics, own labels)
+    frames = []  # per frame: (where, intrinsics, own labels)
+    pending = []  # per frame: (sampled depth, pose, evidence pixels) until the grid is final
     for _, where, frame, pose in _posed_frames(seq, poses, n, name, progress):
         vol.integrate(frame.depth, frame.rgb, pose, frame.intrinsics, where=where)
         depth = np.where(np.isfinite(frame.depth), frame.depth, 0).astype(np.float32, copy=False)
@@ -680,24 +681,27 @@ def reconstruct_many(
         # evidence pixels whose voxel block exists now, as when reconstruct() adds them here
         # (a block that only a later frame allocates is skipped there: ~3 of 100 000 points)
         sel = np.flatnonzero((d > 0) & (d <= vol.depth_max))
-        sel = sel[(vol._voxels_of(d, sel, T, frame.intrinsics) >= 0).cpu().numpy()]
-        frames.append((where, d, T, frame.intrinsics, sel, frame.labels if own_labels else None))
+        sel = sel[(vol._voxels_of(d, sel, T, frame.intrinsics) >= 0).cpu().numpy()].astype(np.int32)
+        frames.append((where, frame.intrinsics, frame.labels if own_labels else None))
+        pending.append((d, T, sel))
     _check_counts(len(frames), None, name)
     # the grid is final now (growing it moves blocks): the voxel of each evidence pixel
-    targets = [(sel, vol._voxels_of(d, sel, T, intr)) for _, d, T, intr, sel, _ in frames]
+    targets = [(sel, vol._voxels_of(d, sel, T, intr)) for (d, T, sel), (_, intr, _) in zip(pending, frames, strict=True)]
+    del pending
     evidence = _torch_view(vol.vbg.attribute("label"))
     mesh = None
     maps = []
     for labels, out in zip(labelings, outs, strict=True):
-        what = name if labels is None or not isinstance(labels, str | os.PathLike) else f"{name} with {labels}"
+        folder = labels if isinstance(labels, str | os.PathLike) else None
+        what = name if folder is None else f"{name} with {folder}"
         lab_iter = _label_source(labels, len(frames))
         evidence.zero_()
         vol.n_label_points = 0
-        for i, ((where, _, _, intr, _, own), (sel, voxel)) in enumerate(zip(frames, targets, strict=True)):
+        for i, ((where, intr, own), (sel, voxel)) in enumerate(zip(frames, targets, strict=True)):
             lab = own if lab_iter is None else _next_labels(lab_iter, i, where)
             if lab is None:
                 continue
-            values, has = vol._sampled_labels(np.asarray(lab), intr, where)
+            values, has = vol._sampled_labels(np.asarray(lab), intr, where if folder is None else f"{folder} ({where})")
             values = values[sel]
             if has is not None:
                 keep = has[sel]

@@ -142,6 +142,9 @@ def test_reconstruct_many_equals_one_fusion_per_labeling(tmp_path, room_frames):
         reconstruct_many(frames[:3], [[f.labels for f in frames[:2]] + [np.full(INTR.shape, 30, np.uint8)]], VS)
     with pytest.raises(ValueError, match="more label images than the 2 frames"):
         reconstruct_many(frames[:2], [noisy[:3]], VS)
+    write_labels_folder(tmp_path / "bad", [noisy[0], np.full(INTR.shape, 30, np.uint8)])
+    with pytest.raises(ValueError, match=r"bad \(sequence frame 1\): label id 30"):
+        reconstruct_many(frames[:2], [None, tmp_path / "bad"], VS)
 
 
 def test_bad_input_is_named(room_frames):
