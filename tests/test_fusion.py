@@ -208,3 +208,15 @@ def test_reconstruct_cli(tmp_path, room_frames, capsys):
     assert m.is_mesh and {1, 2, 3} <= set(np.unique(m.labels))
     rc = main(["reconstruct", str(tmp_path / "nothing"), "--out", str(tmp_path / "x.ply")])
     assert rc == 2 and "no such sequence folder" in capsys.readouterr().err
+
+
+def test_bench_fusion_json_with_labelings(capsys):
+    import json
+
+    from semmatch.cli import main
+
+    assert main(["bench", "fusion", "--json", "--frames", "3", "--width", "160", "--height", "120",
+                 "--labelings", "2"]) == 0
+    res = json.loads(capsys.readouterr().out)
+    assert res["frames"] == 3 and res["fps"] > 0 and res["mesh_vertices"] > 0
+    assert res["labelings"] == 2 and res["separate_seconds"] > 0 and res["many_seconds"] > 0
