@@ -20,6 +20,7 @@ import tempfile
 import uuid
 from collections.abc import Iterator
 from collections.abc import Sequence as _SequenceABC
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -372,11 +373,15 @@ class InMemorySequence(_SequenceABC):
         self.timestamps, self.poses = reader.timestamps, reader.poses
         self.labels_dir, self.has_labels = reader.labels_dir, reader.has_labels
         self._frames: list[Frame] = []
-        for f in tqdm(reader, total=len(reader), desc=f"read {reader.path.name}", disable=not progress, leave=False):
-            for a in (f.rgb, f.depth, f.labels, f.pose):
-                if a is not None:
-                    a.setflags(write=False)
-            self._frames.append(f)
+        # PNG decoding releases the GIL: two threads decode about twice as fast (frames in order)
+        with ThreadPoolExecutor(max_workers=min(2, os.cpu_count() or 1)) as ex:
+            frames = ex.map(reader.__getitem__, range(len(reader)))
+            for f in tqdm(frames, total=len(reader), desc=f"read {reader.path.name}", disable=not progress,
+                          leave=False):
+                for a in (f.rgb, f.depth, f.labels, f.pose):
+                    if a is not None:
+                        a.setflags(write=False)
+                self._frames.append(f)
 
     def __len__(self) -> int:
         return len(self._frames)
@@ -510,8 +515,13 @@ def write_labels_folder(path: PathLike, labels: Iterator[np.ndarray] | list[np.n
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".partial", dir=path.parent))
     try:
-        for i, lab in enumerate(labels):
-            write_image(tmp / _frame_name(i), np.asarray(lab, dtype=np.uint8))
+        # PNG encoding releases the GIL: a writer thread overlaps it with making the next label
+        # image (a prediction, a transfer) or with the other writer
+        with ThreadPoolExecutor(max_workers=2) as ex:
+            pending = [ex.submit(write_image, tmp / _frame_name(i), np.asarray(lab, dtype=np.uint8))
+                       for i, lab in enumerate(labels)]
+            for fut in pending:
+                fut.result()
         if path.exists():
             shutil.rmtree(path)
         os.replace(tmp, path)

@@ -395,7 +395,9 @@ def train(config: TrainConfig, *, views: tuple[D.Views, D.Views] | None = None) 
     mc = config.model_config()
     # channels-last: the depthwise convolutions of the compact net train ~1.6x faster on CPU
     net = build_network(mc).to(device, memory_format=torch.channels_last)
-    opt = torch.optim.AdamW(net.parameters(), lr=config.lr, weight_decay=config.weight_decay)
+    # foreach: the same updates as the per-parameter loop PyTorch picks on CPU, 3x cheaper
+    # (strong: 15 -> 5 ms a step); fused would be cheaper still but rounds differently
+    opt = torch.optim.AdamW(net.parameters(), lr=config.lr, weight_decay=config.weight_decay, foreach=True)
     sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=config.lr, total_steps=config.steps, pct_start=0.1)
     w_t = torch.from_numpy(weights).to(device)
     rng = np.random.default_rng(config.seed)
