@@ -1,6 +1,6 @@
 """semmatch: 3D semantic label transfer across human and robot viewpoints.
 
-Modules (DESIGN.md §2): :mod:`semmatch.labels`, :mod:`semmatch.geometry`, :mod:`semmatch.io`,
+Modules: :mod:`semmatch.labels`, :mod:`semmatch.geometry`, :mod:`semmatch.io`,
 :mod:`semmatch.sim`, :mod:`semmatch.segment`, :mod:`semmatch.fusion`, :mod:`semmatch.transfer`,
 :mod:`semmatch.metrics`, :mod:`semmatch.experiments`, :mod:`semmatch.cli`.
 """

@@ -131,6 +131,9 @@ class SemanticTSDF:
     >>> mesh = vol.extract_mesh()                                 # SemanticMap with faces
     """
 
+    #: smallest share of a frame's pixels with valid depth for it to be integrated
+    MIN_VALID_DEPTH = 0.001
+
     def __init__(
         self,
         voxel_size: float = 0.04,
@@ -174,6 +177,8 @@ class SemanticTSDF:
         self._K: dict[Intrinsics, object] = {}
         self.n_frames = 0
         self.n_label_points = 0
+        #: frames skipped for lack of valid depth (sensor dropouts), by their ``where`` names
+        self.skipped: list[str] = []
 
     _ATTRS = ("tsdf", "weight", "color", "label")
 
@@ -225,8 +230,12 @@ class SemanticTSDF:
         *,
         labels: np.ndarray | None = None,
         where: str = "frame",
-    ) -> None:
+    ) -> bool:
         """Integrate one posed RGB-D frame and its label evidence.
+
+        A frame with (almost) no valid depth (fewer than :attr:`MIN_VALID_DEPTH` of its pixels
+        within range: a sensor dropout) touches no voxel: it is skipped, named in
+        :attr:`skipped`, and False is returned.
 
         Parameters
         ----------
@@ -241,6 +250,11 @@ class SemanticTSDF:
             Category ids (0 = no evidence) or per-pixel class probabilities.
         where : str
             Name of the frame for error messages.
+
+        Returns
+        -------
+        bool
+            True when the frame was integrated.
 
         Raises
         ------
@@ -258,6 +272,9 @@ class SemanticTSDF:
         depth = np.where(np.isfinite(depth), depth, 0).astype(np.float32, copy=False)
         check_depth_units(depth, where=where)
         T = check_pose(pose, what=f"{where} pose")
+        if np.count_nonzero((depth > 0) & (depth <= self.depth_max)) < self.MIN_VALID_DEPTH * H * W:
+            self.skipped.append(where)
+            return False
         if rgb is None:
             color = np.full((H, W, 3), 128, dtype=np.uint8)
         else:
@@ -277,11 +294,15 @@ class SemanticTSDF:
         blocks = self.vbg.compute_unique_block_coordinates(
             d_img, K, ext, 1000.0, self.depth_max, self.trunc_voxels
         )
+        if int(blocks.shape[0]) == 0:
+            self.skipped.append(where)
+            return False
         self._reserve(int(blocks.shape[0]))
         self.vbg.integrate(blocks, d_img, c_img, K, ext, 1000.0, self.depth_max, self.trunc_voxels)
         if labels is not None:
             self._add_evidence(depth, np.asarray(labels), T, intrinsics, where)
         self.n_frames += 1
+        return True
 
     def _add_evidence(
         self, depth: np.ndarray, labels: np.ndarray, T: np.ndarray, intr: Intrinsics, where: str
@@ -332,6 +353,8 @@ class SemanticTSDF:
         allocated. A torch int64 tensor on the grid's device."""
         import torch
 
+        if len(sel) == 0:  # a skipped frame or one without evidence: nothing to look up
+            return torch.zeros(0, dtype=torch.int64, device=_torch_view(self.vbg.attribute("label")).device)
         key = (intr, self.label_stride)
         rays = self._rays.get(key)
         if rays is None:  # (2, M) contiguous rows: x/z and y/z of every sampled pixel
@@ -491,6 +514,17 @@ def _check_poses(seq, poses) -> tuple[int | None, np.ndarray | None]:
     return n, poses
 
 
+def _check_dropouts(vol: SemanticTSDF, count: int, name: str) -> None:
+    """One warning for the frames skipped for lack of depth; an error when none was usable."""
+    if not vol.skipped:
+        return
+    if vol.n_frames == 0:
+        raise ValueError(f"{name}: none of its {count} frame(s) has usable depth (all empty or out of range)")
+    shown = ", ".join(vol.skipped[:3]) + (" ..." if len(vol.skipped) > 3 else "")
+    warnings.warn(f"{name}: {len(vol.skipped)} of {count} frame(s) had (almost) no valid depth and were "
+                  f"skipped (sensor dropouts): {shown}", stacklevel=3)
+
+
 def _posed_frames(seq, poses, n: int | None, name: str, progress: bool):
     """Yield ``(i, where, frame, pose)``: the pose is ``poses[i]`` or the frame's own."""
     from tqdm.auto import tqdm
@@ -593,6 +627,7 @@ def reconstruct(
         vol.integrate(frame.depth, frame.rgb, pose, frame.intrinsics, labels=lab, where=where)
         count += 1
     _check_counts(count, lab_iter, name)
+    _check_dropouts(vol, count, name)
     if vol.n_label_points == 0:
         warnings.warn(f"{name}: no label evidence was integrated; all labels are 0 (void)", stacklevel=2)
     mesh = vol.extract_mesh(min_weight=min_weight) if (output == "mesh" or out or rgb_out) else None
@@ -675,16 +710,17 @@ def reconstruct_many(
     frames = []  # per frame: (where, intrinsics, own labels)
     pending = []  # per frame: (sampled depth, pose, evidence pixels) until the grid is final
     for _, where, frame, pose in _posed_frames(seq, poses, n, name, progress):
-        vol.integrate(frame.depth, frame.rgb, pose, frame.intrinsics, where=where)
+        used = vol.integrate(frame.depth, frame.rgb, pose, frame.intrinsics, where=where)
         depth = np.where(np.isfinite(frame.depth), frame.depth, 0).astype(np.float32, copy=False)
         d, T = vol._sampled_depth(depth), np.asarray(pose, dtype=np.float64)
         # evidence pixels whose voxel block exists now, as when reconstruct() adds them here
         # (a block that only a later frame allocates is skipped there: ~3 of 100 000 points)
-        sel = np.flatnonzero((d > 0) & (d <= vol.depth_max))
+        sel = np.flatnonzero((d > 0) & (d <= vol.depth_max)) if used else np.zeros(0, np.int64)
         sel = sel[(vol._voxels_of(d, sel, T, frame.intrinsics) >= 0).cpu().numpy()].astype(np.int32)
         frames.append((where, frame.intrinsics, frame.labels if own_labels else None))
         pending.append((d, T, sel))
     _check_counts(len(frames), None, name)
+    _check_dropouts(vol, len(frames), name)
     # the grid is final now (growing it moves blocks): the voxel of each evidence pixel
     targets = [(sel, vol._voxels_of(d, sel, T, intr)) for (d, T, sel), (_, intr, _) in zip(pending, frames, strict=True)]
     del pending

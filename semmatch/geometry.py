@@ -1,6 +1,6 @@
 """Camera geometry: intrinsics, poses, back-projection, projection and voxel keys.
 
-Conventions (DESIGN.md §3): world in metres with z up; camera frame OpenCV (x right, y down,
+Conventions (docs/data.md): world in metres with z up; camera frame OpenCV (x right, y down,
 z forward); a pose is ``T_world_camera`` (4x4, camera to world).
 """
 

@@ -1,6 +1,6 @@
 """Files of the data contract: sequence folders, TUM poses, PLY semantic maps, atomic writes.
 
-A sequence folder (DESIGN.md §3)::
+A sequence folder (docs/data.md)::
 
     <sequence>/intrinsics.json  poses.txt  rgb/000000.png  depth/000000.png  labels/000000.png
 
@@ -50,6 +50,10 @@ __all__ = [
     "write_depth",
     "read_labels_folder",
     "write_labels_folder",
+    "OUTPUT_MARKER",
+    "output_kind",
+    "check_output_dir",
+    "replace_output_dir",
     "frame_index",
     "is_sequence",
     "read_sequence",
@@ -509,24 +513,163 @@ class SequenceWriter:
             self.abort()
 
 
-def write_labels_folder(path: PathLike, labels: Iterator[np.ndarray] | list[np.ndarray]) -> Path:
-    """Write label images ``000000.png ...`` into ``path`` (temp folder, renamed when done)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".partial", dir=path.parent))
+#: marker file of a folder semmatch wrote (``{"kind": ...}``); only such folders are ever replaced
+OUTPUT_MARKER = ".semmatch-output"
+
+
+def output_kind(path: PathLike) -> str | None:
+    """The kind of semmatch output folder ``path`` is (its :data:`OUTPUT_MARKER`), else None."""
+    marker = Path(path) / OUTPUT_MARKER
     try:
-        # PNG encoding releases the GIL: a writer thread overlaps it with making the next label
-        # image (a prediction, a transfer) or with the other writer
-        with ThreadPoolExecutor(max_workers=2) as ex:
-            pending = [ex.submit(write_image, tmp / _frame_name(i), np.asarray(lab, dtype=np.uint8))
-                       for i, lab in enumerate(labels)]
-            for fut in pending:
-                fut.result()
-        if path.exists():
-            shutil.rmtree(path)
-        os.replace(tmp, path)
+        return str(json.loads(marker.read_text()).get("kind"))
+    except (OSError, ValueError, AttributeError):
+        return None
+
+
+def check_output_dir(path: PathLike, kind: str, *, overwrite: bool = False, inputs: _SequenceABC[PathLike] = ()) -> Path:
+    """Refuse an output folder whose replacement could destroy what semmatch did not write.
+
+    Parameters
+    ----------
+    path : path
+        The folder to write.
+    kind : str
+        The kind of output (e.g. ``"labels"``).
+    overwrite : bool
+        Allow replacing an existing complete semmatch output of the same kind.
+    inputs : sequence of paths
+        Inputs of the command: the output may be neither one of them, nor inside one, nor
+        contain one.
+
+    Returns
+    -------
+    Path
+
+    Raises
+    ------
+    ValueError
+        The output is, lies inside or contains an input.
+    FileExistsError
+        ``path`` exists and is not an empty folder or a semmatch output of this kind, or it is
+        one and ``overwrite`` is False (the message names ``--overwrite``).
+    """
+    path = Path(path)
+    target = path.resolve()
+    for inp in inputs:
+        src = Path(inp).resolve()
+        if target == src or src in target.parents or target in src.parents:
+            raise ValueError(f"{path}: the output folder is, lies inside or contains the input {inp}; "
+                             f"choose an --out outside the inputs")
+    if not path.exists() and not path.is_symlink():
+        return path
+    if not path.is_dir() or path.is_symlink():
+        raise FileExistsError(f"{path} exists and is not a folder; choose another --out")
+    if not any(path.iterdir()):
+        return path
+    have = output_kind(path)
+    if have != kind:
+        what = f"a semmatch {have} output" if have else "files semmatch did not write"
+        raise FileExistsError(f"{path} holds {what}; refusing to replace it with {kind} (choose another --out)")
+    if not overwrite:
+        raise FileExistsError(f"{path} already holds semmatch {kind}; pass --overwrite to replace it")
+    return path
+
+
+@contextlib.contextmanager
+def _writer_lock(path: Path) -> Iterator[None]:
+    """Hold an exclusive lock for writing ``path`` (a second writer gets a clear error)."""
+    import fcntl
+
+    lock = path.parent / f".{path.name}.lock"
+    fd = os.open(lock, os.O_CREAT | os.O_RDWR, 0o644)
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise FileExistsError(f"{path}: another semmatch process is writing it right now") from None
+        yield
     finally:
-        shutil.rmtree(tmp, ignore_errors=True)
+        os.close(fd)
+
+
+def _recover(path: Path) -> None:
+    """Clean up after a writer of ``path`` that was killed: drop partial folders, and bring back
+    the previous output when the kill fell between moving it aside and moving the new one in."""
+    olds = sorted(path.parent.glob(f".{path.name}.*.old"))
+    if olds and not path.exists():
+        os.replace(olds[-1], path)
+        olds = olds[:-1]
+    for junk in [*path.parent.glob(f".{path.name}.*.partial"), *olds]:
+        shutil.rmtree(junk, ignore_errors=True)
+
+
+def replace_output_dir(tmp: PathLike, path: PathLike, kind: str) -> Path:
+    """Move the complete folder ``tmp`` to ``path``, replacing a previous output of ``kind``.
+
+    The new folder gets the :data:`OUTPUT_MARKER`; an existing ``path`` is moved aside, the
+    new one moved in, then the old one removed: a kill at any point leaves the old or the new
+    output complete (a later writer restores the old one if the kill fell between the moves).
+    """
+    tmp, path = Path(tmp), Path(path)
+    (tmp / OUTPUT_MARKER).write_text(json.dumps({"kind": kind}) + "\n")
+    old = None
+    if path.exists():
+        old = path.parent / f".{path.name}.{uuid.uuid4().hex[:8]}.old"
+        os.replace(path, old)
+    os.replace(tmp, path)
+    if old is not None:
+        shutil.rmtree(old, ignore_errors=True)
+    return path
+
+
+def write_labels_folder(path: PathLike, labels: Iterator[np.ndarray] | list[np.ndarray], *,
+                        overwrite: bool = True, inputs: _SequenceABC[PathLike] = (),
+                        extra_dirs: dict[str, PathLike] | None = None) -> Path:
+    """Write label images ``000000.png ...`` into ``path`` (temp folder, swapped in when done).
+
+    Parameters
+    ----------
+    path : path
+        The labels folder. An existing one is replaced only when it is a semmatch labels
+        output (:func:`check_output_dir`); anything else there is refused, never deleted.
+    labels : iterable of uint8 (H,W)
+    overwrite : bool
+        Replace an existing semmatch labels output (the command line asks for ``--overwrite``).
+    inputs : sequence of paths
+        Inputs of the command (the output may not be, lie inside or contain one).
+    extra_dirs : dict, optional
+        Finished folders moved into the output under these names before it is swapped in
+        (e.g. ``{"probs": tmp_probs}``).
+
+    Returns
+    -------
+    Path
+
+    Raises
+    ------
+    FileExistsError, ValueError
+        See :func:`check_output_dir`; also a second process writing the same folder.
+    """
+    path = Path(path)
+    check_output_dir(path, "labels", overwrite=overwrite, inputs=inputs)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with _writer_lock(path):
+        _recover(path)
+        check_output_dir(path, "labels", overwrite=overwrite, inputs=inputs)
+        tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".partial", dir=path.parent))
+        try:
+            # PNG encoding releases the GIL: a writer thread overlaps it with making the next label
+            # image (a prediction, a transfer) or with the other writer
+            with ThreadPoolExecutor(max_workers=2) as ex:
+                pending = [ex.submit(write_image, tmp / _frame_name(i), np.asarray(lab, dtype=np.uint8))
+                           for i, lab in enumerate(labels)]
+                for fut in pending:
+                    fut.result()
+            for name, src in (extra_dirs or {}).items():
+                os.replace(src, tmp / name)
+            replace_output_dir(tmp, path, "labels")
+        finally:
+            shutil.rmtree(tmp, ignore_errors=True)
     return path
 
 

@@ -8,7 +8,7 @@ label of the points in it (ties: the smallest id). With
 * ``O``: all occupied ground-truth voxels (any label),
 * ``C``: voxels of ``G ∩ P`` with equal labels (the *colour intersection*),
 
-the measures are (DESIGN.md §4, as the authors' evaluator computes them)::
+the measures are (docs/metrics.md, as the authors' evaluator computes them)::
 
     jaccard   = |C| / (|G| + |P \\ O|)        union="restrict" (default)
               = |C| / |G ∪ P|                union="plain"
@@ -96,6 +96,7 @@ def voxelize(
     *,
     transform_matrix: np.ndarray | None = None,
     densify: bool = True,
+    grid_origin: float | np.ndarray | None = None,
 ) -> VoxelGrid:
     """Voxelise a semantic map: majority label per voxel (ties: smallest id).
 
@@ -112,6 +113,9 @@ def voxelize(
         simulator's ``scene.ply``, whose vertices alone leave most voxels of a wall empty) are
         sampled at half-voxel spacing; samples take the triangle's majority vertex label.
         Dense meshes (TSDF reconstructions) are unaffected.
+    grid_origin : float or (3,), optional
+        Corner of voxel ``(0, 0, 0)`` (metres; default the world origin): keys are
+        ``floor((xyz - grid_origin) / voxel_size)``. Grids compared with each other must share it.
 
     Returns
     -------
@@ -135,7 +139,8 @@ def voxelize(
         from .geometry import check_pose
 
         pts = transform(pts.astype(np.float64), check_pose(transform_matrix, what="transform"))
-    vk = voxel_keys(pts, voxel_size)
+    origin = None if grid_origin is None else np.broadcast_to(np.asarray(grid_origin, dtype=np.float64), (3,))
+    vk = voxel_keys(pts, voxel_size, origin)
     keys, labels = _majority(vk, labels)
     try:
         packed = pack_keys(keys)
@@ -218,8 +223,9 @@ def compare(
     union: str = "restrict",
     min_overlap: float = 0.1,
     densify: bool = True,
+    grid_origin: float | np.ndarray | None = None,
 ) -> dict:
-    """Compare a predicted semantic map with ground truth, exactly as DESIGN.md §4.
+    """Compare a predicted semantic map with ground truth, exactly as docs/metrics.md.
 
     Parameters
     ----------
@@ -237,6 +243,10 @@ def compare(
         in different units or frames overlap next to nothing. 0 disables the check.
     densify : bool
         Sample coarse mesh triangles (see :func:`voxelize`).
+    grid_origin : float or (3,), optional
+        Corner of voxel ``(0, 0, 0)`` for both maps (see :func:`voxelize`); e.g. half a voxel
+        when the scene's surfaces lie on multiples of the voxel size, where a sub-centimetre
+        offset of a reconstruction would split a surface between two voxel layers.
 
     Returns
     -------
@@ -262,11 +272,12 @@ def compare(
     """
     if union not in ("restrict", "plain"):
         raise ValueError(f"union must be 'restrict' or 'plain', got {union!r}")
-    g = gt_map if isinstance(gt_map, VoxelGrid) else voxelize(gt_map, voxel_size, densify=densify)
+    g = (gt_map if isinstance(gt_map, VoxelGrid)
+         else voxelize(gt_map, voxel_size, densify=densify, grid_origin=grid_origin))
     p = (
         pred_map
         if isinstance(pred_map, VoxelGrid)
-        else voxelize(pred_map, voxel_size, transform_matrix=transform, densify=densify)
+        else voxelize(pred_map, voxel_size, transform_matrix=transform, densify=densify, grid_origin=grid_origin)
     )
     if isinstance(gt_map, VoxelGrid) or isinstance(pred_map, VoxelGrid):
         if not np.isclose(g.voxel_size, p.voxel_size):

@@ -220,3 +220,20 @@ def test_bench_fusion_json_with_labelings(capsys):
     res = json.loads(capsys.readouterr().out)
     assert res["frames"] == 3 and res["fps"] > 0 and res["mesh_vertices"] > 0
     assert res["labelings"] == 2 and res["separate_seconds"] > 0 and res["many_seconds"] > 0
+
+
+def test_sensor_dropouts_are_skipped_with_one_warning(room_frames):
+    import dataclasses
+    import warnings
+
+    frames = list(room_frames)
+    dropped = [dataclasses.replace(f, depth=np.zeros_like(f.depth)) if i in (1, 2) else f for i, f in enumerate(frames)]
+    with pytest.warns(UserWarning, match="2 of .* frame\\(s\\) had \\(almost\\) no valid depth") as rec:
+        m = reconstruct(dropped, voxel_size=0.05)
+    assert sum("no valid depth" in str(w.message) for w in rec) == 1
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        many = reconstruct_many(dropped, [None, None], 0.05)
+    assert len(m) > 0 and len(many[0]) == len(many[1]) > 0
+    with pytest.raises(ValueError, match="none of its .* frame\\(s\\) has usable depth"):
+        reconstruct([dataclasses.replace(f, depth=np.zeros_like(f.depth)) for f in frames], voxel_size=0.05)

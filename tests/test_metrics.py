@@ -191,3 +191,17 @@ def test_evaluate_cli_table_files_and_errors(tmp_path, rng, capsys):
     assert (tmp_path / "c.png").stat().st_size > 1000
     rc = main(["evaluate", str(tmp_path / "gt.ply"), str(tmp_path / "mm.ply")])
     assert rc == 2 and "different units or frames" in capsys.readouterr().err
+
+
+def test_grid_origin_moves_both_grids():
+    """A surface on a voxel boundary, reconstructed 5 mm low, splits between two voxel layers;
+    half a voxel off the boundary it does not."""
+    from semmatch.io import SemanticMap
+    from semmatch.metrics import compare
+
+    xy = np.stack(np.meshgrid(np.arange(0, 1, 0.01), np.arange(0, 1, 0.01)), -1).reshape(-1, 2)
+    floor = SemanticMap(np.c_[xy, np.zeros(len(xy))], np.full(len(xy), 2))
+    low = SemanticMap(np.c_[xy, np.full(len(xy), -0.005)], np.full(len(xy), 2))
+    on_boundary = compare(floor, low, 0.05, min_overlap=0)
+    offset = compare(floor, low, 0.05, grid_origin=0.025)
+    assert on_boundary["mean_acc"] < 0.5 and offset["mean_acc"] == pytest.approx(1.0)

@@ -102,3 +102,39 @@ def test_readme_results_section_is_generated_from_figures(tmp_path):
     text = r.read_text()
     assert "old" not in text and "| 1 |" in text and "](figures/full/table2_synthetic.png)" in text
     assert text.endswith("rest\n") and not readme.update_readme(r, fig)
+
+
+def test_protocol_refuses_bad_splits_before_any_work(tmp_path):
+    from semmatch.experiments.protocol import check_protocol
+
+    good = dict(kinds=["living_room", "bedroom"], train_seeds=[1, 2], val_seeds=[501, 502, 503, 504],
+                eval_seeds=[7001], dev_seeds=[1001], min_val_per_kind=2)
+    check_protocol(good)
+    for bad, msg in [
+        (dict(eval_seeds=[]), "eval_seeds is empty"),
+        (dict(eval_seeds=[2]), "train and eval seeds must be disjoint"),
+        (dict(val_seeds=[501, 502, 503, 1]), "train and val"),
+        (dict(eval_seeds=[1001]), "looked at during development"),
+        (dict(val_seeds=[501, 502, 503]), r"validation needs >= 2 scene\(s\) of every kind"),
+        (dict(kinds=["castle"]), "unknown scene kind"),
+    ]:
+        with pytest.raises(ValueError, match=msg):
+            check_protocol({**good, **bad})
+    # the pipeline checks before it executes anything
+    (tmp_path / "params.yaml").write_text(
+        "profile: p\nprofiles:\n  p:\n    common: {kinds: [bedroom], train_seeds: [1], val_seeds: [2], eval_seeds: [1]}\n"
+        "    simulate: {}\n")
+    with pytest.raises(ValueError, match="disjoint"):
+        pipeline.run_notebook("01_simulate", "p", params_file=tmp_path / "params.yaml", reports_dir=tmp_path / "rep",
+                              cwd=tmp_path)
+    assert not (tmp_path / "rep" / "01_simulate.ipynb").exists()
+
+
+def test_full_profile_follows_the_protocol():
+    from semmatch.experiments.protocol import check_protocol, validation_kinds
+
+    full = pipeline.load_params(ROOT / "params.yaml", "full")["common"]
+    check_protocol(full)
+    assert len(full["eval_seeds"]) * len(full["kinds"]) >= 12
+    assert min(validation_kinds(full["kinds"], full["val_seeds"]).values()) >= 2
+    assert not set(full["eval_seeds"]) & set(full["dev_seeds"])

@@ -303,3 +303,24 @@ def test_flip_average_is_mirror_symmetric_and_sums_to_one(trained, views):
     np.testing.assert_allclose(p, 0.5 * (q + qm[:, ::-1]), atol=1e-5)
     np.testing.assert_allclose(pm, p[:, ::-1], atol=1e-5)
     np.testing.assert_allclose(p.sum(-1), 1.0, atol=1e-5)
+
+
+def test_network_names_carry_architecture_and_seed():
+    import pandas as pd
+
+    from semmatch.experiments.tables import spread_over_training_seeds
+    from semmatch.segment import network_spec
+
+    assert network_spec("compact", 0) == ("compact", 0)
+    assert network_spec("compact@2", 0) == ("compact", 2)
+    assert network_spec("strong@11", 5) == ("strong", 11)
+    with pytest.raises(ValueError, match="unknown architecture 'tiny'"):
+        network_spec("tiny")
+    with pytest.raises(ValueError, match="must be an integer"):
+        network_spec("compact@x")
+    summary = pd.DataFrame(dict(model=["compact", "compact@1", "compact@2", "strong", "ground truth"],
+                                method=["lower"] * 5, mean_acc=[0.7, 0.8, 0.9, 0.5, 1.0]))
+    spread = spread_over_training_seeds(summary)
+    assert list(spread["arch"]) == ["compact"] and spread["seeds"].iloc[0] == 3
+    assert spread["mean"].iloc[0] == pytest.approx(0.8) and spread["sd"].iloc[0] == pytest.approx(0.1)
+    assert spread_over_training_seeds(summary[summary["model"] == "strong"]).empty

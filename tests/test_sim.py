@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -371,7 +372,7 @@ def test_one_render_pass_writes_clean_and_noisy_copies(tmp_path, living):
 def test_generate_dataset_layout_and_resume(tmp_path):
     kw = dict(train_seeds=[1], eval_seeds=[2], kinds=["bedroom"], n_frames_upper=3, n_frames_lower=3,
               heights_sweep=(0.2, 1.6), n_frames_sweep=2, intrinsics=DEFAULT_INTRINSICS.scaled(80, 60),
-              progress=False)
+              progress=False, routes="shared")
     res = generate_dataset(tmp_path, **kw)
     ev = tmp_path / "eval" / "bedroom_0002"
     for sub in ("upper", "lower", "h020", "h160"):
@@ -381,7 +382,7 @@ def test_generate_dataset_layout_and_resume(tmp_path):
     m = read_map(ev / "scene.ply")
     assert m.is_mesh and id_of("bed") in m.labels
     np.testing.assert_allclose(read_sequence(ev / "h020").poses[:, 2, 3], 0.2, atol=1e-6)
-    # the lower camera sets off along the upper route (its first waypoint, snapped to free space)
+    # shared routes: the lower camera sets off along the upper route (its first waypoint, snapped)
     scene = generate_scene("bedroom", 2)
     start = route_waypoints(scene, 1.6, seed=2, kind="upper")[0]
     assert np.linalg.norm(read_sequence(ev / "lower").poses[0, :2, 3] - start) < 0.3
@@ -390,6 +391,69 @@ def test_generate_dataset_layout_and_resume(tmp_path):
     assert again["written"] == [] and len(again["skipped"]) == 7
     with pytest.raises(ValueError, match="disjoint"):
         generate_dataset(tmp_path, train_seeds=[1, 2], eval_seeds=[2], kinds=["bedroom"])
+
+
+def test_own_routes_differ_and_cover_the_room(tmp_path):
+    """The paper's setup: each camera its own tour; the ablation replays the person's tour."""
+    from semmatch.sim import free_space, tour_coverage
+
+    kw = dict(train_seeds=[], val_seeds=[3], eval_seeds=[4], kinds=["office"], n_frames_upper=40, n_frames_lower=40,
+              heights_sweep=(0.2,), n_frames_sweep=2, intrinsics=DEFAULT_INTRINSICS.scaled(40, 30), progress=False,
+              route_ablation=True)
+    generate_dataset(tmp_path, **kw)
+    ev = tmp_path / "eval" / "office_0004"
+    up, low, shared = (read_sequence(ev / n).poses for n in ("upper", "lower", "lower_shared"))
+    # own tours: different starts and different paths (mean distance to the other path's nearest point)
+    d = np.linalg.norm(low[:, None, :2, 3] - up[None, :, :2, 3], axis=2)
+    assert np.linalg.norm(low[0, :2, 3] - up[0, :2, 3]) > 0.5 or d.min(axis=1).mean() > 0.3
+    assert d.min(axis=1).mean() > 0.3
+    # the replayed route stays near the person's path
+    ds = np.linalg.norm(shared[:, None, :2, 3] - up[None, :, :2, 3], axis=2)
+    assert ds.min(axis=1).mean() < d.min(axis=1).mean()
+    scene = generate_scene("office", 4)
+    for poses, h in ((up, 1.6), (low, 0.2)):
+        assert tour_coverage(free_space(scene, h), poses) > 0.6
+    # validation scenes are laid out like evaluation scenes (no ablation there)
+    va = tmp_path / "val" / "office_0003"
+    assert is_sequence(va / "upper") and is_sequence(va / "lower") and is_sequence(va / "h020")
+    assert not (va / "lower_shared").exists()
+    with pytest.raises(ValueError, match="routes"):
+        generate_dataset(tmp_path, eval_seeds=[4], kinds=["office"], routes="mine")
+
+
+def test_seed_splits_are_checked():
+    from semmatch.sim import check_seed_splits
+
+    check_seed_splits([1, 2], [3], [4], dev_seeds=[5])
+    with pytest.raises(ValueError, match="train and val seeds must be disjoint; both hold \\[2\\]"):
+        check_seed_splits([1, 2], [2], [4])
+    with pytest.raises(ValueError, match="val and eval"):
+        check_seed_splits([1], [4], [4])
+    with pytest.raises(ValueError, match="eval_seeds is empty"):
+        check_seed_splits([1], [2], [])
+    with pytest.raises(ValueError, match="looked at during development"):
+        check_seed_splits([1], [2], [3], dev_seeds=[3])
+    with pytest.raises(ValueError, match="more than once"):
+        check_seed_splits([1, 1], [2], [3])
+
+
+def test_noisy_recordings_drift_independently(tmp_path):
+    """Each noisy recording has its own random stream: the drifts are not in lockstep."""
+    from semmatch.sim import NoiseConfig
+
+    generate_dataset(tmp_path, train_seeds=[], eval_seeds=[5], kinds=["bedroom"], n_frames_upper=12,
+                     n_frames_lower=12, heights_sweep=None, intrinsics=DEFAULT_INTRINSICS.scaled(40, 30),
+                     progress=False, noise=NoiseConfig.kinect(seed=7))
+    ev = tmp_path / "eval" / "bedroom_0005"
+    seeds = {n: json.loads((ev / n / "meta.json").read_text())["noise"]["seed"] for n in ("upper_noisy", "lower_noisy")}
+    assert seeds["upper_noisy"] != seeds["lower_noisy"]
+    drift = {}
+    for n in ("upper_noisy", "lower_noisy"):
+        seq = read_sequence(ev / n)
+        _, true = read_tum(ev / n / "poses_gt.txt")
+        drift[n] = seq.poses[:, :3, 3] - true[:, :3, 3]
+    # the jitter of frame 0 differs between the two recordings
+    assert not np.allclose(drift["upper_noisy"][0], drift["lower_noisy"][0])
 
 
 def test_generate_dataset_in_parallel_writes_the_same_data(tmp_path):

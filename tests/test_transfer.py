@@ -348,3 +348,50 @@ def test_bench_transfer_json(capsys):
     m = out["methods"]["3d-neighborhood"]
     assert m["fps"] > 0 and m["ms_median"] > 0 and out["reference"]["fps"] > 0
     assert m["agreement_with_reference"] > 0.95 and out["size"] == [640, 480]
+
+
+def test_fuse_labels_keeps_supported_transfer_and_fills_the_rest():
+    from semmatch.transfer import fuse_labels
+
+    t = np.array([[0, 3], [5, 0]], np.uint8)
+    p = np.array([[1, 1], [2, 2]], np.uint8)
+    np.testing.assert_array_equal(fuse_labels(t, p), [[1, 3], [5, 2]])
+    with pytest.raises(ValueError, match="one size"):
+        fuse_labels(t, p[:1])
+
+
+def test_outputs_never_replace_what_semmatch_did_not_write(tmp_path):
+    """--out safety: user files and inputs are refused; only semmatch outputs are replaced."""
+    from semmatch.io import OUTPUT_MARKER, check_output_dir, output_kind, write_labels_folder
+
+    lab = [np.full((4, 5), 3, np.uint8)] * 2
+    user = tmp_path / "user"
+    user.mkdir()
+    (user / "thesis.tex").write_text("precious")
+    with pytest.raises(FileExistsError, match="files semmatch did not write"):
+        write_labels_folder(user, lab)
+    assert (user / "thesis.tex").read_text() == "precious"
+    seq = tmp_path / "seq"
+    (seq / "labels").mkdir(parents=True)
+    for bad in (seq, seq / "labels", tmp_path):
+        with pytest.raises(ValueError, match="input"):
+            check_output_dir(bad, "labels", inputs=[seq])
+    out = write_labels_folder(tmp_path / "out", lab)
+    assert output_kind(out) == "labels" and (out / OUTPUT_MARKER).is_file()
+    with pytest.raises(FileExistsError, match="--overwrite"):
+        write_labels_folder(out, lab, overwrite=False)
+    write_labels_folder(out, [np.full((4, 5), 7, np.uint8)])
+    assert read_image(out / "000000.png")[0, 0] == 7
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".out.lock", "out", "seq", "user"]
+
+
+def test_a_kill_between_the_swap_moves_keeps_the_old_output(tmp_path):
+    from semmatch.io import write_labels_folder
+
+    out = write_labels_folder(tmp_path / "out", [np.full((2, 2), 4, np.uint8)])
+    aside = tmp_path / ".out.deadbeef.old"
+    out.rename(aside)  # what a kill right after moving the old output aside leaves
+    (tmp_path / ".out.x.partial").mkdir()
+    write_labels_folder(out, [np.full((2, 2), 5, np.uint8)])  # the next run restores, then replaces
+    assert read_image(out / "000000.png")[0, 0] == 5
+    assert not aside.exists() and not (tmp_path / ".out.x.partial").exists()

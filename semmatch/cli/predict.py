@@ -21,7 +21,9 @@ def register(sub) -> None:
     p.add_argument("--device", choices=("auto", "cpu", "cuda"), default="auto")
     p.add_argument("--no-flip", action="store_true",
                    help="one network pass (default: average with the mirror image, twice the time)")
-    p.add_argument("--quiet", action="store_true")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace an existing labels folder semmatch wrote at --out (anything else is refused)")
+    p.add_argument("--quiet", action="store_true", help="hide the progress bar")
     p.set_defaults(func=run)
 
 
@@ -49,6 +51,7 @@ def run(args: argparse.Namespace) -> int:
 
     seq = read_sequence(args.sequence)
     model = make_segmenter(args.model, seed=args.seed, device=args.device, flip=not args.no_flip)
-    out = predict_sequence(model, seq, args.out, probs=args.probs, progress=not args.quiet)
+    out = predict_sequence(model, seq, args.out, probs=args.probs, progress=not args.quiet,
+                           overwrite=args.overwrite, inputs=[args.sequence])
     print(f"{out}: {len(seq)} label images from {getattr(model, 'name', args.model)}")
     return 0

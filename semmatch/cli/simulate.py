@@ -97,8 +97,14 @@ def register(sub) -> None:
     d.add_argument("--sweep", type=float, nargs="*", default=None,
                    help="height-sweep heights (m); default 0.2 .. 1.6; give none to skip")
     d.add_argument("--jobs", type=int, default=1, help="scenes written in parallel (worker processes)")
-    d.add_argument("--own-routes", action="store_true",
-                   help="the lower camera plans its own tour instead of following the upper route")
+    d.add_argument("--val-seeds", type=int, nargs="*", default=[],
+                   help="validation scenes (laid out as evaluation scenes): the i-th seed gives one scene "
+                        "of kind KINDS[i %% len(KINDS)]")
+    d.add_argument("--routes", choices=("own", "shared"), default="own",
+                   help="own: each camera plans its own coverage-matched tour (the paper's setup); shared: "
+                        "the lower camera follows the upper route there and back (ablation)")
+    d.add_argument("--route-ablation", action="store_true",
+                   help="with --routes own, also write lower_shared/: the robot replaying the person's tour")
     p.set_defaults(func=run)
 
 
@@ -115,7 +121,8 @@ def run(args) -> int:
             args.dataset, train_seeds=args.train_seeds, eval_seeds=args.eval_seeds, kinds=args.kinds,
             n_frames_upper=args.frames, n_frames_lower=args.frames_lower or args.frames,
             heights_sweep=sweep, n_frames_sweep=args.frames_sweep, tilt_deg=args.tilt, noise=noise,
-            intrinsics=intr, progress=progress, jobs=args.jobs, shared_route=not args.own_routes,
+            intrinsics=intr, progress=progress, jobs=args.jobs, routes=args.routes,
+            route_ablation=args.route_ablation, val_seeds=args.val_seeds,
         )
         print(f"{args.dataset}: wrote {len(res['written'])}, skipped {len(res['skipped'])} complete item(s)")
         return 0

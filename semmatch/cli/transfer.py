@@ -22,6 +22,8 @@ def register(sub) -> None:
     p.add_argument("--probs", default=None,
                    help="fused: folder of per-frame class probabilities 000000.npy (H,W,C)")
     p.add_argument("--out", required=True, help="labels folder to write")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace an existing labels folder semmatch wrote at --out (anything else is refused)")
     p.add_argument("--max-distance", type=float, default=DEFAULT_MAX_DISTANCE,
                    help="metres; pixels farther than this from the map get 0 (default %(default)s)")
     p.add_argument("--voxel-size", type=float, default=0.02, help="map index grid voxel (metres)")
@@ -48,10 +50,12 @@ def _parse_params(items: list[str]) -> dict:
 
 def run(args) -> int:
     """Run ``semmatch transfer``."""
-    from semmatch.io import read_map, read_sequence
+    from semmatch.io import check_output_dir, read_map, read_sequence
     from semmatch.transfer import MapIndex, transfer_sequence
     from semmatch.transfer.registry import check_params
 
+    # before any work: never replace what semmatch did not write, nor an input
+    check_output_dir(args.out, "labels", overwrite=args.overwrite, inputs=[args.sequence, args.map])
     params = _parse_params(args.param)
     if args.probs is not None:
         if args.method != "fused":
@@ -63,7 +67,8 @@ def run(args) -> int:
     seq = read_sequence(args.sequence)
     index = MapIndex(read_map(args.map), max_distance=args.max_distance, voxel_size=args.voxel_size)
     stats = transfer_sequence(
-        args.method, seq, index, args.out, jobs=args.jobs, progress=not args.no_progress, **params
+        args.method, seq, index, args.out, jobs=args.jobs, progress=not args.no_progress,
+        overwrite=args.overwrite, inputs=[args.sequence, args.map], **params
     )
     if args.json:
         print(json.dumps(stats))

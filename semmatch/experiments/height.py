@@ -1,53 +1,131 @@
-"""Fig. 3: segmentation accuracy against camera height on the height-sweep sequences (06)."""
+"""Fig. 3: segmentation accuracy against camera height on the height-sweep sequences (06), and
+the test-time choice made on the validation scenes' sweeps (02).
+"""
 
 from __future__ import annotations
 
+import json
 import re
 from collections.abc import Sequence
 from pathlib import Path
 
 import pandas as pd
 
+from ..io import atomic_write_text
 from .layout import Layout
 from .tables import save_table
 
-__all__ = ["sweep_sequences", "height_study"]
+__all__ = ["sweep_sequences", "height_study", "choose_test_time_flip", "plot_height_study"]
 
 _SWEEP = re.compile(r"^h(\d{3})$")
 
 
-def sweep_sequences(data_root: str | Path) -> dict[float, list[Path]]:
-    """Height-sweep sequences of the evaluation scenes: ``{height_m: [h020 folders ...]}``."""
+def sweep_sequences(data_root: str | Path, split: str = "eval") -> dict[float, list[Path]]:
+    """Height-sweep sequences of a split's scenes: ``{height_m: [h020 folders ...]}``."""
     sweeps: dict[float, list[Path]] = {}
-    for sd in Layout(data_root).scene_dirs("eval"):
+    for sd in Layout(data_root).scene_dirs(split):
         for d in sorted(sd.iterdir()):
             m = _SWEEP.match(d.name)
             if m and d.is_dir():
                 sweeps.setdefault(int(m.group(1)) / 100.0, []).append(d)
     if not sweeps:
-        raise FileNotFoundError(f"{data_root}: no height-sweep sequences (h020 ..); run 01_simulate with heights_sweep")
+        raise FileNotFoundError(f"{data_root}: no height-sweep sequences (h020 ..) of the {split} scenes; "
+                                f"run 01_simulate with heights_sweep")
     return dict(sorted(sweeps.items()))
 
 
 def height_study(
     data_root: str | Path, networks: Sequence[str], *, figures_dir: str | Path, progress: bool = True
 ) -> pd.DataFrame:
-    """Score each network on every height-sweep sequence; write ``fig3_height.{png,csv,md}``.
+    """Score each network on every evaluation scene's height sweep; write Fig. 3.
+
+    Writes ``fig3_height_per_scene.csv`` (one row per network, scene and height),
+    ``fig3_height.{csv,md}`` (mean over scenes with a 95 % bootstrap interval) and
+    ``fig3_height.png`` (the means with their intervals as bands).
 
     Returns
     -------
     DataFrame
-        model, height, n_frames and the pixel and voxel-style measures over classes 1..10
-        (see :func:`semmatch.segment.viewpoint.viewpoint_gap_sequences`), scenes pooled.
+        Per scene: model, scene, height, n_frames and the pixel measures over classes 1..10
+        (see :func:`semmatch.segment.viewpoint.viewpoint_gap_sequences`).
     """
-    from ..segment.viewpoint import plot_viewpoint_gap, viewpoint_gap_sequences
+    from ..segment.viewpoint import viewpoint_gap_sequences
+    from .claims import summarize_over_scenes
 
     layout = Layout(data_root)
     models = {net: layout.load_network(net) for net in networks}
-    df = viewpoint_gap_sequences(models, sweep_sequences(data_root), progress=progress)
-    save_table(df, figures_dir, "fig3_height")
+    df = viewpoint_gap_sequences(models, sweep_sequences(data_root), per_scene=True, progress=progress)
+    save_table(df, figures_dir, "fig3_height_per_scene")
+    summary = summarize_over_scenes(df, ("mean_acc", "miou"), by=("model", "height"))
+    save_table(summary, figures_dir, "fig3_height")
+    plot_height_study(summary, Path(figures_dir) / "fig3_height.png")
+    return df
+
+
+def plot_height_study(summary: pd.DataFrame, path: str | Path, *, metrics: Sequence[str] = ("mean_acc", "miou"),
+                      title: str = "Segmentation accuracy against camera height (tilting ±20°), "
+                                   "mean over scenes with 95% interval") -> Path:
+    """Fig. 3 from :func:`summarize_over_scenes` rows (model, height, measure, measure_lo/hi)."""
     import matplotlib.pyplot as plt
 
-    fig = plot_viewpoint_gap(df, path=Path(figures_dir) / "fig3_height.png")
-    plt.close(fig)
-    return df
+    from ..io import save_figure
+
+    names = {"mean_acc": "Mean Acc.", "miou": "mIoU (classes 1..10)"}
+    fig, axes = plt.subplots(1, len(metrics), figsize=(4.8 * len(metrics), 3.6), squeeze=False)
+    for ax, m in zip(axes[0], metrics, strict=True):
+        for model, g in summary.groupby("model", sort=False):
+            g = g.sort_values("height")
+            ax.plot(g["height"], g[m], marker="o", label=str(model))
+            if f"{m}_lo" in g:
+                ax.fill_between(g["height"], g[f"{m}_lo"], g[f"{m}_hi"], alpha=0.2)
+        ax.set_xlabel("camera height [m]")
+        ax.set_ylabel(names.get(m, m))
+        ax.grid(alpha=0.3)
+    axes[0][0].legend(title="network")
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    return save_figure(fig, path)
+
+
+def choose_test_time_flip(
+    data_root: str | Path, networks: Sequence[str], *, figures_dir: str | Path | None = None,
+    progress: bool = True,
+) -> tuple[dict[str, bool], pd.DataFrame]:
+    """Decide on the VALIDATION scenes whether each network averages its mirror image.
+
+    Every network labels the validation scenes' height sweeps with and without mirror
+    averaging; the variant with the higher mIoU averaged over all heights and scenes is kept.
+    The choice goes to ``models/recipe.json`` (read by :meth:`Layout.load_network`), the scores
+    to ``figures_dir/validation_flip.{csv,md}``.
+
+    Returns
+    -------
+    choice : dict
+        ``{network: flip}``.
+    scores : DataFrame
+        model, flip, height, mIoU and Mean Acc. pooled over the validation scenes.
+    """
+    from ..segment import load_model
+    from ..segment.viewpoint import viewpoint_gap_sequences
+
+    layout = Layout(data_root)
+    sweeps = sweep_sequences(data_root, "val")
+    rows, choice = [], {}
+    for net in networks:
+        path = layout.model(net)
+        if not path.is_file():
+            raise FileNotFoundError(f"{path}: no trained {net} network")
+        models = {f"{net}|{flip}": load_model(path, flip=flip) for flip in (False, True)}
+        df = viewpoint_gap_sequences(models, sweeps, progress=progress)
+        df["flip"] = df["model"].str.endswith("True")
+        df["model"] = net
+        rows.append(df)
+        mean = df.groupby("flip")["miou"].mean()
+        choice[net] = bool(mean.get(True, float("-inf")) > mean.get(False, float("-inf")))
+    scores = pd.concat(rows, ignore_index=True)[["model", "flip", "height", "n_frames", "miou", "mean_acc"]]
+    layout.recipe.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(layout.recipe, json.dumps({"flip": choice, "chosen_on": "validation height sweeps"},
+                                                indent=2) + "\n")
+    if figures_dir is not None:
+        save_table(scores, figures_dir, "validation_flip")
+    return choice, scores

@@ -6,12 +6,17 @@
     models/<network>.pt                                                  (02_train_segmentation)
     upper/<scene_id>/<source>.ply, upper/<scene_id>/labels_<network>/    (03_reconstruct_upper)
     lower_labels/<scene_id>/<source>/<method>/                           (04_label_transfer)
+    lower_labels/<scene_id>/shared_route/<source>/<method>/              (04, the route ablation)
     lower_maps/<scene_id>/<source>/<method>.ply, lower_maps/<scene_id>/reference.ply  (05)
+    lower_maps/<scene_id>/mesh_reference.ply, upper_mesh_reference.ply   (05: the GT mesh, observed part)
+    lower_maps/<scene_id>/shared_route/...                               (05, the route ablation)
     real_like/<scene_id>/...                                             (07_real_data)
 
 ``source`` is the upper map a transfer used: ``ground truth`` (written ``gt``) or a network
 name; for the network baseline the "method" is ``lower`` (the network applied to the lower
-frames).
+frames), and ``fused`` is the transferred labels where the map supports a pixel, the network's
+elsewhere. ``route`` names the robot's sequence: ``own`` (``lower/``, its own tour: the main
+protocol) or ``shared`` (``lower_shared/``, the person's route replayed: the ablation).
 """
 
 from __future__ import annotations
@@ -19,10 +24,19 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-__all__ = ["Layout", "GT", "source_dir", "model_name"]
+__all__ = ["Layout", "GT", "ROUTES", "source_dir", "model_name"]
 
 #: the upper map built from ground-truth labels
 GT = "gt"
+
+#: robot sequence folder of each route mode
+ROUTES = {"own": "lower", "shared": "lower_shared"}
+
+
+def _route_part(route: str) -> tuple[str, ...]:
+    if route not in ROUTES:
+        raise ValueError(f"route must be one of {', '.join(ROUTES)}, got {route!r}")
+    return () if route == "own" else ("shared_route",)
 
 
 def source_dir(source: str) -> str:
@@ -58,14 +72,30 @@ class Layout:
     def model(self, network: str) -> Path:
         return self.root / "models" / f"{network}.pt"
 
+    @property
+    def recipe(self) -> Path:
+        """Inference choices made on the validation scenes (``02_train_segmentation``)."""
+        return self.root / "models" / "recipe.json"
+
     def load_network(self, network: str):
-        """The trained network ``network`` (:func:`semmatch.segment.load_model`)."""
+        """The trained network ``network`` (:func:`semmatch.segment.load_model`).
+
+        Test-time mirror averaging follows the choice stored in :attr:`recipe` (made on the
+        validation scenes); without a recipe file the loader's default applies.
+        """
+        import json
+
         from ..segment import load_model
 
         path = self.model(network)
         if not path.is_file():
             raise FileNotFoundError(f"{path}: no trained {network} network; run 02_train_segmentation first")
-        return load_model(path)
+        kw = {}
+        if self.recipe.is_file():
+            choice = json.loads(self.recipe.read_text()).get("flip", {})
+            if network in choice:
+                kw["flip"] = bool(choice[network])
+        return load_model(path, **kw)
 
     def upper_map(self, scene_id: str, source: str) -> Path:
         return self.root / "upper" / scene_id / f"{source_dir(source)}.ply"
@@ -73,15 +103,25 @@ class Layout:
     def upper_labels(self, scene_id: str, network: str) -> Path:
         return self.root / "upper" / scene_id / f"labels_{network}"
 
-    def lower_labels(self, scene_id: str, source: str, method: str) -> Path:
-        return self.root / "lower_labels" / scene_id / source_dir(source) / method
+    def lower_sequence(self, scene_dir: Path, route: str = "own") -> Path:
+        """The robot's sequence folder of a scene for a route mode."""
+        _route_part(route)
+        return Path(scene_dir) / ROUTES[route]
 
-    def lower_map(self, scene_id: str, source: str, method: str) -> Path:
-        return self.root / "lower_maps" / scene_id / source_dir(source) / f"{method}.ply"
+    def lower_labels(self, scene_id: str, source: str, method: str, route: str = "own") -> Path:
+        return self.root.joinpath("lower_labels", scene_id, *_route_part(route), source_dir(source), method)
 
-    def lower_reference(self, scene_id: str) -> Path:
+    def lower_map(self, scene_id: str, source: str, method: str, route: str = "own") -> Path:
+        return self.root.joinpath("lower_maps", scene_id, *_route_part(route), source_dir(source), f"{method}.ply")
+
+    def lower_reference(self, scene_id: str, route: str = "own") -> Path:
         """Lower-view reconstruction fused from ground-truth labels: the reference of Table 2."""
-        return self.root / "lower_maps" / scene_id / "reference.ply"
+        return self.root.joinpath("lower_maps", scene_id, *_route_part(route), "reference.ply")
+
+    def mesh_reference(self, scene_id: str, view: str = "lower", route: str = "own") -> Path:
+        """The ground-truth mesh sampled where a view observed it: the independent reference."""
+        name = "mesh_reference.ply" if view == "lower" else f"{view}_mesh_reference.ply"
+        return self.root.joinpath("lower_maps", scene_id, *_route_part(route), name)
 
     def upper_reference(self, scene_id: str) -> Path:
         """Upper-view reconstruction fused from ground-truth labels."""

@@ -24,6 +24,7 @@ from pathlib import Path
 import yaml
 
 from ..io import atomic_write_text
+from .protocol import check_protocol
 
 __all__ = [
     "NOTEBOOKS",
@@ -140,6 +141,8 @@ def run_notebook(
     import papermill as pm
 
     params = notebook_parameters(notebook, profile, params_file, **overrides)
+    check_protocol(load_params(params_file, params["profile"]).get("common") or {},
+                   where=f"{params_file} (profile {params['profile']})")
     src = Path(notebooks_dir) / f"{notebook}.ipynb"
     if not src.is_file():
         raise FileNotFoundError(f"{src}: no such notebook")

@@ -71,9 +71,6 @@ def qualitative_figure(
     One row per upper-map source (default: ground truth, as the paper's Fig. 4), one column per
     method, the reference (lower frames fused with ground-truth labels) first.
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.patches import Patch
 

@@ -15,11 +15,44 @@ from .tables import speed_table
 __all__ = ["measure_speed", "plot_speed"]
 
 
-def measure_speed(data_root: str | Path, methods: Sequence[str], *, n_frames: int = 30, scene: int = 0) -> pd.DataFrame:
+def _frames_at(sd: Path, n_frames: int, width: int, height: int) -> list:
+    """``n_frames`` evenly spaced lower frames of scene folder ``sd`` at ``width`` x ``height``.
+
+    The recorded frames when the sequence has that size; otherwise the scene (regenerated from
+    ``scene.json``: kind and seed) is rendered at the true poses of those frames.
+    """
+    import json
+
+    from ..geometry import DEFAULT_INTRINSICS
+    from ..io import Frame
+
+    seq = read_sequence(sd / "lower")
+    idx = np.unique(np.linspace(0, len(seq) - 1, min(n_frames, len(seq))).round().astype(int))
+    if (seq.intrinsics.width, seq.intrinsics.height) == (width, height):
+        return [seq[int(i)] for i in idx]
+    from ..io import read_tum
+    from ..sim import Renderer, generate_scene
+
+    meta = json.loads((sd / "scene.json").read_text())
+    if "kind" not in meta or "seed" not in meta:
+        raise ValueError(f"{sd / 'scene.json'}: no kind/seed to regenerate the scene at {width}x{height}")
+    intr = DEFAULT_INTRINSICS.scaled(width, height)
+    renderer = Renderer(generate_scene(meta["kind"], int(meta["seed"])), intr)
+    _, poses = read_tum(sd / "lower" / "poses_gt.txt")
+    frames = []
+    for k, i in enumerate(idx):
+        r = renderer.render(poses[int(i)])
+        frames.append(Frame(rgb=r.rgb, depth=r.depth, labels=r.labels, pose=poses[int(i)], intrinsics=intr, index=k))
+    return frames
+
+
+def measure_speed(data_root: str | Path, methods: Sequence[str], *, n_frames: int = 30, scene: int = 0,
+                  width: int = 640, height: int = 480) -> pd.DataFrame:
     """Median per-frame time of each method and of the reference backend, in one process.
 
     The ground-truth upper map of one evaluation scene is indexed once; ``n_frames`` lower
-    frames (evenly spaced) are labelled by each method after one warm-up frame.
+    frames (evenly spaced; rendered at ``width`` x ``height``, the paper's 640x480, when the
+    profile records smaller frames) are labelled by each method after one warm-up frame.
 
     Returns
     -------
@@ -33,9 +66,7 @@ def measure_speed(data_root: str | Path, methods: Sequence[str], *, n_frames: in
 
     layout = Layout(data_root)
     sd = layout.scene_dirs("eval")[scene]
-    seq = read_sequence(sd / "lower")
-    idx = np.unique(np.linspace(0, len(seq) - 1, min(n_frames, len(seq))).round().astype(int))
-    frames = [seq[int(i)] for i in idx]
+    frames = _frames_at(sd, n_frames, width, height)
     index = prepare(read_map(layout.upper_map(sd.name, GT)))
 
     timing = time_methods(frames, index, methods, exact_variant=False)
@@ -49,9 +80,6 @@ def measure_speed(data_root: str | Path, methods: Sequence[str], *, n_frames: in
 
 def plot_speed(df: pd.DataFrame, path: str | Path) -> Path:
     """Bar chart (log scale) of our FPS beside the paper's, per method."""
-    import matplotlib
-
-    matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     x = np.arange(len(df))

@@ -14,14 +14,17 @@ import pandas as pd
 from tqdm.auto import tqdm
 
 from ..io import read_map, read_sequence
-from .layout import GT, Layout, model_name
+from .layout import GT, ROUTES, Layout, model_name
 
 __all__ = [
     "MEASURE_COLUMNS",
+    "eval_grid_origin",
     "reconstruct_upper_maps",
     "transfer_lower_labels",
+    "support_table",
     "reconstruct_lower_maps",
     "evaluate_synthetic",
+    "main_rows",
     "average_over_scenes",
     "plot_table",
 ]
@@ -29,10 +32,21 @@ __all__ = [
 MEASURE_COLUMNS = ("jaccard", "sorensen", "color_acc", "mean_acc")
 
 
+def eval_grid_origin(voxel_size: float) -> tuple[float, float, float]:
+    """Corner of the evaluation grid: half a voxel off the world origin in every axis.
+
+    The procedural rooms put floors, walls and many furniture faces on multiples of 5 cm, where
+    the faces of a grid anchored at the origin also lie; a reconstruction a few millimetres off
+    (the TSDF's bias) would then split each such surface between two voxel layers and score
+    aliasing rather than labels. The protocol therefore evaluates on a grid offset by half a voxel.
+    """
+    return (0.5 * voxel_size,) * 3
+
+
 def _scores(gt, pred, voxel_size: float) -> dict:
     from ..metrics import compare
 
-    s = compare(gt, pred, voxel_size=voxel_size)
+    s = compare(gt, pred, voxel_size=voxel_size, grid_origin=eval_grid_origin(voxel_size))
     return {k: float(s[k]) for k in MEASURE_COLUMNS}
 
 
@@ -82,45 +96,92 @@ def reconstruct_upper_maps(
     return pd.DataFrame(rows)
 
 
+def _fused_folder(transferred: Path, predicted: Path, out: Path) -> Path:
+    """Write ``fused`` labels: ``transferred`` where supported, ``predicted`` elsewhere."""
+    from ..io import read_image, read_labels_folder, write_labels_folder
+    from ..transfer import fuse_labels
+
+    a, b = read_labels_folder(transferred), read_labels_folder(predicted)
+    if len(a) != len(b):
+        raise ValueError(f"{transferred} holds {len(a)} label images, {predicted} {len(b)}")
+    return write_labels_folder(out, (fuse_labels(read_image(x), read_image(y)) for x, y in zip(a, b, strict=True)))
+
+
+def _routes(layout: Layout, sd: Path) -> list[str]:
+    """Route modes with a robot sequence in scene folder ``sd`` (``own`` first)."""
+    return [r for r in ROUTES if layout.lower_sequence(sd, r).is_dir()]
+
+
+def _route_methods(route: str, methods: Sequence[str], fused_base: str) -> list[str]:
+    """Transfer methods run on a route: all of them on the robot's own tour, the fused base on the ablation."""
+    return list(methods) if route == "own" else [fused_base]
+
+
 def transfer_lower_labels(
     data_root: str | Path,
     methods: Sequence[str],
     networks: Sequence[str],
     *,
+    fused_base: str = "3d-neighborhood",
     jobs: int = 1,
     progress: bool = True,
 ) -> pd.DataFrame:
-    """Labels for every lower frame: each method from each upper map, and each network directly.
+    """Labels for every lower frame: each method from each upper map, each network directly, fused.
 
-    Writes ``lower_labels/<scene>/<source>/<method>/`` (source: ``gt`` or a network) and
+    Writes ``lower_labels/<scene>/<source>/<method>/`` (source: ``gt`` or a network),
     ``lower_labels/<scene>/<network>/lower/`` (the network applied to the lower frames: the
-    baseline).
+    baseline) and ``lower_labels/<scene>/<network>/fused/`` (``fused_base`` from the network's
+    own upper map where it supports a pixel, the network elsewhere). Where the scene has the
+    route ablation (``lower_shared/``), the same for ``fused_base`` under ``shared_route/``.
 
     Returns
     -------
     DataFrame
-        scene, model, method, coverage (share of pixels with depth that got a label), fps.
+        scene, route, model, method, coverage (share of pixels with depth that got a label;
+        for the ground-truth map and ``fused_base``: the share of the robot's view the person's
+        map supports), fps.
     """
     from ..segment import predict_sequence
     from ..transfer import prepare, transfer_sequence
 
+    if fused_base not in methods:
+        raise ValueError(f"fused_base {fused_base!r} is not among the methods {list(methods)}")
     layout = Layout(data_root)
     models = {net: layout.load_network(net) for net in networks}
     rows = []
-    for sd in layout.scene_dirs("eval"):
+    scene_dirs = layout.scene_dirs("eval")
+    for sd in tqdm(scene_dirs, desc="transfer (scenes)", disable=not progress):
         sid = sd.name
-        lower = read_sequence(sd / "lower").load()  # 3 sources x 5 methods read every frame
-        for source in (GT, *networks):
-            index = prepare(read_map(layout.upper_map(sid, source)))
-            for method in methods:
-                st = transfer_sequence(method, lower, index, layout.lower_labels(sid, source, method),
-                                       jobs=jobs, progress=progress)
-                rows.append(dict(scene=sid, model=model_name(source), method=method,
-                                 coverage=float(st["coverage"]), fps=float(st["fps"])))
-        for net in networks:
-            predict_sequence(models[net], lower, layout.lower_labels(sid, net, "lower"),
-                             progress=progress)
+        indexes = {source: prepare(read_map(layout.upper_map(sid, source))) for source in (GT, *networks)}
+        for route in _routes(layout, sd):
+            lower = read_sequence(layout.lower_sequence(sd, route)).load()  # read by every method
+            for source in (GT, *networks):
+                for method in _route_methods(route, methods, fused_base):
+                    st = transfer_sequence(method, lower, indexes[source],
+                                           layout.lower_labels(sid, source, method, route), jobs=jobs, progress=False)
+                    rows.append(dict(scene=sid, route=route, model=model_name(source), method=method,
+                                     coverage=float(st["coverage"]), fps=float(st["fps"])))
+            for net in networks:
+                low = predict_sequence(models[net], lower, layout.lower_labels(sid, net, "lower", route),
+                                       progress=False)
+                _fused_folder(layout.lower_labels(sid, net, fused_base, route), low,
+                              layout.lower_labels(sid, net, "fused", route))
     return pd.DataFrame(rows)
+
+
+def support_table(coverage: pd.DataFrame, fused_base: str = "3d-neighborhood") -> pd.DataFrame:
+    """Per scene and route: the share of the robot's pixels (with depth) the person's map supports.
+
+    From the coverage of :func:`transfer_lower_labels`: ``fused_base`` transferred from the
+    ground-truth upper map (its geometry is the upper camera's; the labels do not matter).
+    """
+    sel = coverage[(coverage["model"] == model_name(GT)) & (coverage["method"] == fused_base)]
+    return sel[["scene", "route", "coverage"]].rename(columns={"coverage": "support"}).reset_index(drop=True)
+
+
+def _labelings(route: str, methods: Sequence[str], networks: Sequence[str], fused_base: str) -> list[tuple[str, str]]:
+    meths = _route_methods(route, methods, fused_base)
+    return [(GT, m) for m in meths] + [(n, m) for n in networks for m in ("lower", *meths, "fused")]
 
 
 def reconstruct_lower_maps(
@@ -129,24 +190,38 @@ def reconstruct_lower_maps(
     networks: Sequence[str],
     *,
     voxel_size: float = 0.04,
+    fused_base: str = "3d-neighborhood",
+    mesh_spacing: float = 0.01,
     progress: bool = True,
 ) -> None:
-    """Fuse the lower sequence of every scene with each labels folder of 04 (and with GT labels).
+    """Fuse the lower sequence of every scene with each labels folder of 04, and build references.
 
-    Writes ``lower_maps/<scene>/reference.ply`` (ground-truth labels: the reference) and
-    ``lower_maps/<scene>/<source>/<method>.ply``.
+    Writes ``lower_maps/<scene>/reference.ply`` (the lower frames fused with ground-truth labels),
+    ``lower_maps/<scene>/<source>/<method>.ply`` and the independent references
+    ``mesh_reference.ply`` / ``upper_mesh_reference.ply``: the ground-truth scene mesh sampled
+    every ``mesh_spacing`` metres and kept where the lower / upper camera observed it
+    (:func:`semmatch.reference.observed_reference`), which shares no geometry with any fusion.
+    The same under ``shared_route/`` for the route ablation.
     """
     from ..fusion import reconstruct_many
+    from ..io import write_map
+    from ..reference import observed_reference
 
     layout = Layout(data_root)
     for sd in tqdm(layout.scene_dirs("eval"), desc="lower maps", disable=not progress):
         sid = sd.name
-        jobs = [(GT, m) for m in methods] + [(n, m) for n in networks for m in ("lower", *methods)]
-        # one fusion of the lower frames; the reference (ground-truth labels) and every
-        # labels folder as labelings of it
-        reconstruct_many(read_sequence(sd / "lower"),
-                         [None, *(layout.lower_labels(sid, s, m) for s, m in jobs)], voxel_size,
-                         outs=[layout.lower_reference(sid), *(layout.lower_map(sid, s, m) for s, m in jobs)])
+        mesh = read_map(sd / "scene.ply")
+        write_map(layout.mesh_reference(sid, "upper"),
+                  observed_reference(mesh, read_sequence(sd / "upper"), spacing=mesh_spacing))
+        for route in _routes(layout, sd):
+            lower = read_sequence(layout.lower_sequence(sd, route)).load()
+            jobs = _labelings(route, methods, networks, fused_base)
+            # one fusion of the lower frames; the reference (ground-truth labels) and every
+            # labels folder as labelings of it
+            reconstruct_many(lower, [None, *(layout.lower_labels(sid, s, m, route) for s, m in jobs)], voxel_size,
+                             outs=[layout.lower_reference(sid, route),
+                                   *(layout.lower_map(sid, s, m, route) for s, m in jobs)])
+            write_map(layout.mesh_reference(sid, "lower", route), observed_reference(mesh, lower, spacing=mesh_spacing))
 
 
 def evaluate_synthetic(
@@ -155,32 +230,50 @@ def evaluate_synthetic(
     networks: Sequence[str],
     *,
     eval_voxel_size: float = 0.05,
+    fused_base: str = "3d-neighborhood",
 ) -> pd.DataFrame:
-    """Table 2, per scene: every lower map against the lower reference, plus the upper rows.
+    """Table 2, per scene: every lower map against both references, plus the upper rows.
 
     Returns
     -------
     DataFrame
-        scene, model (``ground truth`` or a network), method (a transfer method, ``lower`` =
-        the network on the lower frames, ``upper`` = the network's upper map), the four measures.
+        scene, route (``own``: the robot's own tour, ``shared``: the ablation), reference
+        (``fusion``: the robot's frames fused with ground-truth labels, as the paper;
+        ``mesh``: the ground-truth mesh where the camera observed it), model (``ground truth``
+        or a network), method (a transfer method, ``lower`` = the network on the lower frames,
+        ``fused``, ``upper`` = the network's upper map scored against the upper references),
+        the four measures.
     """
     layout = Layout(data_root)
     rows = []
     for sd in layout.scene_dirs("eval"):
         sid = sd.name
-        ref = read_map(layout.lower_reference(sid))
-        up_ref = read_map(layout.upper_reference(sid))
+        up_refs = {"fusion": read_map(layout.upper_reference(sid)),
+                   "mesh": read_map(layout.mesh_reference(sid, "upper"))}
         for net in networks:
-            rows.append(dict(scene=sid, model=net, method="upper",
-                             **_scores(up_ref, read_map(layout.upper_map(sid, net)), eval_voxel_size)))
-            rows.append(dict(scene=sid, model=net, method="lower",
-                             **_scores(ref, read_map(layout.lower_map(sid, net, "lower")), eval_voxel_size)))
-        for source in (GT, *networks):
-            for method in methods:
-                pred = read_map(layout.lower_map(sid, source, method))
-                rows.append(dict(scene=sid, model=model_name(source), method=method,
-                                 **_scores(ref, pred, eval_voxel_size)))
+            up = read_map(layout.upper_map(sid, net))
+            for ref_name, ref in up_refs.items():
+                rows.append(dict(scene=sid, route="own", reference=ref_name, model=net, method="upper",
+                                 **_scores(ref, up, eval_voxel_size)))
+        for route in _routes(layout, sd):
+            refs = {"fusion": read_map(layout.lower_reference(sid, route)),
+                    "mesh": read_map(layout.mesh_reference(sid, "lower", route))}
+            for source, method in _labelings(route, methods, networks, fused_base):
+                pred = read_map(layout.lower_map(sid, source, method, route))
+                for ref_name, ref in refs.items():
+                    rows.append(dict(scene=sid, route=route, reference=ref_name, model=model_name(source),
+                                     method=method, **_scores(ref, pred, eval_voxel_size)))
     return pd.DataFrame(rows)
+
+
+def main_rows(per_scene: pd.DataFrame, *, reference: str = "fusion", route: str = "own") -> pd.DataFrame:
+    """The rows of one table: one reference and one route of :func:`evaluate_synthetic`'s output."""
+    sel = per_scene
+    if "reference" in sel.columns:
+        sel = sel[sel["reference"] == reference]
+    if "route" in sel.columns:
+        sel = sel[sel["route"] == route]
+    return sel.reset_index(drop=True)
 
 
 def average_over_scenes(df: pd.DataFrame) -> pd.DataFrame:
@@ -192,23 +285,26 @@ def average_over_scenes(df: pd.DataFrame) -> pd.DataFrame:
 
 
 def plot_table(df: pd.DataFrame, path: str | Path, *, title: str, methods: Sequence[str]) -> Path:
-    """Bar chart of Mean Acc. per upper map and method, with the paper's values as markers."""
-    import matplotlib
-
-    matplotlib.use("Agg")
+    """Bar chart of Mean Acc. per upper map and method with 95 % intervals (``mean_acc_lo/hi``
+    when present) and the paper's values as markers."""
     import matplotlib.pyplot as plt
 
     from ..io import save_figure
 
     models = list(dict.fromkeys(df["model"]))
-    order = ["upper", "lower", *methods]
+    order = ["upper", "lower", *methods, "fused"]
     fig, axes = plt.subplots(1, len(models), figsize=(4.2 * len(models), 3.6), sharey=True, squeeze=False)
     for ax, model in zip(axes[0], models, strict=True):
         sub = df[df["model"] == model].set_index("method")
         names = [m for m in order if m in sub.index]
         x = np.arange(len(names))
-        colors = ["#999999" if n in ("upper", "lower") else "#3b75af" for n in names]
-        ax.bar(x, sub.loc[names, "mean_acc"], color=colors, label="semmatch")
+        colors = ["#999999" if n in ("upper", "lower") else "#d08c2f" if n == "fused" else "#3b75af" for n in names]
+        mean = sub.loc[names, "mean_acc"].to_numpy(dtype=float)
+        err = None
+        if "mean_acc_lo" in sub.columns:
+            lo, hi = sub.loc[names, "mean_acc_lo"].to_numpy(dtype=float), sub.loc[names, "mean_acc_hi"].to_numpy(dtype=float)
+            err = np.vstack([mean - lo, hi - mean])
+        ax.bar(x, mean, color=colors, yerr=err, capsize=3, label="semmatch (95% interval)")
         if "paper_mean_acc" in sub.columns:
             ax.plot(x, sub.loc[names, "paper_mean_acc"], "k_", markersize=18, mew=2, label="paper")
         ax.set_xticks(x, names, rotation=45, ha="right")

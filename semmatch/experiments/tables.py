@@ -14,6 +14,8 @@ __all__ = [
     "MEASURES",
     "Finding",
     "save_table",
+    "save_interval_table",
+    "spread_over_training_seeds",
     "with_paper_columns",
     "speed_table",
     "check_findings",
@@ -40,6 +42,66 @@ def save_table(df: pd.DataFrame, figures_dir: str | Path, name: str, *, floatfmt
     atomic_write_text(csv, df.to_csv(index=False, float_format="%.4f"))
     atomic_write_text(md, df.to_markdown(index=False, floatfmt=floatfmt) + "\n")
     return csv, md
+
+
+def save_interval_table(summary: pd.DataFrame, figures_dir: str | Path, name: str, *,
+                        measures: tuple[str, ...] = MEASURES, keep: tuple[str, ...] = ()) -> tuple[Path, Path]:
+    """Write a table of means with 95 % intervals: ``<name>.csv`` numeric (``m``, ``m_lo``,
+    ``m_hi``), ``<name>.md`` with ``mean [lo, hi]`` cells.
+
+    Parameters
+    ----------
+    summary : DataFrame
+        From :func:`semmatch.experiments.claims.summarize_over_scenes`, optionally with
+        ``paper_<measure>`` columns (:func:`with_paper_columns`).
+    figures_dir : path
+    name : str
+    measures : tuple of str
+        Measures shown with their intervals.
+    keep : tuple of str
+        Further columns shown as they are (e.g. ``paper_mean_acc``).
+    """
+    from .claims import format_with_intervals
+
+    figures_dir = Path(figures_dir)
+    figures_dir.mkdir(parents=True, exist_ok=True)
+    summary = summary.drop(columns=[c for c in ("paper_model",) if c in summary.columns])
+    csv, md = figures_dir / f"{name}.csv", figures_dir / f"{name}.md"
+    atomic_write_text(csv, summary.to_csv(index=False, float_format="%.4f"))
+    shown = format_with_intervals(summary, measures)
+    extra = [c for c in keep if c in summary.columns]
+    for c in extra:
+        shown[c] = summary[c].map(lambda v: "" if pd.isna(v) else f"{v:.3f}").values
+    atomic_write_text(md, shown.to_markdown(index=False) + "\n")
+    return csv, md
+
+
+def spread_over_training_seeds(summary: pd.DataFrame, measure: str = "mean_acc", *,
+                               by: tuple[str, ...] = ("method",)) -> pd.DataFrame:
+    """The spread of a measure over training seeds of one architecture (``compact``, ``compact@1``, ...).
+
+    Parameters
+    ----------
+    summary : DataFrame
+        Rows per network (column ``model``) and ``by`` with the measure averaged over scenes
+        (e.g. :func:`semmatch.experiments.claims.summarize_over_scenes`).
+    measure : str
+    by : tuple of str
+        Further grouping columns (``method`` for Table 2, ``height`` for Fig. 3).
+
+    Returns
+    -------
+    DataFrame
+        One row per architecture with at least two seeds and ``by``: ``arch, <by>, seeds,
+        mean, sd, min, max`` of the measure over the seeds; empty when no architecture has two.
+    """
+    from ..segment import network_spec
+
+    rows = summary[summary["model"] != "ground truth"].copy()
+    rows["arch"] = [network_spec(m)[0] for m in rows["model"]]
+    out = rows.groupby(["arch", *by], sort=False)[measure].agg(["count", "mean", "std", "min", "max"]).reset_index()
+    out = out.rename(columns={"count": "seeds", "std": "sd"})
+    return out[out["seeds"] >= 2].reset_index(drop=True)
 
 
 def with_paper_columns(ours: pd.DataFrame, table: int = 2) -> pd.DataFrame:

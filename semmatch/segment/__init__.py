@@ -1,7 +1,7 @@
 """Semantic segmentation: two trained networks, a (noisy) ground-truth oracle, a detectron2 adapter
 and the viewpoint-gap study.
 
-Public surface (DESIGN.md §8)::
+Public surface::
 
     from semmatch.segment import load_model
     net = load_model(checkpoint); probs = net.predict(rgb)  # (H,W,21) float32, sums to 1
@@ -23,6 +23,7 @@ _EXPORTS = {
     "Segmenter": "predict",
     "train": "training",
     "make_config": "training",
+    "network_spec": "training",
     "TrainConfig": "training",
     "PROFILES": "training",
     "ModelConfig": "models",

@@ -20,7 +20,7 @@ network time. ``flip=False`` gives the single pass (used for validation during t
 from __future__ import annotations
 
 import os
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -266,6 +266,8 @@ def predict_sequence(
     *,
     probs: bool = False,
     progress: bool = True,
+    overwrite: bool = True,
+    inputs: Sequence[str | os.PathLike] = (),
 ) -> Path:
     """Label every frame of a sequence and write a labels folder per the data contract.
 
@@ -280,6 +282,11 @@ def predict_sequence(
     probs : bool
         Also write the probabilities as ``out_dir/probs/000000.npy`` (float16 (H,W,C)).
     progress : bool
+    overwrite : bool
+        Replace an existing semmatch labels output at ``out_dir`` (anything else there is
+        refused: :func:`semmatch.io.check_output_dir`).
+    inputs : sequence of paths
+        Folders ``out_dir`` may not be, lie inside or contain (e.g. the sequence itself).
 
     Returns
     -------
@@ -305,9 +312,8 @@ def predict_sequence(
             yield p.argmax(axis=-1).astype(np.uint8)
 
     try:
-        write_labels_folder(out_dir, labels())
-        if tmp_probs is not None:
-            os.replace(tmp_probs, out_dir / "probs")
+        write_labels_folder(out_dir, labels(), overwrite=overwrite, inputs=inputs,
+                            extra_dirs={"probs": tmp_probs} if tmp_probs is not None else None)
     finally:
         if tmp_probs is not None:
             shutil.rmtree(tmp_probs, ignore_errors=True)

@@ -1,7 +1,7 @@
 """2D pixel scores of label images: confusion matrix, per-class IoU, mIoU over classes 1..10.
 
 Kept inside :mod:`semmatch.segment` for validation during training and for the viewpoint
-study. The 2D analogues of the paper's measures (DESIGN.md §4) are computed over pixels:
+study. The 2D analogues of the paper's measures (docs/metrics.md) are computed over pixels:
 G = ground-truth pixels of an evaluation class, P = predicted pixels of an evaluation class,
 C = pixels in both with equal labels.
 """

@@ -31,7 +31,7 @@ from .models import ModelConfig, build_network, count_parameters
 from .scores import confusion, scores
 
 __all__ = [
-    "TrainConfig", "PROFILES", "make_config", "train", "train_or_load", "validation_table", "augment",
+    "TrainConfig", "PROFILES", "make_config", "network_spec", "train", "train_or_load", "validation_table", "augment",
     "evaluate_views", "build_views", "CHECKPOINT_FORMAT",
 ]
 
@@ -181,6 +181,32 @@ PROFILES: dict[str, dict] = {
                  frames=16, val_frames=30, steps=4000, batch_size=16, eval_every=200,
                  train_seeds=tuple(range(1, 13)), val_seeds=(501, 502)),
 }
+
+
+def network_spec(name: str, default_seed: int = 0) -> tuple[str, int]:
+    """Architecture and training seed of a network name of the pipeline.
+
+    ``"compact"`` is the compact architecture trained with ``default_seed``; ``"compact@2"`` the
+    same architecture trained with seed 2 (the training-variance study lists several seeds of
+    one architecture as separate networks).
+
+    Raises
+    ------
+    ValueError
+        An unknown architecture or a seed that is not an integer; the message names both.
+    """
+    from .models import ARCHITECTURES
+
+    arch, sep, seed = str(name).partition("@")
+    if arch not in ARCHITECTURES:
+        raise ValueError(f"network {name!r}: unknown architecture {arch!r}; valid: {', '.join(ARCHITECTURES)} "
+                         f"(optionally with @SEED, e.g. compact@2)")
+    if not sep:
+        return arch, int(default_seed)
+    try:
+        return arch, int(seed)
+    except ValueError:
+        raise ValueError(f"network {name!r}: the training seed after '@' must be an integer") from None
 
 
 def make_config(profile: str = "smoke", **overrides) -> TrainConfig:

@@ -14,7 +14,14 @@ from .plyscene import scene_from_ply
 from .procedural import SCENE_KINDS, box_room, generate_scene
 from .render import Renderer, RenderResult
 from .scene import Scene
-from .sequence import DEFAULT_SWEEP, generate_dataset, simulate_sequence, simulate_sequences, sweep_name
+from .sequence import (
+    DEFAULT_SWEEP,
+    check_seed_splits,
+    generate_dataset,
+    simulate_sequence,
+    simulate_sequences,
+    sweep_name,
+)
 from .trajectory import (
     FreeSpace,
     camera_elevation_deg,
@@ -24,6 +31,7 @@ from .trajectory import (
     make_trajectory,
     route_waypoints,
     scene_levels,
+    tour_coverage,
 )
 
 __all__ = [
@@ -43,10 +51,12 @@ __all__ = [
     "limit_turn_rate",
     "make_sweep_trajectories",
     "camera_elevation_deg",
+    "tour_coverage",
     "NoiseConfig",
     "simulate_sequence",
     "simulate_sequences",
     "generate_dataset",
+    "check_seed_splits",
     "sweep_name",
     "DEFAULT_SWEEP",
 ]

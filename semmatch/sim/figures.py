@@ -11,7 +11,7 @@ import numpy as np
 from ..io import save_figure
 from ..labels import EVAL_CLASSES, NAMES, PALETTE, labels_to_colors
 
-__all__ = ["frame_figure", "scene_frames_figure", "sequence_frames_figure", "dataset_summary"]
+__all__ = ["frame_figure", "scene_frames_figure", "sequence_frames_figure", "dataset_summary", "routes_figure"]
 
 
 def frame_figure(
@@ -46,9 +46,6 @@ def frame_figure(
     ValueError
         No frames, a frame without labels, or titles that do not match the frames.
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.patches import Patch
 
@@ -204,3 +201,62 @@ def dataset_summary(root: str | os.PathLike, *, stride: int = 5):
             "categories": int(len(set(np.unique(allv).tolist()) - {0})),
         })
     return pd.DataFrame(rows)
+
+
+def routes_figure(split_dir: str | os.PathLike, path: str | os.PathLike, *, max_scenes: int = 12,
+                  radius: float = 1.5) -> Path:
+    """Floor plans of the scenes of a split with each camera's path, and how broadly each covers the room.
+
+    Per scene (``<split_dir>/<scene>/``): the ground-truth mesh seen from above (walls and
+    furniture as grey points), the ``upper`` and ``lower`` camera paths and, when present, the
+    ``lower_shared`` ablation path; the title gives each tour's coverage
+    (:func:`semmatch.sim.trajectory.tour_coverage`: share of the free space within ``radius``).
+
+    Raises
+    ------
+    FileNotFoundError
+        No scene with an upper and a lower sequence under ``split_dir``.
+    """
+    import json
+
+    import matplotlib.pyplot as plt
+
+    from ..io import read_map, read_sequence, save_figure
+    from ..labels import id_of
+    from .procedural import generate_scene
+    from .trajectory import free_space, tour_coverage
+
+    scenes = [d for d in sorted(Path(split_dir).iterdir())
+              if (d / "upper").is_dir() and (d / "lower").is_dir() and (d / "scene.ply").is_file()][:max_scenes]
+    if not scenes:
+        raise FileNotFoundError(f"{split_dir}: no scene with upper and lower sequences")
+    cols = min(4, len(scenes))
+    rows = -(-len(scenes) // cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(3.6 * cols, 3.4 * rows), squeeze=False)
+    styles = {"upper": ("#1f77b4", "-"), "lower": ("#ff7f0e", "-"), "lower_shared": ("#2ca02c", ":")}
+    for ax, sd in zip(axes.flat, scenes):
+        m = read_map(sd / "scene.ply")
+        keep = (m.labels != id_of("floor")) & (m.labels != id_of("ceiling"))
+        ax.scatter(m.points[keep, 0], m.points[keep, 1], s=0.2, c="0.75", rasterized=True)
+        meta = json.loads((sd / "scene.json").read_text()) if (sd / "scene.json").is_file() else {}
+        scene = generate_scene(meta["kind"], int(meta["seed"])) if "kind" in meta and "seed" in meta else None
+        cover = []
+        for name, (color, ls) in styles.items():
+            if not (sd / name).is_dir():
+                continue
+            poses = read_sequence(sd / name).poses
+            ax.plot(poses[:, 0, 3], poses[:, 1, 3], ls, color=color, lw=1.2, label=name)
+            ax.plot(poses[0, 0, 3], poses[0, 1, 3], "o", color=color, ms=4)
+            if scene is not None:
+                fs = free_space(scene, float(np.median(poses[:, 2, 3]) - scene.meta.get("floor_z", 0.0)))
+                cover.append(f"{name} {tour_coverage(fs, poses, radius):.0%}")
+        ax.set_title(f"{sd.name}\n" + ", ".join(cover), fontsize=8)
+        ax.set_aspect("equal")
+        ax.set_xticks([])
+        ax.set_yticks([])
+    for ax in list(axes.flat)[len(scenes):]:
+        ax.axis("off")
+    axes.flat[0].legend(fontsize=7, loc="lower left", framealpha=0.8)
+    fig.suptitle(f"Camera tours\n(coverage: share of the free space within {radius:g} m of the path)", fontsize=9)
+    fig.tight_layout()
+    return save_figure(fig, path)

@@ -1,6 +1,6 @@
 """Render trajectories into sequence folders and generate the default data set.
 
-Files of a simulated sequence (DESIGN.md §3 plus extras)::
+Files of a simulated sequence (docs/data.md plus extras)::
 
     intrinsics.json, poses.txt, rgb/, depth/, labels/   the data contract
     instances/NNNNNN.png   16-bit instance ids (ground truth)
@@ -20,6 +20,7 @@ import json
 import os
 import shutil
 import tempfile
+import zlib
 from collections.abc import Sequence
 from contextlib import ExitStack
 from pathlib import Path
@@ -35,7 +36,8 @@ from .render import Renderer
 from .scene import Scene
 from .trajectory import make_sweep_trajectories, make_trajectory, route_waypoints
 
-__all__ = ["simulate_sequence", "simulate_sequences", "generate_dataset", "sweep_name", "DEFAULT_SWEEP"]
+__all__ = ["simulate_sequence", "simulate_sequences", "generate_dataset", "sweep_name", "DEFAULT_SWEEP",
+           "check_seed_splits"]
 
 DEFAULT_SWEEP = (0.2, 0.4, 0.6, 0.8, 1.0, 1.2, 1.4, 1.6)
 
@@ -215,10 +217,58 @@ def _drop_partials(folder: Path, name: str) -> None:
         shutil.rmtree(tmp, ignore_errors=True)
 
 
-def _check_seeds(train_seeds: Sequence[int], eval_seeds: Sequence[int]) -> None:
-    both = sorted(set(map(int, train_seeds)) & set(map(int, eval_seeds)))
-    if both:
-        raise ValueError(f"train and eval seeds must be disjoint; both hold {both}")
+def check_seed_splits(train_seeds: Sequence[int] = (), val_seeds: Sequence[int] = (),
+                      eval_seeds: Sequence[int] = (), *, dev_seeds: Sequence[int] = ()) -> None:
+    """Refuse scene seeds that overlap between splits, and an empty evaluation list.
+
+    Parameters
+    ----------
+    train_seeds, val_seeds, eval_seeds : sequences of int
+        Scene seeds of the training, validation and evaluation splits.
+    dev_seeds : sequence of int
+        Seeds looked at while the recipes were developed: they may be neither evaluation
+        seeds nor anything else's (they are only checked against ``eval_seeds``).
+
+    Raises
+    ------
+    ValueError
+        An empty ``eval_seeds``, a seed listed twice in one split, or a seed in two splits;
+        the message names the splits and the seeds.
+    """
+    splits = {"train": list(map(int, train_seeds)), "val": list(map(int, val_seeds)),
+              "eval": list(map(int, eval_seeds))}
+    if not splits["eval"]:
+        raise ValueError("eval_seeds is empty: the protocol needs at least one evaluation seed")
+    for name, seeds in splits.items():
+        dup = sorted({s for s in seeds if seeds.count(s) > 1})
+        if dup:
+            raise ValueError(f"{name} seeds list {dup} more than once")
+    names = list(splits)
+    for i, a in enumerate(names):
+        for b in names[i + 1:]:
+            both = sorted(set(splits[a]) & set(splits[b]))
+            if both:
+                raise ValueError(f"{a} and {b} seeds must be disjoint; both hold {both}")
+    dev = sorted(set(map(int, dev_seeds)) & set(splits["eval"]))
+    if dev:
+        raise ValueError(f"evaluation seeds {dev} were looked at during development (dev_seeds): "
+                         f"choose evaluation seeds that were never looked at")
+
+
+def _path_waypoints(xy: np.ndarray, every: float = 0.5) -> np.ndarray:
+    """Points every ``every`` metres along a camera path (N,2): waypoints to replay it."""
+    seg = np.linalg.norm(np.diff(xy, axis=0), axis=1)
+    s = np.concatenate([[0.0], np.cumsum(seg)])
+    keep = np.unique(np.searchsorted(s, np.arange(0.0, s[-1] + 1e-9, every)).clip(0, len(xy) - 1))
+    return np.asarray(xy)[np.append(keep, len(xy) - 1) if keep[-1] != len(xy) - 1 else keep]
+
+
+def _noise_for(noise: NoiseConfig, seed: int, kind: str, name: str) -> NoiseConfig:
+    """The noise of one recording: its own random stream (two recordings never drift in lockstep)."""
+    from dataclasses import replace
+
+    ss = np.random.SeedSequence([int(noise.seed), int(seed), zlib.crc32(kind.encode()), zlib.crc32(name.encode())])
+    return replace(noise, seed=int(ss.generate_state(1)[0]))
 
 
 def _write_scene(root: Path, o: dict, split: str, seed: int, kind: str,
@@ -244,14 +294,18 @@ def _write_scene(root: Path, o: dict, split: str, seed: int, kind: str,
     else:
         todo += [("upper", o["upper_height"], o["n_frames_upper"], "upper", None),
                  ("lower", o["lower_height"], o["n_frames_lower"], "lower", None)]
+        if o["route_ablation"] and split == "eval":
+            todo.append(("lower_shared", o["lower_height"], o["n_frames_lower"], "lower_shared", None))
         if noise is not None and noise.enabled:
-            todo += [("upper_noisy", o["upper_height"], o["n_frames_upper"], "upper", noise),
-                     ("lower_noisy", o["lower_height"], o["n_frames_lower"], "lower", noise)]
+            todo += [("upper_noisy", o["upper_height"], o["n_frames_upper"], "upper",
+                      _noise_for(noise, seed, kind, "upper_noisy")),
+                     ("lower_noisy", o["lower_height"], o["n_frames_lower"], "lower",
+                      _noise_for(noise, seed, kind, "lower_noisy"))]
     done = {t[0] for t in todo if _complete(sdir / t[0], t[2], intrinsics)}
     pending = [t for t in todo if t[0] not in done]
     skipped += [str(sdir / t[0]) for t in todo if t[0] in done]
     sweep = {}
-    if split == "eval" and o["heights_sweep"]:
+    if split in ("eval", "val") and o["heights_sweep"]:
         names = {sweep_name(h): float(h) for h in o["heights_sweep"]}
         missing = [n for n in names if not _complete(sdir / n, o["n_frames_sweep"], intrinsics)]
         skipped += [str(sdir / n) for n in names if n not in missing]
@@ -262,9 +316,16 @@ def _write_scene(root: Path, o: dict, split: str, seed: int, kind: str,
     if not pending and not sweep:
         return written, skipped
     renderer = Renderer(scene, intrinsics)
-    # the robot (lower) follows the person's (upper) route: the upper map covers its view
-    route = (route_waypoints(scene, o["upper_height"], seed=seed, kind="upper")
-             if o["shared_route"] and any(t[3] == "lower" for t in pending) else None)
+    shared = o["routes"] == "shared"
+    # "shared": the robot (lower) follows the person's (upper) route, walked there and back (the
+    # ablation); "own": each carrier plans its own coverage-matched tour (the paper's setup)
+    route = None
+    if any(t[3] == "lower" for t in pending) and shared:
+        route = route_waypoints(scene, o["upper_height"], seed=seed, kind="upper")
+    elif any(t[3] == "lower_shared" for t in pending):  # the ablation replays the person's actual tour
+        up = make_trajectory(scene, o["upper_height"], o["n_frames_upper"], tilt_deg=tilt_deg, seed=seed,
+                             kind="upper", cover=True, there_and_back=False)
+        route = _path_waypoints(up[:, :2, 3])
     # a clean sequence and its noisy copy follow one trajectory: render it once for both
     paths: dict[tuple[float, int, str], list[tuple[str, NoiseConfig | None]]] = {}
     for name, height, n, tkind, cfg in pending:
@@ -272,9 +333,18 @@ def _write_scene(root: Path, o: dict, split: str, seed: int, kind: str,
     for (height, n, tkind), outs in paths.items():
         for name, _ in outs:
             _drop_partials(sdir, name)
-        poses = make_trajectory(scene, height, n, tilt_deg=tilt_deg, seed=seed, kind=tkind,
-                                waypoints=route if tkind == "lower" else None)
-        simulate_sequences(scene, poses, [(sdir / name, cfg, {"trajectory": name, "seed": seed, "tilt_deg": tilt_deg})
+        follow = tkind == "lower_shared" or (shared and tkind == "lower")
+        if follow:
+            poses = make_trajectory(scene, height, n, tilt_deg=tilt_deg, seed=seed, kind="lower", waypoints=route)
+        elif shared:
+            poses = make_trajectory(scene, height, n, tilt_deg=tilt_deg, seed=seed, kind=tkind)
+        else:
+            poses = make_trajectory(scene, height, n, tilt_deg=tilt_deg, seed=seed, kind=tkind,
+                                    cover=True, there_and_back=False)
+        route_meta = {"route": "upper route, there and back" if follow else
+                      ("own tour" if shared else "own coverage-matched tour")}
+        simulate_sequences(scene, poses, [(sdir / name, cfg, {"trajectory": name, "seed": seed, "tilt_deg": tilt_deg,
+                                                              **route_meta})
                                           for name, cfg in outs],
                            intrinsics=intrinsics, overwrite=True, progress=progress, renderer=renderer)
         written += [str(sdir / name) for name, _ in outs]
@@ -306,15 +376,20 @@ def generate_dataset(
     intrinsics: Intrinsics = DEFAULT_INTRINSICS,
     progress: bool = True,
     jobs: int = 1,
-    shared_route: bool = True,
+    routes: str = "own",
+    route_ablation: bool = False,
+    val_seeds: Sequence[int] = (),
+    dev_seeds: Sequence[int] = (),
 ) -> dict:
-    """Write the generated data layout of DESIGN.md §3 (resumable).
+    """Write the generated data layout of docs/data.md (resumable).
 
     ::
 
         <root>/<split>/<scene_id>/scene.ply         GT semantic mesh (split: train | eval)
         <root>/<split>/<scene_id>/upper/            sequence at ``upper_height``
-        <root>/eval/<scene_id>/lower/               sequence at ``lower_height`` (the upper route)
+        <root>/eval/<scene_id>/lower/               sequence at ``lower_height`` (its own tour)
+        <root>/eval/<scene_id>/lower_shared/        with ``route_ablation``: the upper route replayed
+        <root>/val/<scene_id>/...                   validation scenes, laid out as eval scenes
         <root>/eval/<scene_id>/h020 .. h160/        height sweep: one path at every height
         <root>/eval/<scene_id>/upper_noisy/, lower_noisy/   with ``noise``: the same paths,
                                                     sensor noise and estimated poses
@@ -331,6 +406,13 @@ def generate_dataset(
         Scene seeds per split; they must be disjoint. Every evaluation seed gives one scene
         of every kind; training seed ``i`` gives one scene of kind ``kinds[i % len(kinds)]``
         (the scenes :mod:`semmatch.segment` trains on: many seeds, varied materials).
+    val_seeds : sequence of int
+        Validation scenes (``<root>/val/``), written like evaluation scenes (upper, lower,
+        noisy copies, height sweep); seed ``i`` gives one scene of kind
+        ``kinds[i % len(kinds)]``, the scenes :mod:`semmatch.segment` validates on. Recipes are
+        chosen on these, never on the evaluation scenes.
+    dev_seeds : sequence of int
+        Seeds looked at during development; refused as evaluation seeds.
     kinds : sequence of str
         Scene kinds (see :data:`semmatch.sim.procedural.SCENE_KINDS`).
     n_frames_upper, n_frames_lower, n_frames_train, n_frames_sweep : int
@@ -345,11 +427,15 @@ def generate_dataset(
     jobs : int
         Scenes written in parallel by this many worker processes (each renders on one
         thread); the output does not depend on it.
-    shared_route : bool
-        The lower camera visits the waypoints of the upper route (planned in its own free
-        space, with its own sweep), as a robot following the person who mapped the room;
-        False: each height plans its own tour (the two may cover different parts of a large
-        scene, and the lower view then sees much the upper map lacks).
+    routes : {"own", "shared"}
+        ``"own"`` (the paper's setup, the default): each camera plans its own tour through its
+        own free space, coverage-matched (``make_trajectory(cover=True)``: waypoints spread over
+        the whole room at the finest spacing the frames allow, no walking back), so the two
+        tours differ and both see the room broadly. ``"shared"``: the lower camera visits the
+        waypoints of the upper route and walks there and back (the earlier protocol).
+    route_ablation : bool
+        With ``routes="own"``, also write ``lower_shared/`` in evaluation and validation scenes:
+        the robot replaying the person's actual tour, there and back (the shared-route ablation).
 
     Returns
     -------
@@ -360,9 +446,12 @@ def generate_dataset(
     Raises
     ------
     ValueError
-        Overlapping seeds, an unknown kind, or bad frame counts.
+        Overlapping seeds, an empty evaluation seed list, an unknown kind or route mode, or
+        bad frame counts.
     """
-    _check_seeds(train_seeds, eval_seeds)
+    check_seed_splits(train_seeds, val_seeds, eval_seeds, dev_seeds=dev_seeds)
+    if routes not in ("own", "shared"):
+        raise ValueError(f"routes must be 'own' or 'shared', got {routes!r}")
     for k in kinds:
         if k not in SCENE_KINDS:
             raise ValueError(f"unknown scene kind {k!r}; valid: {', '.join(SCENE_KINDS)}")
@@ -378,12 +467,14 @@ def generate_dataset(
     skipped: list[str] = []
     # evaluation scenes first: they hold most frames, so a pool of workers finishes together
     todo = [("eval", int(s), k) for s in eval_seeds for k in kinds]
+    val = [(int(s), kinds[i % len(kinds)]) for i, s in enumerate(val_seeds)]
+    todo += [("val", s, k) for s, k in val]
     train = [(int(s), kinds[i % len(kinds)]) for i, s in enumerate(train_seeds)]
     todo += [("train", s, k) for s, k in train]
     opts = dict(n_train=n_train, n_frames_upper=int(n_frames_upper), n_frames_lower=int(n_frames_lower),
                 heights_sweep=tuple(heights_sweep or ()), n_frames_sweep=int(n_frames_sweep),
                 upper_height=upper_height, lower_height=lower_height, tilt_deg=tilt_deg, noise=noise,
-                intrinsics=intrinsics, shared_route=bool(shared_route))
+                intrinsics=intrinsics, routes=routes, route_ablation=bool(route_ablation))
     jobs = max(1, min(int(jobs), len(todo)))
     if jobs == 1:
         results = (_write_scene(root, opts, *job, progress=progress) for job in todo)
@@ -405,11 +496,13 @@ def generate_dataset(
     manifest = {"written": written, "skipped": skipped}
     write_json(root / "manifest.json", {
         "train": sorted({f"{k}_{s:04d}" for s, k in train}),
+        "val": sorted({f"{k}_{s:04d}" for s, k in val}),
         "eval": sorted({f"{k}_{int(s):04d}" for s in eval_seeds for k in kinds}),
         "params": {"n_frames_upper": n_frames_upper, "n_frames_lower": n_frames_lower,
                    "n_frames_train": n_train, "heights_sweep": list(heights_sweep or []),
                    "n_frames_sweep": n_frames_sweep, "upper_height": upper_height,
-                   "lower_height": lower_height, "tilt_deg": tilt_deg, "shared_route": bool(shared_route),
+                   "lower_height": lower_height, "tilt_deg": tilt_deg, "routes": routes,
+                   "route_ablation": bool(route_ablation),
                    "noise": noise.to_dict() if noise is not None else None,
                    "intrinsics": intrinsics.to_dict()},
     })

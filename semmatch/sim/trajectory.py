@@ -37,6 +37,7 @@ __all__ = [
     "make_trajectory",
     "make_sweep_trajectories",
     "camera_elevation_deg",
+    "tour_coverage",
 ]
 
 _FLOOR, _CEILING = id_of("floor"), id_of("ceiling")
@@ -338,6 +339,54 @@ def _resample(xy: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
     return out, si
 
 
+def _path_length(xy: np.ndarray) -> float:
+    return float(np.linalg.norm(np.diff(xy, axis=0), axis=1).sum()) if len(xy) > 1 else 0.0
+
+
+#: waypoint spacings tried by ``make_trajectory(cover=True)``, as multiples of ``spacing``
+_COVER_SPACINGS = (1.0, 1.25, 1.5, 2.0, 2.5, 3.0, 4.0)
+
+
+def _covering_tour(fs: FreeSpace, seed: int, kind: str, spacing: float, margin: float,
+                   budget: float) -> tuple[np.random.Generator, np.ndarray]:
+    """The smoothed tour at the finest waypoint spacing whose length fits ``budget`` (metres).
+
+    Returns the random stream after the chosen tour's waypoints were drawn (the heading sweep
+    draws from it next) and the path; the coarsest tour when none fits (then cut by the caller).
+    """
+    for mult in _COVER_SPACINGS:
+        rng = _rng(seed, kind)
+        path = _smooth_path(fs, fs.xy_of(_grid_path(fs, _waypoints(fs, rng, spacing * mult))), margin)
+        if _path_length(path) <= budget:
+            break
+    return rng, path
+
+
+def tour_coverage(fs: FreeSpace, poses: np.ndarray, radius: float = 1.5) -> float:
+    """Share of the free cells within ``radius`` (m) of a trajectory's camera positions.
+
+    Parameters
+    ----------
+    fs : FreeSpace
+    poses : ndarray (N,4,4)
+    radius : float
+
+    Returns
+    -------
+    float
+        In [0, 1]; how broadly a tour visits the free space (the protocol reports it for both
+        carriers of a scene).
+    """
+    from scipy import ndimage
+
+    near = np.zeros_like(fs.free)
+    rc = np.clip(fs.cell_of(np.asarray(poses)[:, :2, 3]), 0, np.array(fs.free.shape) - 1)
+    near[rc[:, 0], rc[:, 1]] = True
+    dist = ndimage.distance_transform_edt(~near) * fs.resolution
+    free = int(fs.free.sum())
+    return float(((dist <= radius) & fs.free).sum() / free) if free else 0.0
+
+
 def camera_elevation_deg(poses: np.ndarray) -> np.ndarray:
     """Elevation (degrees, + = up) of the optical axis of poses (N,4,4)."""
     z = np.asarray(poses)[:, :3, 2]
@@ -365,6 +414,7 @@ def make_trajectory(
     max_turn_deg: float | None = 30.0,
     waypoints: np.ndarray | None = None,
     there_and_back: bool = True,
+    cover: bool = False,
 ) -> np.ndarray:
     """A smooth, collision-free camera trajectory at ``height`` above the floor.
 
@@ -410,6 +460,12 @@ def make_trajectory(
     there_and_back : bool
         With ``max_step``, a tour shorter than ``(n_frames - 1) * max_step`` continues back
         along itself up to that length (a small room is otherwise seen only facing one way).
+    cover : bool
+        Fit the tour to the frames (the evaluation protocol's coverage-matched tours): the
+        waypoints are spread over the whole free space at the finest spacing (``spacing``,
+        then 1.25x, 1.5x, ... 4x) whose tour is at most ``(n_frames - 1) * max_step`` long,
+        so every carrier's tour spans the room instead of stopping part-way. Ignored with
+        ``waypoints`` or without ``max_step``.
 
     Returns
     -------
@@ -445,8 +501,11 @@ def make_trajectory(
         if waypoints.ndim != 2 or waypoints.shape[1] != 2 or len(waypoints) == 0 or not np.isfinite(waypoints).all():
             raise ValueError(f"waypoints must be finite world (x, y) points (K, 2), got shape {waypoints.shape}")
         wp = _snap_to_free(fs, waypoints)
-    path = fs.xy_of(_grid_path(fs, wp))
-    path = _smooth_path(fs, path, margin)
+        path = _smooth_path(fs, fs.xy_of(_grid_path(fs, wp)), margin)
+    elif cover and max_step is not None and n_frames > 1:
+        rng, path = _covering_tour(fs, seed, kind, spacing, margin, max_step * (n_frames - 1))
+    else:
+        path = _smooth_path(fs, fs.xy_of(_grid_path(fs, wp)), margin)
     if len(path) < 2:
         path = np.concatenate([path, path])
     if max_step is not None and n_frames > 1:

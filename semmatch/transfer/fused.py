@@ -6,7 +6,7 @@ import numpy as np
 
 from ..labels import NUM_CLASSES
 
-__all__ = ["fuse"]
+__all__ = ["fuse", "fuse_labels"]
 
 
 def fuse(
@@ -65,3 +65,33 @@ def fuse(
             raise ValueError(f"purity is {purity.shape}, labels are {labels.shape}")
         keep &= purity >= min_purity
     return np.where(keep, labels, net).astype(np.uint8)
+
+
+def fuse_labels(transferred: np.ndarray, predicted: np.ndarray) -> np.ndarray:
+    """Transferred labels where the map supports a pixel (label > 0), a prediction elsewhere.
+
+    The evaluation protocol's ``fused`` rows: what a user deploys when the person's map does not
+    cover everything the robot sees (:func:`fuse` without probabilities or purity).
+
+    Parameters
+    ----------
+    transferred : uint8 (H,W)
+        Labels of a transfer method, 0 = no support.
+    predicted : uint8 (H,W)
+        The lower-view network's labels.
+
+    Returns
+    -------
+    uint8 (H,W)
+
+    Raises
+    ------
+    ValueError
+        Shapes that differ.
+    """
+    transferred = np.asarray(transferred)
+    predicted = np.asarray(predicted)
+    if transferred.shape != predicted.shape or transferred.ndim != 2:
+        raise ValueError(f"transferred labels {transferred.shape} and predictions {predicted.shape} must be "
+                         f"(H,W) images of one size")
+    return np.where(transferred > 0, transferred, predicted).astype(np.uint8)

@@ -28,7 +28,7 @@ _FUNCS: dict[str, Callable] = {
     "3d-neighborhood": _m.neighborhood_3d,
 }
 
-#: The paper's five methods (DESIGN.md §1), in the order of its Table 1.
+#: The paper's five methods (the paper, §3), in the order of its Table 1.
 METHODS: tuple[str, ...] = ("2d-slic", "3d-slic", "3d-projected-sp", "dbscan", "3d-neighborhood")
 
 #: The paper's methods plus ``fused`` (transfer + a network's probabilities).

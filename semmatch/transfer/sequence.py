@@ -11,7 +11,14 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from ..io import InMemorySequence, SemanticMap, SequenceReader, read_sequence, write_labels_folder
+from ..io import (
+    InMemorySequence,
+    SemanticMap,
+    SequenceReader,
+    check_output_dir,
+    read_sequence,
+    write_labels_folder,
+)
 from .index import MapIndex, prepare
 from .registry import ALL_METHODS, check_params, transfer_frame
 
@@ -58,6 +65,8 @@ def transfer_sequence(
     progress: bool = True,
     max_distance: float | None = None,
     poses: np.ndarray | None = None,
+    overwrite: bool = True,
+    inputs: Sequence[str | os.PathLike] = (),
     **params,
 ) -> dict:
     """Transfer labels into every frame of a sequence and write a labels folder.
@@ -86,6 +95,11 @@ def transfer_sequence(
     poses : ndarray (N,4,4), optional
         ``T_world_camera`` poses to use instead of the sequence's own, e.g. poses estimated
         by RGB-D odometry for a recording whose ``poses.txt`` drifts.
+    overwrite : bool
+        Replace an existing semmatch labels output at ``out_dir``; anything else there is
+        refused before any work (:func:`semmatch.io.check_output_dir`).
+    inputs : sequence of paths
+        Folders ``out_dir`` may not be, lie inside or contain (the sequence, the map).
     **params
         Method parameters. For ``fused``, ``probs`` may be a folder of per-frame
         ``000000.npy ...`` arrays (H,W,C) (e.g. written by ``semmatch predict``).
@@ -101,6 +115,7 @@ def transfer_sequence(
     if int(jobs) < 1:
         raise ValueError(f"jobs must be >= 1, got {jobs}")
     check_params(method, params)
+    check_output_dir(out_dir, "labels", overwrite=overwrite, inputs=inputs)
     seq_path = None
     source = None  # what the workers open: a folder, or frames already in memory
     if isinstance(sequence, (str, os.PathLike)):
@@ -139,7 +154,7 @@ def transfer_sequence(
             labels[i], cov[i], secs[i] = r.labels, r.coverage, r.seconds
             bar.update()
     bar.close()
-    out = write_labels_folder(out_dir, labels)
+    out = write_labels_folder(out_dir, labels, overwrite=overwrite, inputs=inputs)
     ms = float(np.median(secs) * 1000)
     return {
         "method": method,

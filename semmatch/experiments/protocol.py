@@ -1,0 +1,90 @@
+"""The evaluation protocol's checks, run before any pipeline work starts.
+
+A profile of ``params.yaml`` names its scene splits in ``common``: ``train_seeds`` (the networks
+learn from them), ``val_seeds`` (every recipe choice is made on them: checkpoint selection,
+test-time flip, odometry gate), ``eval_seeds`` (never looked at while developing; every table
+is computed on them) and ``dev_seeds`` (scenes that were looked at during development, recorded
+so that they can never become evaluation scenes). ``min_val_per_kind`` asks for validation
+scenes of every kind.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from collections.abc import Mapping
+
+__all__ = ["check_protocol", "validation_kinds", "preflight_scenes"]
+
+
+def validation_kinds(kinds: list[str], val_seeds: list[int]) -> Counter:
+    """How many validation scenes of each kind ``val_seeds`` give (seed ``i``: ``kinds[i % len(kinds)]``)."""
+    return Counter(kinds[i % len(kinds)] for i in range(len(val_seeds)))
+
+
+def check_protocol(common: Mapping, *, where: str = "params.yaml") -> None:
+    """Refuse a profile whose splits break the protocol, before any work starts.
+
+    Parameters
+    ----------
+    common : mapping
+        The profile's ``common`` section (``kinds``, ``train_seeds``, ``val_seeds``,
+        ``eval_seeds``, optional ``dev_seeds`` and ``min_val_per_kind``). A section with
+        neither ``kinds`` nor ``eval_seeds`` defines no scenes and is not checked.
+    where : str
+        Named in the messages.
+
+    Raises
+    ------
+    ValueError
+        An empty evaluation seed list, overlapping splits, evaluation seeds that were used
+        during development, an unknown scene kind, or fewer validation scenes of a kind than
+        ``min_val_per_kind``.
+    """
+    from ..sim import SCENE_KINDS, check_seed_splits
+
+    if "eval_seeds" not in common and "kinds" not in common:
+        return  # a parameter file without scene splits (e.g. one notebook's own)
+    kinds = list(common.get("kinds") or [])
+    if not kinds:
+        raise ValueError(f"{where}: common.kinds is empty")
+    unknown = [k for k in kinds if k not in SCENE_KINDS]
+    if unknown:
+        raise ValueError(f"{where}: unknown scene kind(s) {unknown}; valid: {', '.join(SCENE_KINDS)}")
+    try:
+        check_seed_splits(common.get("train_seeds") or [], common.get("val_seeds") or [],
+                          common.get("eval_seeds") or [], dev_seeds=common.get("dev_seeds") or [])
+    except ValueError as e:
+        raise ValueError(f"{where}: {e}") from None
+    need = int(common.get("min_val_per_kind") or 0)
+    if need:
+        have = validation_kinds(kinds, list(common.get("val_seeds") or []))
+        short = {k: have.get(k, 0) for k in kinds if have.get(k, 0) < need}
+        if short:
+            raise ValueError(f"{where}: validation needs >= {need} scene(s) of every kind (min_val_per_kind); "
+                             f"val_seeds give {dict(short)} (seed i is of kind kinds[i % {len(kinds)}])")
+
+
+def preflight_scenes(kinds: list[str], seeds_by_split: Mapping[str, list[int]],
+                     heights: tuple[float, ...]) -> None:
+    """Check that every evaluation / validation scene can be generated and flown at ``heights``.
+
+    Generates each scene and its free space at every height (about a second a scene), so that
+    a profile that cannot be generated fails before hours of work, naming the scene.
+
+    Raises
+    ------
+    ValueError
+        Naming the split, kind, seed and the generator's reason.
+    """
+    from ..sim import free_space, generate_scene
+
+    for split, seeds in seeds_by_split.items():
+        for i, seed in enumerate(seeds):
+            scene_kinds = kinds if split == "eval" else [kinds[i % len(kinds)]]
+            for kind in scene_kinds:
+                try:
+                    scene = generate_scene(kind, int(seed))
+                    for h in heights:
+                        free_space(scene, float(h))
+                except ValueError as e:
+                    raise ValueError(f"{split} scene {kind} seed {seed} cannot be generated or flown: {e}") from None

@@ -1,0 +1,287 @@
+"""Register two reconstructions of one room without ground truth, as a real user must.
+
+The person's upper map and the robot's lower reconstruction are each built in the frame of its
+own recording (the first camera pose), so before labels can be transferred the lower map must be
+registered onto the upper one from geometry alone. :func:`register_maps` does what Open3D's
+global-registration pipeline does [1]_ [2]_:
+
+1. both maps' vertices are voxel-downsampled (``voxel_size``), with normals (from the mesh
+   triangles when there are any, so that they point to the side the camera saw);
+2. FPFH features (radius ``5 * voxel_size``) are matched and a rigid transform is found by
+   RANSAC (``registration_ransac_based_on_feature_matching``, edge-length and distance
+   checkers), seeded through ``o3d.utility.random.seed`` so that a run is repeatable;
+3. each RANSAC result is refined by point-to-plane ICP from coarse to fine (voxels
+   ``voxel_size``, ``/2``, ``/4``; correspondences up to twice the level's voxel);
+4. with ``restarts > 1`` RANSAC runs again with the next seeds and the refined candidate that
+   fits best at the finest level (highest fitness, then lowest inlier RMSE) is kept.
+
+The two maps of this project overlap only partly (the robot at 0.2 m sees under tables, the
+person at 1.6 m sees the tops; often 30-70 % of either map), so ``fitness`` is a share of the
+*source* points that found a target surface, not a proof of success; ``agreement`` (how many
+restarts reached the kept transform) is the better sign of a unique solution.
+
+References
+----------
+.. [1] R. B. Rusu, N. Blodow, M. Beetz, "Fast Point Feature Histograms (FPFH) for 3D
+   registration", ICRA 2009.
+.. [2] Open3D, "Global registration" (``open3d.pipelines.registration``).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .io import SemanticMap
+
+__all__ = ["Registration", "register_maps", "rigid_perturbation", "transform_error"]
+
+
+@dataclass(frozen=True)
+class Registration:
+    """The result of :func:`register_maps`.
+
+    Attributes
+    ----------
+    transform : ndarray (4, 4)
+        Rigid transform taking the source map into the target map's frame.
+    fitness : float
+        Share of the (finest-level) source points with a target point within the finest ICP
+        correspondence distance (``voxel_size / 2``) after the transform.
+    inlier_rmse : float
+        RMSE (m) of those correspondences.
+    global_transform : ndarray (4, 4)
+        The RANSAC transform the kept candidate's ICP started from.
+    global_fitness : float
+        RANSAC fitness of that transform (correspondence distance ``1.5 * voxel_size``).
+    restarts : int
+        RANSAC runs made (seeds ``seed .. seed + restarts - 1``).
+    agreement : int
+        How many of them ended, after ICP, within ``2 * voxel_size`` and 2 degrees of the kept
+        transform (itself included).
+    candidates : list of dict
+        Per restart: ``seed``, ``global_fitness``, ``fitness``, ``inlier_rmse``, ``transform``.
+    n_source, n_target : int
+        Points after downsampling at ``voxel_size`` (those the features describe).
+    seconds : float
+        Wall time.
+    """
+
+    transform: np.ndarray
+    fitness: float
+    inlier_rmse: float
+    global_transform: np.ndarray
+    global_fitness: float
+    restarts: int
+    agreement: int
+    candidates: list = field(repr=False)
+    n_source: int = 0
+    n_target: int = 0
+    seconds: float = 0.0
+
+
+def _point_cloud(m: SemanticMap, what: str):
+    """Legacy Open3D point cloud of a map's vertices, with normals when they can be had."""
+    import open3d as o3d
+
+    if not isinstance(m, SemanticMap):
+        raise TypeError(f"{what}: expected a SemanticMap, got {type(m).__name__}")
+    m.check()
+    pts = o3d.utility.Vector3dVector(m.points.astype(np.float64))
+    if m.is_mesh:
+        mesh = o3d.geometry.TriangleMesh(pts, o3d.utility.Vector3iVector(m.faces))
+        mesh.compute_vertex_normals()
+        pc = o3d.geometry.PointCloud(mesh.vertices)
+        pc.normals = mesh.vertex_normals
+    else:
+        pc = o3d.geometry.PointCloud(pts)
+        if m.normals is not None and len(m.normals) == len(m.points):
+            pc.normals = o3d.utility.Vector3dVector(m.normals.astype(np.float64))
+    return pc
+
+
+def _downsample(pc, voxel: float):
+    """Voxel-downsampled cloud with normals re-estimated at this scale (orientation kept)."""
+    import open3d as o3d
+
+    d = pc.voxel_down_sample(voxel)
+    d.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=2.0 * voxel, max_nn=30))
+    return d
+
+
+def transform_error(estimate: np.ndarray, truth: np.ndarray) -> tuple[float, float]:
+    """Translation (m) and rotation (degrees) of ``inv(truth) @ estimate``.
+
+    Parameters
+    ----------
+    estimate, truth : ndarray (4, 4)
+        Rigid transforms.
+
+    Returns
+    -------
+    translation_m, rotation_deg : float
+        The translation is the displacement of the origin of the transforms' source frame.
+    """
+    E = np.linalg.inv(np.asarray(truth, dtype=np.float64)) @ np.asarray(estimate, dtype=np.float64)
+    cos = np.clip((np.trace(E[:3, :3]) - 1.0) / 2.0, -1.0, 1.0)
+    return float(np.linalg.norm(E[:3, 3])), float(np.degrees(np.arccos(cos)))
+
+
+def register_maps(
+    source: SemanticMap,
+    target: SemanticMap,
+    *,
+    voxel_size: float = 0.05,
+    seed: int = 0,
+    restarts: int = 3,
+    max_iterations: int = 100_000,
+    confidence: float = 0.999,
+    icp_levels: int = 3,
+    icp_iterations: int = 50,
+) -> Registration:
+    """Rigid transform taking ``source`` into ``target``'s frame, from geometry alone.
+
+    FPFH features + RANSAC (global, seeded), refined by coarse-to-fine point-to-plane ICP; see
+    the module documentation. Labels are ignored.
+
+    Parameters
+    ----------
+    source, target : SemanticMap
+        Reconstructions (meshes or point clouds) of overlapping parts of one scene, in metres.
+    voxel_size : float
+        Downsampling voxel (m) of the features; FPFH radius ``5 * voxel_size``, RANSAC
+        correspondence distance ``1.5 * voxel_size``.
+    seed : int
+        Seed of the first RANSAC run (``o3d.utility.random.seed``); restart ``k`` uses
+        ``seed + k``. The same inputs and seed give the same result.
+    restarts : int
+        RANSAC runs; the best refined candidate is kept.
+    max_iterations : int
+        RANSAC iterations per run.
+    confidence : float
+        RANSAC stops early once this confidence is reached.
+    icp_levels : int
+        ICP levels, voxel ``voxel_size / 2**k`` for ``k = 0 .. icp_levels - 1``, each with a
+        correspondence distance of twice its voxel.
+    icp_iterations : int
+        ICP iterations per level.
+
+    Returns
+    -------
+    Registration
+
+    Raises
+    ------
+    TypeError
+        Inputs that are not :class:`~semmatch.io.SemanticMap`.
+    ValueError
+        An empty map or NaN vertices (naming the map's file), non-positive ``voxel_size``,
+        ``restarts`` or ``icp_levels`` below 1, or too few points left after downsampling.
+    """
+    import open3d as o3d
+
+    reg = o3d.pipelines.registration
+    t0 = time.perf_counter()
+    if not voxel_size > 0:
+        raise ValueError(f"voxel_size must be > 0, got {voxel_size}")
+    if int(restarts) < 1 or int(icp_levels) < 1:
+        raise ValueError(f"restarts and icp_levels must be >= 1, got {restarts} and {icp_levels}")
+    src_full = _point_cloud(source, "source")
+    dst_full = _point_cloud(target, "target")
+    src, dst = _downsample(src_full, voxel_size), _downsample(dst_full, voxel_size)
+    for pc, m, what in ((src, source, "source"), (dst, target, "target")):
+        if len(pc.points) < 10:
+            raise ValueError(f"{what} map {m.source}: only {len(pc.points)} points at a {voxel_size} m voxel; "
+                             "too few to register")
+    feature = o3d.geometry.KDTreeSearchParamHybrid(radius=5.0 * voxel_size, max_nn=100)
+    f_src = reg.compute_fpfh_feature(src, feature)
+    f_dst = reg.compute_fpfh_feature(dst, feature)
+    dist = 1.5 * voxel_size
+    point_to_plane = reg.TransformationEstimationPointToPlane()
+    criteria = reg.ICPConvergenceCriteria(max_iteration=int(icp_iterations))
+
+    def icp(s, d, v: float, T: np.ndarray):
+        res = reg.registration_icp(s, d, 2.0 * v, T, point_to_plane, criteria)
+        return np.asarray(res.transformation).copy(), float(res.fitness), float(res.inlier_rmse)
+
+    # every restart: RANSAC, then ICP at the feature voxel (cheap); the finer levels only for the best
+    candidates = []
+    for k in range(int(restarts)):
+        o3d.utility.random.seed(int(seed) + k)
+        ransac = reg.registration_ransac_based_on_feature_matching(
+            src, dst, f_src, f_dst, True, dist, reg.TransformationEstimationPointToPoint(False), 3,
+            [reg.CorrespondenceCheckerBasedOnEdgeLength(0.9), reg.CorrespondenceCheckerBasedOnDistance(dist)],
+            reg.RANSACConvergenceCriteria(int(max_iterations), float(confidence)),
+        )
+        T0 = np.asarray(ransac.transformation).copy()
+        T, fit, rmse = icp(src, dst, voxel_size, T0)
+        candidates.append(dict(seed=int(seed) + k, global_fitness=float(ransac.fitness), global_transform=T0,
+                               coarse_fitness=fit, coarse_rmse=rmse, transform=T))
+    best = max(candidates, key=lambda c: (round(c["coarse_fitness"], 6), -c["coarse_rmse"]))
+    agreement = 0
+    for c in candidates:
+        dt, dr = transform_error(c["transform"], best["transform"])
+        agreement += int(dt <= 2.0 * voxel_size and dr <= 2.0)
+    T, fit, rmse = best["transform"], best["coarse_fitness"], best["coarse_rmse"]
+    for level in range(1, int(icp_levels)):
+        v = voxel_size / 2**level
+        s = src_full.voxel_down_sample(v)  # the source needs no normals for point-to-plane ICP
+        T, fit, rmse = icp(s, _downsample(dst_full, v), v, T)
+    return Registration(
+        transform=T, fitness=fit, inlier_rmse=rmse,
+        global_transform=best["global_transform"], global_fitness=best["global_fitness"],
+        restarts=int(restarts), agreement=agreement,
+        candidates=[{k: v for k, v in c.items() if k != "global_transform"} for c in candidates],
+        n_source=len(src.points), n_target=len(dst.points), seconds=time.perf_counter() - t0,
+    )
+
+
+def rigid_perturbation(
+    translation_m: float,
+    rotation_deg: float,
+    *,
+    center: np.ndarray,
+    seed: int = 0,
+) -> np.ndarray:
+    """A rigid transform of known size: a rotation about a random axis through ``center``, then a shift.
+
+    The axis and the shift's direction are drawn (uniformly on the sphere) from ``seed`` in
+    that order, independently of the magnitudes, so that a series of magnitudes with one seed
+    moves along the same axis and direction.
+
+    Parameters
+    ----------
+    translation_m : float
+        Length (m) of the translation, >= 0.
+    rotation_deg : float
+        Rotation angle (degrees), >= 0.
+    center : array-like (3,)
+        A point of the rotation axis (e.g. the map's centroid), so that the rotation does not
+        also move the map by ``|center| * angle``.
+    seed : int
+
+    Returns
+    -------
+    ndarray (4, 4)
+        ``T`` with ``T[:3, :3]`` a rotation by ``rotation_deg`` and
+        ``|T @ center - center| = translation_m``.
+    """
+    import open3d as o3d
+
+    if not (np.isfinite(translation_m) and translation_m >= 0 and np.isfinite(rotation_deg) and rotation_deg >= 0):
+        raise ValueError(f"translation_m and rotation_deg must be finite and >= 0, got {translation_m}, {rotation_deg}")
+    c = np.asarray(center, dtype=np.float64).reshape(-1)
+    if c.shape != (3,) or not np.isfinite(c).all():
+        raise ValueError(f"center must be a finite 3-vector, got {center!r}")
+    rng = np.random.default_rng(seed)
+    axis = rng.standard_normal(3)
+    axis /= np.linalg.norm(axis)
+    direction = rng.standard_normal(3)
+    direction /= np.linalg.norm(direction)
+    R = o3d.geometry.get_rotation_matrix_from_axis_angle(axis * np.radians(rotation_deg))
+    T = np.eye(4)
+    T[:3, :3] = R
+    T[:3, 3] = c - R @ c + float(translation_m) * direction
+    return T
