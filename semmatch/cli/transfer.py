@@ -32,6 +32,8 @@ def register(sub) -> None:
     p.add_argument("--jobs", type=int, default=1, help="worker processes (default 1)")
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     p.add_argument("--json", action="store_true", help="print the statistics as one JSON object")
+    p.add_argument("--strict", action="store_true",
+                   help="exit with an error when the map supports (almost) no pixel (default: a warning)")
     p.set_defaults(func=run)
 
 
@@ -66,10 +68,20 @@ def run(args) -> int:
     check_params(args.method, params)
     seq = read_sequence(args.sequence)
     index = MapIndex(read_map(args.map), max_distance=args.max_distance, voxel_size=args.voxel_size)
-    stats = transfer_sequence(
-        args.method, seq, index, args.out, jobs=args.jobs, progress=not args.no_progress,
-        overwrite=args.overwrite, inputs=[args.sequence, args.map], **params
-    )
+    import warnings
+
+    from semmatch.transfer.sequence import LOW_SUPPORT, LowSupportWarning
+
+    with warnings.catch_warnings():
+        if args.strict:
+            warnings.simplefilter("error", LowSupportWarning)
+        try:
+            stats = transfer_sequence(
+                args.method, seq, index, args.out, jobs=args.jobs, progress=not args.no_progress,
+                overwrite=args.overwrite, inputs=[args.sequence, args.map], **params
+            )
+        except LowSupportWarning as e:
+            raise ValueError(f"{e} (--strict: coverage below {LOW_SUPPORT:.0%}; the labels were written)") from None
     if args.json:
         print(json.dumps(stats))
     else:

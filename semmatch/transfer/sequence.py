@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import warnings
 from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import replace
@@ -22,9 +23,17 @@ from ..io import (
 from .index import MapIndex, prepare
 from .registry import ALL_METHODS, check_params, transfer_frame
 
-__all__ = ["transfer_sequence"]
+__all__ = ["transfer_sequence", "LOW_SUPPORT", "LowSupportWarning"]
 
 _WORKER: dict = {}
+
+
+#: mean coverage below which :func:`transfer_sequence` warns that the map barely overlaps the frames
+LOW_SUPPORT = 0.01
+
+
+class LowSupportWarning(UserWarning):
+    """The map supports (almost) no pixel of the frames: the labels are (almost) all void."""
 
 
 def _frame_params(params: dict, i: int) -> dict:
@@ -155,6 +164,11 @@ def transfer_sequence(
             bar.update()
     bar.close()
     out = write_labels_folder(out_dir, labels, overwrite=overwrite, inputs=inputs)
+    if cov.mean() < LOW_SUPPORT:
+        warnings.warn(
+            f"{seq_path or 'sequence'}: the map supports only {cov.mean():.2%} of the pixels with depth "
+            f"({method}); does the map overlap these frames (same world frame, same units)?",
+            LowSupportWarning, stacklevel=2)
     ms = float(np.median(secs) * 1000)
     return {
         "method": method,
