@@ -27,7 +27,7 @@ from tqdm.auto import tqdm
 
 from ..io import read_map, read_sequence
 from .layout import GT, Layout
-from .synthetic import MEASURE_COLUMNS
+from .synthetic import MEASURE_COLUMNS, eval_grid_origin
 
 __all__ = ["misregistration_study", "plot_misregistration"]
 
@@ -150,7 +150,7 @@ def misregistration_study(
             # one fusion of the lower frames at their true poses for every labeling
             maps = reconstruct_many(lower, [j[3] for j in jobs_list], voxel_size)
         for (t, r, method, _, cov), pred in zip(jobs_list, maps, strict=True):
-            s = compare(reference, pred, voxel_size=eval_voxel_size)
+            s = compare(reference, pred, voxel_size=eval_voxel_size, grid_origin=eval_grid_origin(eval_voxel_size))
             rows.append(dict(scene=sid, method=method, translation_m=t, rotation_deg=r,
                              **{k: float(s[k]) for k in MEASURE_COLUMNS}, coverage=float(cov)))
     cols = ["scene", "method", "translation_m", "rotation_deg", *MEASURE_COLUMNS, "coverage"]

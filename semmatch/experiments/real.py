@@ -52,7 +52,7 @@ from ..io import (
     write_tum,
 )
 from .layout import GT, Layout, model_name, source_dir
-from .synthetic import MEASURE_COLUMNS
+from .synthetic import MEASURE_COLUMNS, eval_grid_origin
 
 __all__ = [
     "PosedSequence",
@@ -66,6 +66,7 @@ __all__ = [
     "real_like_lower_map",
     "evaluate_real_like",
     "select_prior_tolerance",
+    "score_real_like_against_mesh",
 ]
 
 
@@ -147,7 +148,7 @@ def estimate_or_load_poses(
     seq_dir : path
         The noisy sequence folder (with ``poses.txt`` and ``poses_gt.txt``).
     out : path
-        Cache file (TUM format, written atomically).
+        Cache file (TUM format, written atomically; the poses returned are those it holds).
     seq : sequence, optional
         The frames of ``seq_dir`` when already read (e.g. an :class:`~semmatch.io.InMemorySequence`).
     prior_tolerance : (metres, degrees) or None
@@ -164,7 +165,6 @@ def estimate_or_load_poses(
     FileNotFoundError
         ``seq_dir`` has no ``poses_gt.txt``.
     """
-    from ..io import atomic_path
     from ..odometry import estimate_poses
 
     seq_dir, out = Path(seq_dir), Path(out)
@@ -180,9 +180,9 @@ def estimate_or_load_poses(
             return est, true
     est = estimate_poses(seq, init_pose=np.eye(4), prior=seq.poses, prior_tolerance=tol,
                          downsample=ODOMETRY_DOWNSAMPLE, progress=progress)
-    with atomic_path(out) as tmp:
-        write_tum(tmp, np.arange(len(est), dtype=np.float64), est)
-    return est, true
+    write_tum(out, np.arange(len(est), dtype=np.float64), est)  # atomic
+    # the poses as the cache holds them, so that a fresh and a cached run use the same numbers
+    return read_tum(out)[1], true
 
 
 def _finite(*arrays: np.ndarray) -> np.ndarray:
@@ -204,8 +204,9 @@ def world_alignment(
     (:func:`semmatch.odometry.align_trajectory`; frames with a non-finite true pose skipped).
     With ``reconstruction`` and ``scene_mesh`` it is refined by point-to-plane ICP of the
     reconstruction's vertices onto points sampled on the ground-truth mesh (correspondences
-    up to 10, 5, then 2.5 cm): where the map actually lies, which can differ from the
-    trajectory alignment by about the trajectory's ATE (6 cm on a scene whose upper ATE was 4 cm).
+    up to 10, 5, then 2.5 cm; about one mesh point per 4 cm^2): where the map actually lies,
+    which can differ from the trajectory alignment by about the trajectory's ATE (6 cm on a
+    scene whose upper ATE was 4 cm).
 
     Parameters
     ----------
@@ -231,18 +232,60 @@ def world_alignment(
     if reconstruction is None or scene_mesh is None:
         return A
     reg = o3d.pipelines.registration
-    mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(scene_mesh.points.astype(np.float64)),
-                                     o3d.utility.Vector3iVector(scene_mesh.faces))
-    mesh.compute_triangle_normals()
-    o3d.utility.random.seed(int(seed))
-    n = int(min(2_000_000, max(100_000, mesh.get_surface_area() / 0.01**2)))  # about one point per cm^2
-    target = mesh.sample_points_uniformly(n, use_triangle_normal=True)
+    target = _mesh_samples(scene_mesh, seed)
     src = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(reconstruction.points.astype(np.float64)))
     src = src.voxel_down_sample(0.02)
     for dist in (0.1, 0.05, 0.025):
         A = np.asarray(reg.registration_icp(src, target, dist, A, reg.TransformationEstimationPointToPlane(),
                                             reg.ICPConvergenceCriteria(max_iteration=50)).transformation).copy()
     return A
+
+
+_MESH_SAMPLES: list = []  # (key, mesh, Open3D point cloud) of the last scene mesh sampled
+
+
+def _mesh_samples(scene_mesh, seed: int, spacing: float = 0.02):
+    """Points (with the triangles' normals) sampled on a mesh, about one per ``spacing**2``; the last one cached."""
+    import open3d as o3d
+
+    key = (id(scene_mesh), int(seed), float(spacing))
+    if _MESH_SAMPLES and _MESH_SAMPLES[0][0] == key and _MESH_SAMPLES[0][1] is scene_mesh:
+        return _MESH_SAMPLES[0][2]
+    if not scene_mesh.is_mesh:
+        raise ValueError(f"{scene_mesh.source}: the scene's ground truth must be a mesh (triangles)")
+    mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(scene_mesh.points.astype(np.float64)),
+                                     o3d.utility.Vector3iVector(scene_mesh.faces))
+    mesh.compute_triangle_normals()
+    o3d.utility.random.seed(int(seed))
+    n = int(np.clip(mesh.get_surface_area() / spacing**2, 10_000, 2_000_000))
+    pc = mesh.sample_points_uniformly(n, use_triangle_normal=True)
+    _MESH_SAMPLES[:] = [(key, scene_mesh, pc)]
+    return pc
+
+
+def _moved(m, T: np.ndarray):
+    """The map ``m`` moved by the rigid transform ``T`` (points and normals)."""
+    R, t = np.asarray(T[:3, :3], dtype=np.float64), np.asarray(T[:3, 3], dtype=np.float64)
+    normals = None if m.normals is None else (m.normals @ R.T).astype(np.float32)
+    return replace(m, points=(m.points @ R.T + t).astype(np.float32), normals=normals)
+
+
+def _compact_frame(m) -> np.ndarray:
+    """Rigid transform into the frame of a map's minimal oriented bounding box (from its vertices only).
+
+    A map in a camera's frame is tilted against its walls; the label-transfer index is an
+    axis-aligned grid, which in this frame holds about half the voxels (and builds in about
+    half the time) than in the tilted one.
+    """
+    import open3d as o3d
+
+    pts = m.points.astype(np.float64)
+    pts = pts[np.lexsort(pts.T[::-1])]  # the same vertices in any order: the same box
+    box = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(pts)).get_minimal_oriented_bounding_box()
+    U = np.eye(4)
+    U[:3, :3] = np.asarray(box.R).T
+    U[:3, 3] = -U[:3, :3] @ np.asarray(box.center)
+    return U
 
 
 def registration_errors(
@@ -296,17 +339,6 @@ def real_like_lower_map(data_root: str | Path, scene_id: str, source: str, metho
     return Layout(data_root).real_like / scene_id / "lower_maps" / source_dir(source) / f"{method}.ply"
 
 
-def _fused_labels(transferred: Path, predicted: Path, out: Path) -> Path:
-    """Labels folder: ``transferred`` where it is nonzero (supported), ``predicted`` elsewhere."""
-    from ..io import read_image, read_labels_folder, write_labels_folder
-    from ..transfer import fuse_labels
-
-    a, b = read_labels_folder(transferred), read_labels_folder(predicted)
-    if len(a) != len(b):
-        raise ValueError(f"{transferred} holds {len(a)} label images, {predicted} {len(b)}")
-    return write_labels_folder(out, (fuse_labels(read_image(x), read_image(y)) for x, y in zip(a, b, strict=True)))
-
-
 def _matrix(T: np.ndarray) -> list:
     return np.asarray(T, dtype=np.float64).round(9).tolist()
 
@@ -321,7 +353,7 @@ def evaluate_real_like(
     include_ground_truth: bool = True,
     prior_tolerance: tuple[float, float] | None = DEFAULT_PRIOR_TOLERANCE,
     fused_base: str | None = "3d-neighborhood",
-    registration_voxel: float = 0.08,
+    registration_voxel: float = 0.1,
     registration_seed: int = 0,
     registration_restarts: int = 3,
     jobs: int = 1,
@@ -397,7 +429,7 @@ def evaluate_real_like(
     from ..odometry import trajectory_errors
     from ..registration import register_maps
     from ..segment import predict_sequence
-    from ..transfer import prepare, transfer_sequence
+    from ..transfer import prepare, transfer_sequence, write_fused_labels
 
     tol = _check_tolerance(prior_tolerance)
     if fused_base is not None and networks and fused_base not in methods:
@@ -466,7 +498,10 @@ def evaluate_real_like(
         } | {"prior_tolerance": None if tol is None else list(tol), "registration_voxel": registration_voxel,
              "registration_seed": registration_seed, "candidates": [
                  {k: (_matrix(v) if isinstance(v, np.ndarray) else v) for k, v in c.items()} for c in reg.candidates]})
-        lower_in_upper = reg.transform @ est["lower"]
+        # the transfer works in the upper map's bounding-box frame U (a compact index grid): the
+        # map moved by U, the lower frames at U @ T_reg @ est_lower
+        U = _compact_frame(upper_maps[0])
+        lower_in_upper = U @ reg.transform @ est["lower"]
         # lower labels: each network on the lower frames, each method from each upper map
         lower = []  # (source, method, labels folder)
         for source, upper_map in zip(sources, upper_maps, strict=True):
@@ -474,21 +509,21 @@ def evaluate_real_like(
                 low_dir = work / f"lower_labels_{source}" / "lower"
                 predict_sequence(models[source], seqs["lower"], low_dir, progress=False)
                 lower.append((source, "lower", low_dir))
-            index = prepare(upper_map)
+            index = prepare(_moved(upper_map, U))
             for method in methods:
                 lab_dir = work / f"lower_labels_{source}" / method
                 transfer_sequence(method, seqs["lower"].seq, index, lab_dir, poses=lower_in_upper,
                                   jobs=jobs, progress=False)
                 lower.append((source, method, lab_dir))
             if source != GT and fused_base is not None:
-                fused = _fused_labels(work / f"lower_labels_{source}" / fused_base, low_dir,
+                fused = write_fused_labels(work / f"lower_labels_{source}" / fused_base, low_dir,
                                       work / f"lower_labels_{source}" / "fused")
                 lower.append((source, "fused", fused))
         # one fusion of the lower frames (own frame) for every labeling
         maps = reconstruct_many(seqs["lower"], [d for *_, d in lower], voxel_size,
                                 outs=[real_like_lower_map(data_root, sid, s, m) for s, m, _ in lower])
         for (source, method, _), pred in zip(lower, maps, strict=True):
-            s = compare(reference, pred, voxel_size=eval_voxel_size)
+            s = compare(reference, pred, voxel_size=eval_voxel_size, grid_origin=eval_grid_origin(eval_voxel_size))
             rows.append(dict(scene=sid, model=model_name(source), method=method,
                              **{k: float(s[k]) for k in MEASURE_COLUMNS}))
     return pd.DataFrame(rows), pd.DataFrame(traj_rows), pd.DataFrame(reg_rows)
@@ -509,9 +544,10 @@ def select_prior_tolerance(
     candidate with the lowest mean ATE over all recordings wins (ties: the first listed).
     Pass *validation* scenes (``Layout(root).scene_dirs("val")``), never evaluation scenes.
 
-    Cost: ``len(candidates) * len(scene_dirs) * len(recordings)`` odometry runs, nothing else
-    (no fusion, no transfer); measured on the 2-core development machine (under load) at about
-    0.1-0.2 s a frame for 320x240 frames.
+    Cost: ``len(candidates) * len(scene_dirs) * len(recordings)`` odometry runs and nothing
+    else (no fusion, no transfer). One run of a 60-frame 320x240 noisy recording (pose graph
+    included) took 5-18 s on the 2-core development machine under load (16 recordings of eight
+    scenes), so two candidates on four validation scenes cost about 16 runs, 1.5-5 minutes there.
 
     Parameters
     ----------
@@ -571,3 +607,62 @@ def select_prior_tolerance(
     means = table.groupby("prior_tolerance", sort=False)["ate_rmse"].mean()
     chosen = min(cands, key=lambda c: (means[gate_name(c)], cands.index(c)))
     return chosen, table
+
+
+def score_real_like_against_mesh(
+    data_root: str | Path,
+    per_scene: pd.DataFrame,
+    registration: pd.DataFrame,
+    *,
+    eval_voxel_size: float = 0.05,
+    mesh_spacing: float = 0.01,
+) -> pd.DataFrame:
+    """Score every stored real-like lower map against the ground-truth mesh where the robot looked.
+
+    The reference is the scene's ground-truth mesh sampled every ``mesh_spacing`` metres and kept
+    where the robot's camera observed it (:func:`semmatch.reference.observed_reference` on the
+    clean ``lower`` sequence, which flies the same true poses as ``lower_noisy``; written by
+    ``05_evaluate_synthetic`` as ``lower_maps/<scene>/mesh_reference.ply`` and reused when
+    present). Each lower map, fused in the robot recording's own frame, is placed in the world
+    by the registration table's ``lower_to_world`` (from ground truth: for scoring only) and
+    compared on the protocol's evaluation grid (:func:`~semmatch.experiments.synthetic.eval_grid_origin`),
+    so odometry, registration and fusion errors all count.
+
+    Parameters
+    ----------
+    data_root : path
+    per_scene : DataFrame
+        Rows of :func:`evaluate_real_like` (scene, model, method).
+    registration : DataFrame
+        Its registration table (scene, lower_to_world).
+    eval_voxel_size, mesh_spacing : float
+
+    Returns
+    -------
+    DataFrame
+        scene, model, method, reference (``mesh``) and the four measures.
+    """
+    from ..io import read_map, write_map
+    from ..metrics import compare
+    from ..reference import observed_reference
+    from .layout import source_dir
+
+    layout = Layout(data_root)
+    to_world = {r.scene: np.asarray(r.lower_to_world, dtype=np.float64) for r in registration.itertuples()}
+    rows = []
+    for sid, group in per_scene.groupby("scene", sort=False):
+        if sid not in to_world:
+            raise ValueError(f"{sid}: no registration row (lower_to_world) to place its maps in the world")
+        ref_path = layout.mesh_reference(sid)
+        if ref_path.is_file():
+            ref = read_map(ref_path)
+        else:
+            sd = layout.scenes / "eval" / sid
+            ref = observed_reference(read_map(sd / "scene.ply"), read_sequence(sd / "lower"), spacing=mesh_spacing)
+            write_map(ref_path, ref)
+        for r in group.itertuples():
+            pred = read_map(real_like_lower_map(data_root, sid, source_dir(r.model), r.method))
+            s = compare(ref, pred, eval_voxel_size, transform=to_world[sid], grid_origin=eval_grid_origin(eval_voxel_size))
+            rows.append(dict(scene=sid, model=r.model, method=r.method, reference="mesh",
+                             **{k: float(s[k]) for k in MEASURE_COLUMNS}))
+    return pd.DataFrame(rows)

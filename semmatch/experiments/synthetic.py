@@ -96,17 +96,6 @@ def reconstruct_upper_maps(
     return pd.DataFrame(rows)
 
 
-def _fused_folder(transferred: Path, predicted: Path, out: Path) -> Path:
-    """Write ``fused`` labels: ``transferred`` where supported, ``predicted`` elsewhere."""
-    from ..io import read_image, read_labels_folder, write_labels_folder
-    from ..transfer import fuse_labels
-
-    a, b = read_labels_folder(transferred), read_labels_folder(predicted)
-    if len(a) != len(b):
-        raise ValueError(f"{transferred} holds {len(a)} label images, {predicted} {len(b)}")
-    return write_labels_folder(out, (fuse_labels(read_image(x), read_image(y)) for x, y in zip(a, b, strict=True)))
-
-
 def _routes(layout: Layout, sd: Path) -> list[str]:
     """Route modes with a robot sequence in scene folder ``sd`` (``own`` first)."""
     return [r for r in ROUTES if layout.lower_sequence(sd, r).is_dir()]
@@ -142,7 +131,7 @@ def transfer_lower_labels(
         map supports), fps.
     """
     from ..segment import predict_sequence
-    from ..transfer import prepare, transfer_sequence
+    from ..transfer import prepare, transfer_sequence, write_fused_labels
 
     if fused_base not in methods:
         raise ValueError(f"fused_base {fused_base!r} is not among the methods {list(methods)}")
@@ -164,7 +153,7 @@ def transfer_lower_labels(
             for net in networks:
                 low = predict_sequence(models[net], lower, layout.lower_labels(sid, net, "lower", route),
                                        progress=False)
-                _fused_folder(layout.lower_labels(sid, net, fused_base, route), low,
+                write_fused_labels(layout.lower_labels(sid, net, fused_base, route), low,
                               layout.lower_labels(sid, net, "fused", route))
     return pd.DataFrame(rows)
 

@@ -11,7 +11,7 @@ plus ``fused`` (transferred labels + a network's probabilities) and
 :func:`transfer_sequence` (a whole sequence into a labels folder).
 """
 
-from .fused import fuse, fuse_labels
+from .fused import fuse, fuse_labels, write_fused_labels
 from .index import DEFAULT_MAX_DISTANCE, MapIndex, prepare
 from .registry import ALL_METHODS, METHODS, PAPER_FPS, TransferResult, method_params, transfer, transfer_frame
 from .sequence import transfer_sequence
@@ -33,6 +33,7 @@ __all__ = [
     "method_params",
     "fuse",
     "fuse_labels",
+    "write_fused_labels",
     "superpixels",
     "SUPERPIXEL_BACKENDS",
     "vote",

@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import os
+from pathlib import Path
+
 import numpy as np
 
 from ..labels import NUM_CLASSES
 
-__all__ = ["fuse", "fuse_labels"]
+__all__ = ["fuse", "fuse_labels", "write_fused_labels"]
 
 
 def fuse(
@@ -95,3 +98,31 @@ def fuse_labels(transferred: np.ndarray, predicted: np.ndarray) -> np.ndarray:
         raise ValueError(f"transferred labels {transferred.shape} and predictions {predicted.shape} must be "
                          f"(H,W) images of one size")
     return np.where(transferred > 0, transferred, predicted).astype(np.uint8)
+
+
+def write_fused_labels(transferred: str | os.PathLike, predicted: str | os.PathLike,
+                       out: str | os.PathLike) -> Path:
+    """Write a labels folder of :func:`fuse_labels`, frame by frame, from two labels folders.
+
+    Parameters
+    ----------
+    transferred, predicted : path
+        Labels folders (``000000.png ...``) of a transfer method and of the lower-view network.
+    out : path
+        The ``fused`` labels folder (:func:`semmatch.io.write_labels_folder`).
+
+    Returns
+    -------
+    Path
+
+    Raises
+    ------
+    ValueError
+        Folders with different numbers of frames (both named).
+    """
+    from ..io import read_image, read_labels_folder, write_labels_folder
+
+    a, b = read_labels_folder(transferred), read_labels_folder(predicted)
+    if len(a) != len(b):
+        raise ValueError(f"{transferred} holds {len(a)} label images, {predicted} {len(b)}")
+    return write_labels_folder(out, (fuse_labels(read_image(x), read_image(y)) for x, y in zip(a, b, strict=True)))
