@@ -30,8 +30,15 @@ def test_smoke_run_writes_every_table_and_figure(smoke_run):
     for name in ("frames_upper_lower.png", "training_curves.png", "upper_maps.md", "table1_speed.md",
                  "table1_speed.png", "table2_synthetic.md", "table2_synthetic.png", "findings_synthetic.md",
                  "fig3_height.png", "table3_real.md", "findings_real.md", "trajectory_error.csv",
-                 "fig4_qualitative.png"):
+                 "fig4_qualitative.png", "routes.png", "misregistration.png", "validation_flip.csv",
+                 "validation_odometry_gate.csv", "findings_height.md"):
         assert (fig / name).is_file(), name
+    # the protocol's per-scene numbers, beside every table
+    for name in ("table2_per_scene.csv", "fig3_height_per_scene.csv", "table3_per_scene.csv", "support_per_scene.csv"):
+        per_scene = pd.read_csv(fig / name)
+        assert len(per_scene) and "scene" in per_scene.columns, name
+    assert set(pd.read_csv(fig / "table2_per_scene.csv")["reference"]) == {"fusion", "mesh"}
+    assert {"claim", "verdict"} <= set(pd.read_csv(fig / "claims_synthetic.csv").columns)
     t2 = pd.read_csv(fig / "table2_synthetic.csv")
     methods = pipeline.notebook_parameters("05_evaluate_synthetic", "smoke")["methods"]
     assert set(methods) <= set(t2["method"])
