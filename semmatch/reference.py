@@ -32,7 +32,7 @@ from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
-from .fusion import check_depth_units
+from .fusion import _check_poses, check_depth_units
 from .geometry import Intrinsics, check_pose
 from .io import Frame, SemanticMap, read_map
 
@@ -467,15 +467,12 @@ def observed_reference(
     if max_depth is not None and not (np.isfinite(max_depth) and max_depth > 0):
         raise ValueError(f"max_depth must be > 0 (metres) or None, got {max_depth}")
     name = str(getattr(frames, "path", "sequence"))
-    n_frames = len(frames) if hasattr(frames, "__len__") else None
+    try:
+        n_frames, poses = _check_poses(frames, poses)
+    except ValueError as e:
+        raise ValueError(f"{name}: {e}") from None
     if n_frames == 0:
         raise ValueError(f"{name}: the sequence has no frames")
-    if poses is not None:
-        poses = np.asarray(poses, dtype=np.float64)
-        if poses.ndim != 3 or poses.shape[1:] != (4, 4):
-            raise ValueError(f"{name}: poses must have shape (N,4,4), got {poses.shape}")
-        if n_frames is not None and len(poses) != n_frames:
-            raise ValueError(f"{name}: {len(poses)} poses for a sequence of {n_frames} frames")
 
     samples = sample_surface(mesh, spacing, seed=seed, max_points=max_points)
     mesh_source = samples.source
