@@ -30,12 +30,16 @@ import numpy as np
 from .geometry import Intrinsics, check_pose, pose_from_tum, pose_to_tum
 from .labels import NUM_CLASSES, colors_to_labels, labels_to_colors
 
+#: largest instance id a map or an instance image may hold (PLY ``instance`` is int32)
+INSTANCE_MAX = 2**31 - 1
+
 __all__ = [
     "Frame",
     "SequenceReader",
     "InMemorySequence",
     "SequenceWriter",
     "SemanticMap",
+    "INSTANCE_MAX",
     "atomic_path",
     "atomic_write_text",
     "save_figure",
@@ -317,6 +321,32 @@ class SequenceReader(_SequenceABC):
         if lab.max(initial=0) >= NUM_CLASSES:
             raise ValueError(f"{p}: label id {lab.max()} outside 0..{NUM_CLASSES - 1}")
         return lab
+
+    @property
+    def has_instances(self) -> bool:
+        """True when the sequence has an ``instances/`` folder (16-bit instance ids)."""
+        return (self.path / "instances").is_dir()
+
+    def read_instances(self, i: int) -> np.ndarray:
+        """Instance image of frame ``i`` (int32 (H,W), 0 = none).
+
+        Raises
+        ------
+        FileNotFoundError
+            The sequence has no ``instances/`` folder or lacks this frame's image.
+        ValueError
+            The image is not single-channel 8/16-bit or has another size.
+        """
+        i = frame_index(i, len(self))
+        p = self.path / "instances" / _frame_name(i)
+        if not p.is_file():
+            what = "has no instances/ folder" if not self.has_instances else f"lacks frame {i} ({p.name})"
+            raise FileNotFoundError(f"{self.path}: the sequence {what}; panoptic work needs instance images")
+        inst = read_image(p)
+        if inst.ndim != 2 or inst.dtype not in (np.uint8, np.uint16):
+            raise ValueError(f"{p}: instance ids must be an 8- or 16-bit single-channel PNG")
+        self._check_shape(inst, p, i)
+        return inst.astype(np.int32)
 
     def __getitem__(self, i):  # type: ignore[override]
         if isinstance(i, slice):
@@ -700,6 +730,9 @@ class SemanticMap:
     normals : float32 (N,3) or None
     source : str
         File it was read from, for messages.
+    instances : int32 (N,) or None
+        Instance id of every vertex (0 = none: stuff, or a thing without an instance), the
+        panoptic layer; None when the map has no instance layer.
     """
 
     points: np.ndarray
@@ -708,6 +741,7 @@ class SemanticMap:
     faces: np.ndarray | None = None
     normals: np.ndarray | None = None
     source: str = "<memory>"
+    instances: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         self.points = np.ascontiguousarray(self.points, dtype=np.float32).reshape(-1, 3)
@@ -718,6 +752,16 @@ class SemanticMap:
             self.faces = np.ascontiguousarray(self.faces, dtype=np.int32).reshape(-1, 3)
             if self.faces.size and (self.faces.min() < 0 or self.faces.max() >= len(self.points)):
                 raise ValueError(f"{self.source}: face index outside the vertex list")
+        if self.instances is not None:
+            inst = np.asarray(self.instances).reshape(-1)
+            if len(inst) != len(self.points):
+                raise ValueError(f"{self.source}: {len(self.points)} points but {len(inst)} instance ids")
+            if inst.size and (inst.min() < 0 or inst.max() > INSTANCE_MAX):
+                raise ValueError(
+                    f"{self.source}: instance ids must lie in 0..{INSTANCE_MAX} (the PLY property is "
+                    f"int32), got {int(inst.min())}..{int(inst.max())}"
+                )
+            self.instances = np.ascontiguousarray(inst, dtype=np.int32)
 
     def __len__(self) -> int:
         return len(self.points)
@@ -726,6 +770,11 @@ class SemanticMap:
     def is_mesh(self) -> bool:
         """True when the map has triangles."""
         return self.faces is not None and len(self.faces) > 0
+
+    @property
+    def has_instances(self) -> bool:
+        """True when the map carries an instance layer."""
+        return self.instances is not None
 
     @property
     def label_colors(self) -> np.ndarray:
@@ -811,6 +860,17 @@ def read_map(path: PathLike, *, require_labels: bool = True) -> SemanticMap:
         raise ValueError(f"{path}: PLY has neither vertex colours nor a 'label' property")
     else:
         labels = np.zeros(len(pts), dtype=np.uint8)
+    instances = None
+    if "instance" in names:
+        instances = np.asarray(v["instance"])
+        if not np.issubdtype(instances.dtype, np.integer):
+            raise ValueError(f"{path}: the 'instance' property must be an integer type, got {instances.dtype}")
+        instances = instances.astype(np.int64)
+        if instances.size and (instances.min() < 0 or instances.max() > INSTANCE_MAX):
+            raise ValueError(
+                f"{path}: instance ids outside 0..{INSTANCE_MAX} "
+                f"({int(instances.min())}..{int(instances.max())})"
+            )
     normals = None
     if {"nx", "ny", "nz"} <= set(names):
         normals = np.stack([v["nx"], v["ny"], v["nz"]], axis=1).astype(np.float32)
@@ -825,7 +885,8 @@ def read_map(path: PathLike, *, require_labels: bool = True) -> SemanticMap:
             raise ValueError(f"{path}: only triangle faces are supported") from None
         if faces.ndim != 2 or faces.shape[1] != 3:
             raise ValueError(f"{path}: only triangle faces are supported")
-    m = SemanticMap(pts, labels, colors=colors, faces=faces, normals=normals, source=str(path))
+    m = SemanticMap(pts, labels, colors=colors, faces=faces, normals=normals, source=str(path),
+                    instances=instances)
     bad = ~np.isfinite(m.points).all(axis=1)
     if bad.any():
         raise ValueError(f"{path}: {int(bad.sum())} vertices hold NaN or inf")
@@ -840,6 +901,8 @@ def write_map(
     binary: bool = True,
 ) -> Path:
     """Write a semantic map as PLY: vertex colours + ``label`` (uchar) property, atomically.
+
+    A map with an instance layer also gets an ``instance`` (int32) vertex property.
 
     Parameters
     ----------
@@ -862,12 +925,16 @@ def write_map(
     if m.normals is not None:
         fields += [("nx", "f4"), ("ny", "f4"), ("nz", "f4")]
     fields += [("red", "u1"), ("green", "u1"), ("blue", "u1"), ("label", "u1")]
+    if m.instances is not None:
+        fields += [("instance", "i4")]
     arr = np.empty(len(m.points), dtype=fields)
     arr["x"], arr["y"], arr["z"] = m.points.T
     if m.normals is not None:
         arr["nx"], arr["ny"], arr["nz"] = np.asarray(m.normals, dtype=np.float32).T
     arr["red"], arr["green"], arr["blue"] = col.T
     arr["label"] = m.labels
+    if m.instances is not None:
+        arr["instance"] = m.instances
     elements = [PlyElement.describe(arr, "vertex")]
     if m.is_mesh:
         f = np.empty(len(m.faces), dtype=[("vertex_indices", "i4", (3,))])

@@ -21,6 +21,8 @@ __all__ = [
     "NUM_CLASSES",
     "VOID",
     "EVAL_CLASSES",
+    "STUFF_CLASSES",
+    "THING_CLASSES",
     "id_of",
     "name_of",
     "labels_to_colors",
@@ -69,6 +71,10 @@ PALETTE.setflags(write=False)
 NUM_CLASSES: int = len(CATEGORIES)
 VOID: int = 0
 EVAL_CLASSES: tuple[int, ...] = tuple(range(1, 11))
+#: amorphous classes without instances (panoptic "stuff"): wall, floor, ceiling
+STUFF_CLASSES: tuple[int, ...] = (1, 2, 3)
+#: countable classes (panoptic "things"): every other category
+THING_CLASSES: tuple[int, ...] = tuple(range(4, NUM_CLASSES))
 
 _NAME_TO_ID = {c.name: c.id for c in CATEGORIES}
 _COLOR_KEYS = (

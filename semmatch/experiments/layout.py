@@ -11,6 +11,7 @@
     lower_maps/<scene_id>/mesh_reference.ply, upper_mesh_reference.ply   (05: the GT mesh, observed part)
     lower_maps/<scene_id>/shared_route/...                               (05, the route ablation)
     real_like/<scene_id>/...                                             (07_real_data)
+    panoptic/<scene_id>/upper_<source>.ply, reference.ply, <source>/<method>.ply  (10_panoptic)
 
 ``source`` is the upper map a transfer used: ``ground truth`` (written ``gt``) or a network
 name; for the network baseline the "method" is ``lower`` (the network applied to the lower
@@ -126,6 +127,11 @@ class Layout:
     def upper_reference(self, scene_id: str) -> Path:
         """Upper-view reconstruction fused from ground-truth labels."""
         return self.upper_map(scene_id, GT)
+
+    def panoptic(self, scene_id: str) -> Path:
+        """Panoptic maps of one scene (``10_panoptic``): ``upper_<source>.ply``, ``reference.ply``,
+        ``<source>/<method>.ply``."""
+        return self.root / "panoptic" / scene_id
 
     @property
     def real_like(self) -> Path:

@@ -51,6 +51,7 @@ NOTEBOOKS: tuple[str, ...] = (
     "06_height_study",
     "07_real_data",
     "08_qualitative",
+    "10_panoptic",
 )
 
 

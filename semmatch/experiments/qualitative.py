@@ -33,11 +33,14 @@ def render_map(
     *,
     cut_ceiling: float = 0.5,
     background: int = 255,
+    colors: np.ndarray | None = None,
 ) -> np.ndarray:
     """Shaded label-colour render of a semantic mesh, with the ceiling cut away.
 
     Triangles whose vertices all lie within ``cut_ceiling`` metres of the map's top are
-    dropped so that the room can be seen from above.
+    dropped so that the room can be seen from above. ``colors`` (uint8 (N,3), one per vertex,
+    e.g. :func:`semmatch.panoptic.instance_colors`) replaces the label colours; a triangle
+    takes its first vertex's colour.
     """
     from ..sim import Renderer, Scene
     from ..sim.plyscene import triangle_labels
@@ -50,7 +53,8 @@ def render_map(
     if len(faces) == 0:
         raise ValueError(f"{m.source}: nothing left below the ceiling cut")
     labels = triangle_labels(faces, m.labels)
-    scene = Scene(m.points, faces, labels, np.zeros(len(faces)), PALETTE[labels] / 255.0, name="map")
+    albedo = PALETTE[labels] if colors is None else np.asarray(colors, dtype=np.uint8)[faces[:, 0]]
+    scene = Scene(m.points, faces, labels, np.zeros(len(faces)), albedo / 255.0, name="map")
     r = Renderer(scene, intrinsics, ambient=0.55, shadows=False, texture=False).render(pose)
     rgb = r.rgb.copy()
     rgb[r.depth <= 0] = background

@@ -19,13 +19,13 @@ from pathlib import Path
 import numpy as np
 
 from ..io import read_map
-from ..labels import NUM_CLASSES, id_of
+from ..labels import NUM_CLASSES, STUFF_CLASSES, id_of
 from .materials import MATERIALS
 from .scene import Scene
 
 __all__ = ["scene_from_ply", "triangle_labels", "up_rotation"]
 
-_STUFF = (id_of("wall"), id_of("floor"), id_of("ceiling"))
+_STUFF = STUFF_CLASSES
 
 
 def triangle_labels(faces: np.ndarray, vertex_labels: np.ndarray) -> np.ndarray:

@@ -29,7 +29,7 @@ from scipy.spatial import cKDTree
 
 from ..geometry import Intrinsics, check_pose, pixel_rays
 from ..io import SemanticMap
-from ..labels import NUM_CLASSES
+from ..labels import NUM_CLASSES, THING_CLASSES
 
 __all__ = ["MapIndex", "prepare", "sample_mesh", "DEFAULT_MAX_DISTANCE"]
 
@@ -156,6 +156,7 @@ class MapIndex:
             self.samples, self.sample_labels = semantic_map.points, semantic_map.labels
         self._tree = None if self.is_mesh else cKDTree(self.samples)
         self._rc = None
+        self._class_trees: dict | None = None  # per-class KD-trees of instance lookups
         self._rays: dict[Intrinsics, tuple[np.ndarray, np.ndarray]] = {}
         self._build_grid(float(voxel_size), int(max_voxels))
         self.n_samples = len(self.samples)
@@ -310,6 +311,79 @@ class MapIndex:
             lab = np.where(far, 0, lab).astype(np.uint8)
             d[far] = np.inf
         return lab, d
+
+    @property
+    def has_instances(self) -> bool:
+        """True when the indexed map carries an instance layer."""
+        return self.map.instances is not None
+
+    def with_instances(self, instances: np.ndarray) -> MapIndex:
+        """This index over the same map with another instance layer (the label grid is shared,
+        not rebuilt).
+
+        Parameters
+        ----------
+        instances : int (N,)
+            One instance id per map vertex.
+        """
+        import copy
+
+        m = self.map
+        other = copy.copy(self)
+        other.map = SemanticMap(m.points, m.labels, colors=m.colors, faces=m.faces, normals=m.normals,
+                                source=m.source, instances=instances)
+        other._class_trees = None
+        return other
+
+    def instances_at(self, points: np.ndarray, labels: np.ndarray) -> np.ndarray:
+        """Instance id of the nearest map vertex of each point's own class.
+
+        The panoptic lookup: a point labelled ``c`` takes the instance of the nearest map vertex
+        labelled ``c`` within ``max_distance`` (0 when there is none, or when ``c`` is void or a
+        stuff class). One KD-tree per class, built on first use.
+
+        Parameters
+        ----------
+        points : float (N,3)
+        labels : uint8 (N,)
+            The class each point was given (e.g. by a transfer method).
+
+        Returns
+        -------
+        int32 (N,)
+
+        Raises
+        ------
+        ValueError
+            The map has no instance layer, or ``points`` and ``labels`` differ in length.
+        """
+        if self.map.instances is None:
+            raise ValueError(
+                f"{self.source}: the map has no instance layer (no 'instance' vertex property); "
+                "add one with semmatch.panoptic.segment_instances or `semmatch panoptic segment`"
+            )
+        p = np.asarray(points, dtype=np.float32).reshape(-1, 3)
+        lab = np.asarray(labels).reshape(-1)
+        if len(p) != len(lab):
+            raise ValueError(f"{len(p)} points but {len(lab)} labels")
+        out = np.zeros(len(p), np.int32)
+        if self._class_trees is None:
+            self._class_trees = {}
+        for c in np.unique(lab):
+            if int(c) not in THING_CLASSES:
+                continue
+            if int(c) not in self._class_trees:
+                verts = np.flatnonzero((self.map.labels == c) & (self.map.instances > 0))
+                tree = cKDTree(self.map.points[verts]) if len(verts) else None
+                self._class_trees[int(c)] = (tree, self.map.instances[verts])
+            tree, inst = self._class_trees[int(c)]
+            if tree is None:
+                continue
+            sel = np.flatnonzero(lab == c)
+            d, i = tree.query(p[sel], distance_upper_bound=self.max_distance, workers=self.workers)
+            hit = np.isfinite(d)
+            out[sel[hit]] = inst[i[hit]]
+        return out
 
     def lookup(self, points: np.ndarray, *, exact: bool = True) -> np.ndarray:
         """Label of the nearest map surface, 0 where it is farther than ``max_distance``.

@@ -1,8 +1,11 @@
 """The paper's five label-projection methods (§3.2, Alg. 1-3), on a :class:`MapIndex`.
 
 Every method takes a validated frame (:class:`~semmatch.transfer.frames.FrameData`) and an
-index and returns ``(labels, purity)``: ``uint8 (H,W)`` labels (0 = no support) and the
-per-pixel share of its group's votes that agreed (``float32 (H,W)``), which ``fused`` uses.
+index and returns ``(labels, purity, groups)``: ``uint8 (H,W)`` labels (0 = no support), the
+per-pixel share of its group's votes that agreed (``float32 (H,W)``), which ``fused`` uses,
+and the method's grouping of the pixels (``int64 (H,W)`` superpixel / supervoxel / cluster
+id, -1 = in no group; None for the per-pixel ``3d-neighborhood``), which panoptic transfer
+uses to give a group one instance (:mod:`semmatch.panoptic`).
 
 Common rules: pixels without depth get 0; a pixel whose own 3D point is farther than the
 index's ``max_distance`` from the map gets 0 even when its group has a label (the group vote
@@ -35,12 +38,19 @@ def _mapped_points(fd: FrameData, index: MapIndex) -> tuple[np.ndarray, np.ndarr
     return pts, pix
 
 
-def _finish(fd: FrameData, index: MapIndex, labels: np.ndarray, purity: np.ndarray):
+def _finish(fd: FrameData, index: MapIndex, labels: np.ndarray, purity: np.ndarray, groups: np.ndarray):
     """Apply the per-pixel support mask shared by the group methods."""
     support = index.support_depth(fd.depth, fd.pose, fd.intrinsics)
     labels = np.where(support, labels, 0).astype(np.uint8)
     purity = np.where(support, purity, 0).astype(np.float32)
-    return labels, purity
+    return labels, purity, np.asarray(groups, dtype=np.int64).reshape(fd.shape)
+
+
+def _pixel_groups(fd: FrameData, pix: np.ndarray, group_of_point: np.ndarray) -> np.ndarray:
+    """Per-pixel group ids (-1 for pixels without a point) from the groups of the points."""
+    g = np.full(fd.shape[0] * fd.shape[1], -1, np.int64)
+    g[pix] = group_of_point
+    return g
 
 
 def render_labels(
@@ -156,7 +166,7 @@ def slic_2d(
     g = seg[::s, ::s][rendered]
     n = int(seg.max()) + 1
     winner, purity = vote(g, votes[rendered], n)
-    return _finish(fd, index, paint(seg, winner), paint(seg, purity, 0.0))
+    return _finish(fd, index, paint(seg, winner), paint(seg, purity, 0.0), seg)
 
 
 def projected_sp_3d(
@@ -182,7 +192,7 @@ def projected_sp_3d(
     pts, pix = fd.points(int(subsample))
     lab = index.lookup(pts, exact=exact)
     winner, purity = vote(seg.reshape(-1)[pix], lab, int(seg.max()) + 1)
-    return _finish(fd, index, paint(seg, winner), paint(seg, purity, 0.0))
+    return _finish(fd, index, paint(seg, winner), paint(seg, purity, 0.0), seg)
 
 
 def _voxel_downsample(points: np.ndarray, voxel_size: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -239,7 +249,7 @@ def slic_3d(
     maskSLIC (scikit-image ``slic`` with the occupied voxels as mask) on the voxel grid for
     ``n_segments`` supervoxels, label each voxel centroid from the map, vote per supervoxel."""
 
-    out = np.zeros(fd.shape, np.uint8), np.zeros(fd.shape, np.float32)
+    out = np.zeros(fd.shape, np.uint8), np.zeros(fd.shape, np.float32), np.full(fd.shape, -1, np.int64)
     pts, pix = _mapped_points(fd, index)
     if len(pts) == 0:
         return out
@@ -263,7 +273,7 @@ def slic_3d(
     pur = np.zeros(fd.shape, np.float32)
     labels.reshape(-1)[pix] = paint(sv[inv], winner)
     pur.reshape(-1)[pix] = paint(sv[inv], purity, 0.0)
-    return _finish(fd, index, labels, pur)
+    return _finish(fd, index, labels, pur, _pixel_groups(fd, pix, sv[inv]))
 
 
 def _cloud(points: np.ndarray):
@@ -346,7 +356,7 @@ def dbscan(
     RANSAC scores its hypotheses on ``ransac_sample`` random points (seeded by ``seed``)."""
     import open3d as o3d
 
-    out = np.zeros(fd.shape, np.uint8), np.zeros(fd.shape, np.float32)
+    out = np.zeros(fd.shape, np.uint8), np.zeros(fd.shape, np.float32), np.full(fd.shape, -1, np.int64)
     pts, pix = _mapped_points(fd, index)
     if len(pts) == 0:
         return out
@@ -365,7 +375,7 @@ def dbscan(
     pur = np.zeros(fd.shape, np.float32)
     labels.reshape(-1)[pix] = paint(cluster[inv], winner)
     pur.reshape(-1)[pix] = paint(cluster[inv], purity, 0.0)
-    return _finish(fd, index, labels, pur)
+    return _finish(fd, index, labels, pur, _pixel_groups(fd, pix, cluster[inv]))
 
 
 def neighborhood_3d(fd: FrameData, index: MapIndex, *, exact: bool = False, backend: str = "grid"):
@@ -387,4 +397,4 @@ def neighborhood_3d(fd: FrameData, index: MapIndex, *, exact: bool = False, back
         labels = index.lookup_depth(fd.depth, fd.pose, fd.intrinsics, exact=exact)
     else:
         raise ValueError(f"unknown 3d-neighborhood backend {backend!r}; valid: grid, reference")
-    return labels, (labels > 0).astype(np.float32)
+    return labels, (labels > 0).astype(np.float32), None

@@ -58,6 +58,10 @@ class TransferResult:
         Share of the pixel's group votes that agreed with its label (1 for ``3d-neighborhood``,
         0 for void pixels).
     method : str
+    groups : int64 (H,W) or None
+        The method's grouping of the pixels (superpixel, supervoxel or cluster id; -1 = in no
+        group); None for per-pixel methods (``3d-neighborhood``). Panoptic transfer gives each
+        group one instance.
     """
 
     labels: np.ndarray
@@ -65,6 +69,7 @@ class TransferResult:
     seconds: float
     purity: np.ndarray
     method: str
+    groups: np.ndarray | None = None
 
 
 def method_params(name: str) -> dict:
@@ -154,18 +159,18 @@ def transfer_frame(
         if base == "fused" or base not in _FUNCS:
             raise ValueError(f"fused: base must be one of {', '.join(METHODS)}, got {base!r}")
         fd = check_frame(frame, need_rgb=base not in _RGB_FREE)
-        labels, purity = _call(base, fd, index, params)
+        labels, purity, groups = _call(base, fd, index, params)
         labels = fuse(labels, probs, purity=purity, min_purity=min_purity)
         purity = np.where(labels == 0, 0, purity).astype(np.float32)
     else:
         fd = check_frame(frame, need_rgb=name not in _RGB_FREE)
-        labels, purity = _call(name, fd, index, params)
+        labels, purity, groups = _call(name, fd, index, params)
     seconds = time.perf_counter() - t1
     n_valid = fd.n_valid
     # the paper's methods leave pixels without depth at 0; fused may label them from the network
     n_lab = np.count_nonzero(labels[fd.valid]) if name == "fused" else np.count_nonzero(labels)
     coverage = float(n_lab / n_valid) if n_valid else 0.0
-    return TransferResult(labels, coverage, seconds, purity, name)
+    return TransferResult(labels, coverage, seconds, purity, name, groups)
 
 
 def transfer(

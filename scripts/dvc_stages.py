@@ -1,0 +1,92 @@
+"""Write dvc.yaml: one stage per notebook (run `python scripts/dvc_stages.py dvc.yaml`).
+
+Edit the stage table here, not dvc.yaml by hand: every stage depends on its notebook and on
+the whole `semmatch` package, plus the data folders of the stages before it.
+"""
+
+import sys
+
+import yaml
+
+P = "${profile}"
+
+
+def fig(*names):
+    return [{f"figures/{P}/{n}": {"cache": False}} for n in names]
+
+
+def tbl(*names):
+    out = []
+    for n in names:
+        out += [f"{n}.csv", f"{n}.md"]
+    return out
+
+
+def common(*keys):
+    return [f"profiles.{P}.common.{k}" for k in keys]
+
+
+stages = {
+ "simulate": dict(
+    nb="01_simulate", deps=[],
+    params=["profile", *common("kinds", "eval_seeds", "train_seeds", "val_seeds", "dev_seeds", "min_val_per_kind", "seed"), f"profiles.{P}.simulate"],
+    outs=[f"data/{P}/scenes"], figs=["frames_upper_lower.png", "routes.png"]),
+ "train_segmentation": dict(
+    nb="02_train_segmentation", deps=[f"data/{P}/scenes"],
+    params=["profile", *common("kinds", "train_seeds", "val_seeds", "eval_seeds", "networks", "seed"), f"profiles.{P}.train_segmentation"],
+    outs=[{f"data/{P}/models": {"persist": True}}],
+    figs=["training_curves.png", *tbl("segmentation_validation", "validation_flip", "validation_flip_summary")]),
+ "reconstruct_upper": dict(
+    nb="03_reconstruct_upper", deps=[f"data/{P}/scenes", f"data/{P}/models"],
+    params=["profile", *common("networks", "voxel_size", "eval_voxel_size"), f"profiles.{P}.reconstruct_upper"],
+    outs=[f"data/{P}/upper"], figs=tbl("upper_maps")),
+ "label_transfer": dict(
+    nb="04_label_transfer", deps=[f"data/{P}/scenes", f"data/{P}/models", f"data/{P}/upper"],
+    params=["profile", *common("methods", "networks", "jobs", "fused_base"), f"profiles.{P}.label_transfer"],
+    outs=[f"data/{P}/lower_labels"],
+    figs=[*tbl("table1_speed", "support_per_scene"), "table1_speed.png", "support_per_scene.png"]),
+ "evaluate_synthetic": dict(
+    nb="05_evaluate_synthetic", deps=[f"data/{P}/scenes", f"data/{P}/upper", f"data/{P}/lower_labels"],
+    params=["profile", *common("methods", "networks", "voxel_size", "eval_voxel_size", "fused_base"), f"profiles.{P}.evaluate_synthetic"],
+    outs=[f"data/{P}/lower_maps"],
+    figs=[*tbl("table2_per_scene", "table2_synthetic", "table2_mesh_reference", "table2_route_ablation", "claims_synthetic", "table2_training_seeds"),
+          "table2_synthetic.png", "table2_mesh_reference.png", "findings_synthetic.md"]),
+ "height_study": dict(
+    nb="06_height_study", deps=[f"data/{P}/scenes", f"data/{P}/models"],
+    params=["profile", *common("networks"), f"profiles.{P}.height_study"],
+    outs=[], figs=[*tbl("fig3_height", "fig3_height_per_scene", "claims_height", "fig3_training_seeds"), "fig3_height.png", "findings_height.md"]),
+ "real_data": dict(
+    nb="07_real_data", deps=[f"data/{P}/scenes", f"data/{P}/models", f"data/{P}/upper", f"data/{P}/lower_maps"],
+    params=["profile", *common("methods", "networks", "voxel_size", "eval_voxel_size", "fused_base", "jobs"), f"profiles.{P}.real_data"],
+    outs=[f"data/{P}/real_like"],
+    figs=[*tbl("table3_per_scene", "table3_real", "table3_mesh_reference", "trajectory_error", "validation_odometry_gate",
+               "misregistration", "claims_real", "trajectory_error_summary", "registration_error"),
+          "table3_real.png", "misregistration.png", "findings_real.md"]),
+ "qualitative": dict(
+    nb="08_qualitative", deps=[f"data/{P}/scenes", f"data/{P}/lower_maps"],
+    params=["profile", *common("methods"), f"profiles.{P}.qualitative"],
+    outs=[], figs=["fig4_qualitative.png"]),
+ "panoptic": dict(
+    nb="10_panoptic", deps=[f"data/{P}/scenes", f"data/{P}/upper", f"data/{P}/lower_maps"],
+    params=["profile", *common("methods", "voxel_size", "eval_voxel_size", "jobs"), f"profiles.{P}.panoptic"],
+    outs=[f"data/{P}/panoptic"],
+    figs=[*tbl("validation_panoptic_clustering", "table_panoptic_per_scene", "table_panoptic"),
+          "table_panoptic.png", "fig_panoptic.png"]),
+}
+out = {"stages": {}}
+for name, st in stages.items():
+    out["stages"][name] = {
+        "cmd": f"python -m semmatch.experiments run {st['nb']}",
+        "deps": [f"notebooks/{st['nb']}.ipynb", "semmatch", *st["deps"]],
+        "params": st["params"],
+        "outs": [*st["outs"], f"reports/{P}/{st['nb']}.ipynb", *fig(*st["figs"])],
+    }
+head = """# The paper's results, one stage per notebook, run through papermill by
+# `python -m semmatch.experiments run NN_name` with the parameters of the active profile
+# (params.yaml: `profile`). Data goes to data/<profile>/, executed notebooks to
+# reports/<profile>/, figures and tables to figures/<profile>/ (small: kept in git).
+# Every stage depends on the whole package (`semmatch`): a stage runs code from many modules,
+# and a hand-picked list goes stale silently.
+"""
+if __name__ == "__main__":
+    open(sys.argv[1], "w").write(head + yaml.safe_dump(out, sort_keys=False, width=120))
