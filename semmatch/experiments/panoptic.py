@@ -201,7 +201,7 @@ def panoptic_study(
         ``scene``, ``source``, ``method`` and :data:`PANOPTIC_MEASURES`, plus the per-class PQ of
         the thing classes as ``pq_<class>`` (NaN where the class is absent from both maps).
     """
-    from concurrent.futures import ProcessPoolExecutor
+    from ..workers import process_pool
 
     layout = Layout(data_root)
     scenes = [sd.name for sd in layout.scene_dirs("eval")]
@@ -214,7 +214,7 @@ def panoptic_study(
             rows += panoptic_scene(data_root, sid, methods, networks, **kw)
             bar.update()
     else:
-        with ProcessPoolExecutor(max_workers=int(jobs)) as pool:
+        with process_pool(int(jobs)) as pool:
             futures = [pool.submit(panoptic_scene, data_root, sid, methods, networks, **kw) for sid in scenes]
             for fut in futures:
                 rows += fut.result()

@@ -31,6 +31,8 @@ _SECTIONS = (
     ("misregistration.png", None, "**Misregistration study.** Mean Acc. of every method when the ground-truth upper map is shifted or rotated against the robot's frames (mean and 95% interval over scenes)."),
     (None, "findings_real.md", None),
     ("fig4_qualitative.png", None, "**Fig. 4 (qualitative).** Lower-view semantic maps of one scene per method."),
+    ("table_panoptic.png", "table_panoptic.md", "**Panoptic transfer (the paper's future work, [docs/panoptic.md](docs/panoptic.md)).** Panoptic quality of the robot's map (PQ = SQ x RQ on 5 cm voxels; thing classes, stuff, all) per transfer method and upper-map source (`oracle`: ground-truth classes and instances; `gt+clustering`: ground-truth classes, instances by 3D clustering; a network: its classes, clustered instances): mean [95% interval] over the evaluation scenes. The clustering radius was chosen on the validation scenes."),
+    ("fig_panoptic.png", None, "Instances in the robot's map of one evaluation scene (one colour per instance, stuff in its class colour)."),
     ("training_curves.png", "segmentation_validation.md", "Segmentation networks: training curves and validation at human height (validation scenes; the best validation checkpoint is kept)."),
     (None, "validation_flip_summary.md", "Test-time mirror averaging, chosen on the validation scenes' height sweeps (mIoU over all heights):"),
 )

@@ -479,12 +479,12 @@ def generate_dataset(
     if jobs == 1:
         results = (_write_scene(root, opts, *job, progress=progress) for job in todo)
     else:
-        import multiprocessing as mp
-        from concurrent.futures import ProcessPoolExecutor
         from functools import partial
 
+        from ..workers import process_pool
+
         # spawn: Open3D and BLAS thread pools do not survive a fork safely
-        pool = ProcessPoolExecutor(max_workers=jobs, mp_context=mp.get_context("spawn"))
+        pool = process_pool(jobs, spawn=True)
         results = pool.map(partial(_write_scene, root, opts), *zip(*todo))
     try:
         for w, sk in tqdm(results, total=len(todo), desc="scenes", disable=not progress):

@@ -5,7 +5,6 @@ from __future__ import annotations
 import os
 import warnings
 from collections.abc import Sequence
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import replace
 from pathlib import Path
 
@@ -20,6 +19,7 @@ from ..io import (
     read_sequence,
     write_labels_folder,
 )
+from ..workers import process_pool
 from .index import MapIndex, prepare
 from .registry import ALL_METHODS, check_params, transfer_frame
 
@@ -151,9 +151,7 @@ def transfer_sequence(
     secs = np.zeros(n)
     bar = tqdm(total=n, desc=f"transfer {method}", disable=not progress, unit="frame")
     if int(jobs) > 1 and source is not None:
-        with ProcessPoolExecutor(
-            max_workers=int(jobs), initializer=_init_worker, initargs=(index, source, method, params, poses)
-        ) as ex:
+        with process_pool(int(jobs), initializer=_init_worker, initargs=(index, source, method, params, poses)) as ex:
             for i, lab, c, s in ex.map(_run_one, range(n), chunksize=max(1, n // (4 * int(jobs)))):
                 labels[i], cov[i], secs[i] = lab, c, s
                 bar.update()

@@ -1,0 +1,60 @@
+"""Worker processes die with their parent, even when it is killed with SIGKILL."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+from semmatch.workers import process_pool
+
+_CHILD = """
+import os, sys, time
+from semmatch.workers import process_pool
+
+def work(_):
+    print(os.getpid(), flush=True)
+    time.sleep(60)
+
+if __name__ == "__main__":
+    with process_pool(2, spawn={spawn}) as pool:
+        list(pool.map(work, range(2)))
+"""
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    with open(f"/proc/{pid}/stat") as fh:  # a zombie waits for its reaper: it is gone
+        return fh.read().split(")")[-1].split()[0] != "Z"
+
+
+def _square(x: int) -> int:
+    return x * x
+
+
+def test_pool_computes():
+    with process_pool(2) as pool:
+        assert list(pool.map(_square, range(5))) == [0, 1, 4, 9, 16]
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="PR_SET_PDEATHSIG is Linux-only")
+@pytest.mark.parametrize("spawn", [False, True])
+def test_workers_die_when_the_parent_is_killed(tmp_path, spawn):
+    script = tmp_path / "child.py"
+    script.write_text(_CHILD.format(spawn=spawn))
+    proc = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE, text=True)
+    pids = [int(proc.stdout.readline()) for _ in range(2)]
+    assert all(_alive(p) for p in pids)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    deadline = time.monotonic() + 10
+    while any(_alive(p) for p in pids) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not any(_alive(p) for p in pids), "workers outlived their killed parent"
