@@ -44,7 +44,8 @@ stages = {
     nb="04_label_transfer", deps=[f"data/{P}/scenes", f"data/{P}/models", f"data/{P}/upper"],
     params=["profile", *common("methods", "networks", "jobs", "fused_base"), f"profiles.{P}.label_transfer"],
     outs=[f"data/{P}/lower_labels"],
-    figs=[*tbl("table1_speed", "support_per_scene"), "table1_speed.png", "support_per_scene.png"]),
+    figs=[*tbl("table1_speed", "support_per_scene"), "table1_speed.png", "support_per_scene.png",
+          "fig_transferred_frames.png"]),
  "evaluate_synthetic": dict(
     nb="05_evaluate_synthetic", deps=[f"data/{P}/scenes", f"data/{P}/upper", f"data/{P}/lower_labels"],
     params=["profile", *common("methods", "networks", "voxel_size", "eval_voxel_size", "fused_base"), f"profiles.{P}.evaluate_synthetic"],

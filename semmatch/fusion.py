@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from .geometry import Intrinsics, check_pose, pixel_rays
-from .io import Frame, SemanticMap, read_image, read_labels_folder, write_map
+from .io import Frame, SemanticMap, read_label_image, read_labels_folder, write_map
 from .labels import NUM_CLASSES
 
 __all__ = ["SemanticTSDF", "reconstruct", "reconstruct_many", "check_depth_units", "default_device"]
@@ -491,7 +491,7 @@ def _label_source(labels, n: int | None) -> Iterator[np.ndarray | None] | None:
         paths = read_labels_folder(labels)
         if n is not None and len(paths) != n:
             raise ValueError(f"{labels}: labels folder has {len(paths)} images for {n} frames")
-        return (read_image(p) for p in paths)
+        return (read_label_image(p) for p in paths)
     if isinstance(labels, np.ndarray) and (
         labels.ndim == 2 or (labels.ndim == 3 and np.issubdtype(labels.dtype, np.floating))
     ):

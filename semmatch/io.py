@@ -50,6 +50,8 @@ __all__ = [
     "write_tum",
     "read_image",
     "write_image",
+    "read_label_image",
+    "write_label_image",
     "read_depth",
     "write_depth",
     "read_labels_folder",
@@ -123,6 +125,55 @@ def write_image(path: PathLike, image: np.ndarray) -> None:
     with atomic_path(path) as tmp:
         if not cv2.imwrite(str(tmp), np.ascontiguousarray(image), [cv2.IMWRITE_PNG_COMPRESSION, 1]):
             raise OSError(f"could not write image {path}")
+
+
+def _png_palette() -> list[int]:
+    from .labels import PALETTE
+
+    pal = np.zeros((256, 3), np.uint8)
+    pal[: len(PALETTE)] = PALETTE
+    return pal.reshape(-1).tolist()
+
+
+def write_label_image(path: PathLike, labels: np.ndarray) -> None:
+    """Write category ids (uint8 (H,W)) as a palette PNG, atomically.
+
+    The pixel values are the ids (read back id-exact by :func:`read_label_image`); the PNG's
+    palette holds the category colours, so any image viewer shows the labels in colour.
+    """
+    from PIL import Image
+
+    lab = np.asarray(labels)
+    if lab.ndim != 2 or lab.dtype != np.uint8:
+        raise ValueError(f"{path}: labels must be uint8 (H,W), got {lab.dtype} {lab.shape}")
+    img = Image.fromarray(np.ascontiguousarray(lab), mode="P")
+    img.putpalette(_png_palette())
+    with atomic_path(path) as tmp:
+        img.save(tmp, format="PNG", compress_level=1)
+
+
+def read_label_image(path: PathLike) -> np.ndarray:
+    """Read a label PNG as category ids (uint8 (H,W)): palette PNGs (their indices) and 8-bit
+    grayscale PNGs (their values).
+
+    Raises
+    ------
+    FileNotFoundError
+        No such file.
+    ValueError
+        The file is not a single-channel 8-bit or palette image.
+    """
+    from PIL import Image, UnidentifiedImageError
+
+    try:
+        with Image.open(path) as img:
+            if img.mode not in ("P", "L"):
+                raise ValueError(f"{path}: labels must be an 8-bit single-channel or palette PNG, got mode {img.mode}")
+            return np.asarray(img, dtype=np.uint8).copy()
+    except FileNotFoundError:
+        raise FileNotFoundError(f"cannot read image {path}") from None
+    except (UnidentifiedImageError, OSError) as e:
+        raise ValueError(f"{path}: not a readable image ({e})") from None
 
 
 def read_image(path: PathLike, *, flags: int = cv2.IMREAD_UNCHANGED) -> np.ndarray:
@@ -314,9 +365,7 @@ class SequenceReader(_SequenceABC):
             if self.has_labels:
                 raise ValueError(f"{self.labels_dir}: frame {i} ({p.name}) is missing")
             return None
-        lab = read_image(p)
-        if lab.ndim != 2 or lab.dtype != np.uint8:
-            raise ValueError(f"{p}: labels must be an 8-bit single-channel PNG")
+        lab = read_label_image(p)
         self._check_shape(lab, p, i)
         if lab.max(initial=0) >= NUM_CLASSES:
             raise ValueError(f"{p}: label id {lab.max()} outside 0..{NUM_CLASSES - 1}")
@@ -500,7 +549,7 @@ class SequenceWriter:
         write_image(self._tmp / "rgb" / name, np.asarray(rgb, dtype=np.uint8))
         write_depth(self._tmp / "depth" / name, depth, self.intrinsics.depth_scale)
         if labels is not None:
-            write_image(self._tmp / "labels" / name, np.asarray(labels, dtype=np.uint8))
+            write_label_image(self._tmp / "labels" / name, np.asarray(labels, dtype=np.uint8))
         for key, img in extra_images.items():
             write_image(self._tmp / key / name, img)
         self._poses.append(pose)
@@ -694,7 +743,7 @@ def write_labels_folder(path: PathLike, labels: Iterator[np.ndarray] | list[np.n
             # PNG encoding releases the GIL: a writer thread overlaps it with making the next label
             # image (a prediction, a transfer) or with the other writer
             with ThreadPoolExecutor(max_workers=2) as ex:
-                pending = [ex.submit(write_image, tmp / _frame_name(i), np.asarray(lab, dtype=np.uint8))
+                pending = [ex.submit(write_label_image, tmp / _frame_name(i), np.asarray(lab, dtype=np.uint8))
                            for i, lab in enumerate(labels)]
                 for fut in pending:
                     fut.result()

@@ -25,7 +25,7 @@ import numpy as np
 
 from .fusion import check_depth_units
 from .geometry import Intrinsics
-from .io import Frame, frame_index, read_depth, read_image, read_intrinsics, read_tum
+from .io import Frame, frame_index, read_depth, read_image, read_intrinsics, read_label_image, read_tum
 
 __all__ = [
     "TUM_INTRINSICS",
@@ -296,7 +296,7 @@ class TumRgbdSequence(_SequenceABC):
             lp = self.labels_dir / f"{i:06d}.png"
             if not lp.is_file():
                 raise ValueError(f"{self.labels_dir}: frame {i} ({lp.name}) is missing")
-            labels = read_image(lp)
+            labels = read_label_image(lp)
             if labels.shape != shape:
                 raise ValueError(f"{lp}: labels are {labels.shape}, expected {shape}")
         pose = None

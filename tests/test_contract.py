@@ -191,3 +191,25 @@ def test_replica_map_reads_with_palette(shared_dir):
         m = read_map(path)
     assert m.is_mesh and len(m) > 10000
     assert set(np.unique(m.labels)) & set(L.EVAL_CLASSES)
+
+
+def test_label_pngs_are_palette_images_read_back_id_exact(tmp_path):
+    from PIL import Image
+
+    from semmatch.io import read_label_image, write_image, write_label_image
+    from semmatch.labels import NUM_CLASSES, PALETTE
+
+    lab = (np.arange(6 * 7).reshape(6, 7) % NUM_CLASSES).astype(np.uint8)
+    write_label_image(tmp_path / "l.png", lab)
+    with Image.open(tmp_path / "l.png") as img:
+        assert img.mode == "P"  # viewers show the palette colours
+        shown = np.asarray(img.convert("RGB"))
+    np.testing.assert_array_equal(shown, PALETTE[lab])
+    np.testing.assert_array_equal(read_label_image(tmp_path / "l.png"), lab)
+    # older grayscale label PNGs still read as ids
+    write_image(tmp_path / "g.png", lab)
+    np.testing.assert_array_equal(read_label_image(tmp_path / "g.png"), lab)
+    # an RGB image is no label image
+    write_image(tmp_path / "rgb.png", np.zeros((6, 7, 3), np.uint8))
+    with pytest.raises(ValueError, match="8-bit single-channel or palette"):
+        read_label_image(tmp_path / "rgb.png")

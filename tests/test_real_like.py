@@ -84,12 +84,12 @@ def test_chain_uses_no_true_pose_and_reports_the_registration(tiny_root, tmp_pat
     assert row["transform"].shape == row["lower_to_world"].shape == (4, 4)
     assert (work / "registration.json").is_file()
     # fused = the transferred label where supported, the network's elsewhere
-    from semmatch.io import read_image, read_labels_folder
+    from semmatch.io import read_label_image, read_labels_folder
 
     lab = work / "lower_labels_noisy"
     for a, b, f in zip(*(read_labels_folder(lab / m) for m in ("3d-neighborhood", "lower", "fused")), strict=True):
-        t, n = read_image(a), read_image(b)
-        np.testing.assert_array_equal(read_image(f), np.where(t > 0, t, n))
+        t, n = read_label_image(a), read_label_image(b)
+        np.testing.assert_array_equal(read_label_image(f), np.where(t > 0, t, n))
 
     # the same recordings with every true pose moved: the same estimate, registration and scores
     G = np.eye(4)

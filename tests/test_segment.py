@@ -7,7 +7,7 @@ import pytest
 import torch
 
 from semmatch.geometry import DEFAULT_INTRINSICS
-from semmatch.io import SequenceWriter, read_image, read_labels_folder, read_sequence
+from semmatch.io import SequenceWriter, read_label_image, read_labels_folder, read_sequence
 from semmatch.labels import NUM_CLASSES
 from semmatch.segment import load_model, make_config, predict_sequence, train
 from semmatch.segment.data import Views, class_weights, make_scenes, render_views
@@ -138,7 +138,7 @@ def test_predict_sequence_writes_labels_and_probabilities(trained, views, tmp_pa
     out = predict_sequence(net, tmp_path / "seq", tmp_path / "pred", probs=True, progress=False)
     files = read_labels_folder(out)
     assert [f.name for f in files] == ["000000.png", "000001.png", "000002.png"]
-    lab = read_image(files[1])
+    lab = read_label_image(files[1])
     assert lab.dtype == np.uint8 and lab.shape == (H, W)
     np.testing.assert_array_equal(lab, net.predict_labels(va.rgb[1]))
     p = np.load(out / "probs" / "000001.npy")
@@ -207,7 +207,7 @@ def test_cli_predict_with_the_noisy_oracle(views, tmp_path):
             w.add(va.rgb[i], va.depth[i], np.eye(4), labels=va.labels[i])
     assert main(["predict", str(tmp_path / "seq"), "--model", "noisy:0.25", "--out", str(tmp_path / "lab"),
                  "--quiet"]) == 0
-    lab = read_image(tmp_path / "lab" / "000001.png")
+    lab = read_label_image(tmp_path / "lab" / "000001.png")
     gt = va.labels[1]
     assert abs((lab != gt)[gt > 0].mean() - 0.25) < 1e-3
     assert main(["predict", str(tmp_path / "seq"), "--model", "noisy:x", "--out", str(tmp_path / "l2")]) == 2

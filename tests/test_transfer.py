@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from semmatch.geometry import DEFAULT_INTRINSICS
-from semmatch.io import SemanticMap, SequenceWriter, read_image, read_sequence, write_map
+from semmatch.io import SemanticMap, SequenceWriter, read_label_image, read_sequence, write_map
 from semmatch.transfer import (
     METHODS,
     MapIndex,
@@ -274,10 +274,10 @@ def test_transfer_sequence_jobs(seq_and_map, gt_map):
                            progress=False)
     assert s1["frames"] == s2["frames"] == s3["frames"] == 3 and s1["coverage"] > 0.9
     for i in range(3):
-        a = read_image(root / "lab1" / f"{i:06d}.png")
-        b = read_image(root / "lab2" / f"{i:06d}.png")
-        gt = read_image(root / "lower" / "labels" / f"{i:06d}.png")
-        assert (a == b).all() and (read_image(root / "lab3" / f"{i:06d}.png") == a).all() and _acc(a, gt)[0] > 0.95
+        a = read_label_image(root / "lab1" / f"{i:06d}.png")
+        b = read_label_image(root / "lab2" / f"{i:06d}.png")
+        gt = read_label_image(root / "lower" / "labels" / f"{i:06d}.png")
+        assert (a == b).all() and (read_label_image(root / "lab3" / f"{i:06d}.png") == a).all() and _acc(a, gt)[0] > 0.95
     assert not list(root.glob(".lab*"))  # no temporary folders left
 
 
@@ -295,10 +295,10 @@ def test_transfer_sequence_other_poses(seq_and_map, gt_map):
     three = transfer_sequence("3d-neighborhood", seq.load(), idx, root / "p4", poses=shifted, jobs=2, progress=False)
     assert same["frames"] == one["frames"] == two["frames"] == three["frames"] == 3
     for i in range(3):
-        gt = read_image(root / "lower" / "labels" / f"{i:06d}.png")
-        a, b = read_image(root / "p1" / f"{i:06d}.png"), read_image(root / "p2" / f"{i:06d}.png")
-        assert (a == b).all() and (read_image(root / "p4" / f"{i:06d}.png") == a).all()
-        assert _acc(read_image(root / "p0" / f"{i:06d}.png"), gt)[0] > 0.95 > _acc(a, gt)[0]
+        gt = read_label_image(root / "lower" / "labels" / f"{i:06d}.png")
+        a, b = read_label_image(root / "p1" / f"{i:06d}.png"), read_label_image(root / "p2" / f"{i:06d}.png")
+        assert (a == b).all() and (read_label_image(root / "p4" / f"{i:06d}.png") == a).all()
+        assert _acc(read_label_image(root / "p0" / f"{i:06d}.png"), gt)[0] > 0.95 > _acc(a, gt)[0]
     with pytest.raises(ValueError, match="poses must have shape"):
         transfer_sequence("3d-neighborhood", seq, idx, root / "p3", poses=shifted[:2], progress=False)
 
@@ -381,7 +381,7 @@ def test_outputs_never_replace_what_semmatch_did_not_write(tmp_path):
     with pytest.raises(FileExistsError, match="--overwrite"):
         write_labels_folder(out, lab, overwrite=False)
     write_labels_folder(out, [np.full((4, 5), 7, np.uint8)])
-    assert read_image(out / "000000.png")[0, 0] == 7
+    assert read_label_image(out / "000000.png")[0, 0] == 7
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out", "seq", "user"]
 
 
@@ -393,7 +393,7 @@ def test_a_kill_between_the_swap_moves_keeps_the_old_output(tmp_path):
     out.rename(aside)  # what a kill right after moving the old output aside leaves
     (tmp_path / ".out.x.partial").mkdir()
     write_labels_folder(out, [np.full((2, 2), 5, np.uint8)])  # the next run restores, then replaces
-    assert read_image(out / "000000.png")[0, 0] == 5
+    assert read_label_image(out / "000000.png")[0, 0] == 5
     assert not aside.exists() and not (tmp_path / ".out.x.partial").exists()
 
 

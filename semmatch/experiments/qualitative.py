@@ -12,7 +12,7 @@ from ..io import SemanticMap, read_map, save_figure
 from ..labels import NAMES, PALETTE
 from .layout import GT, Layout
 
-__all__ = ["overview_pose", "render_map", "qualitative_figure"]
+__all__ = ["overview_pose", "render_map", "qualitative_figure", "transferred_frames_figure"]
 
 
 def overview_pose(m: SemanticMap, *, elevation_deg: float = 55.0, azimuth_deg: float = -60.0) -> np.ndarray:
@@ -105,4 +105,56 @@ def qualitative_figure(
     fig.legend(handles=handles, loc="lower center", ncol=min(len(handles), 8), fontsize=7, frameon=False)
     fig.suptitle(f"Lower-view semantic maps of {sid}")
     fig.tight_layout(rect=(0, 0.08, 1, 1))
+    return save_figure(fig, path, dpi=110)
+
+
+def transferred_frames_figure(
+    data_root: str | Path,
+    methods: Sequence[str],
+    path: str | Path,
+    *,
+    scene: int = 0,
+    frames: int = 3,
+    source: str = GT,
+) -> Path:
+    """A few robot frames of one scene: RGB | ground truth | each method's transferred labels.
+
+    Labels are shown in the palette colours (void black); the frames are spread evenly over the
+    robot's sequence; ``source`` names the upper map the transfers used (04's label folders).
+    """
+    import matplotlib.pyplot as plt
+    from matplotlib.patches import Patch
+
+    from ..io import read_label_image, read_sequence
+
+    layout = Layout(data_root)
+    scenes = layout.scene_dirs("eval")
+    if not 0 <= scene < len(scenes):
+        raise ValueError(f"scene index {scene} out of range: {len(scenes)} evaluation scenes")
+    sd = scenes[scene]
+    seq = read_sequence(layout.lower_sequence(sd))
+    idx = np.linspace(0, len(seq) - 1, max(1, int(frames))).round().astype(int)
+    cols = ["RGB", "ground truth", *methods]
+    fig, axes = plt.subplots(len(idx), len(cols), figsize=(2.1 * len(cols), 1.7 * len(idx) + 0.6), squeeze=False)
+    seen: set[int] = set()
+    for r, i in enumerate(idx):
+        f = seq[int(i)]
+        images = [f.rgb, PALETTE[f.labels]]
+        seen |= set(np.unique(f.labels).tolist())
+        for m in methods:
+            lab = read_label_image(layout.lower_labels(sd.name, source, m) / f"{int(i):06d}.png")
+            seen |= set(np.unique(lab).tolist())
+            images.append(PALETTE[lab])
+        for c, img in enumerate(images):
+            axes[r][c].imshow(img)
+            axes[r][c].set_xticks([])
+            axes[r][c].set_yticks([])
+            if r == 0:
+                axes[r][c].set_title(cols[c], fontsize=8)
+        axes[r][0].set_ylabel(f"frame {int(i)}", fontsize=8)
+    handles = [Patch(color=PALETTE[k] / 255.0, label=NAMES[k]) for k in sorted(seen)]
+    fig.legend(handles=handles, loc="lower center", ncol=min(len(handles), 8), fontsize=7, frameon=False)
+    src = "the ground-truth upper map" if source == GT else f"the {source} upper map"
+    fig.suptitle(f"Robot frames of {sd.name}: labels transferred from {src} (black: no support)", fontsize=9)
+    fig.tight_layout(rect=(0, 0.07, 1, 1))
     return save_figure(fig, path, dpi=110)

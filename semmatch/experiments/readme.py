@@ -18,6 +18,7 @@ _SECTIONS = (
     ("frames_upper_lower.png", None, "An upper (1.6 m) and a lower (0.2 m) frame of an evaluation scene: RGB, depth, labels."),
     ("routes.png", None, "The two cameras' own tours through every evaluation scene (the paper's setup; dotted: the route ablation, the robot replaying the person's tour), with the share of the free space each tour passes within 1.5 m of."),
     ("support_per_scene.png", None, "Share of the robot's pixels (with depth) that the person's map supports, per evaluation scene, on the robot's own tour and on the replayed route."),
+    ("fig_transferred_frames.png", None, "Robot frames of one evaluation scene: RGB, ground truth and the labels each method transferred from the ground-truth upper map (black: no support in the person's map)."),
     ("table1_speed.png", "table1_speed.md", "**Table 1 (speed).** Transfer methods on 640x480 frames, one process on this 2-core machine, beside the paper's server numbers and the reference closest-point backend measured in the same run."),
     ("table2_synthetic.png", "table2_synthetic.md", "**Table 2 (synthetic).** Lower-view semantic reconstructions on the robot's own tour, scored against the lower frames fused with ground-truth labels (5 cm voxels): mean [95% bootstrap interval] over the evaluation scenes; `fused` = transferred labels where the person's map supports a pixel, the lower-view network elsewhere; `paper_mean_acc`: the paper's value (compact ~ Mask R-CNN, strong ~ Transfiner)."),
     (None, "findings_synthetic.md", None),

@@ -120,9 +120,9 @@ def write_fused_labels(transferred: str | os.PathLike, predicted: str | os.PathL
     ValueError
         Folders with different numbers of frames (both named).
     """
-    from ..io import read_image, read_labels_folder, write_labels_folder
+    from ..io import read_label_image, read_labels_folder, write_labels_folder
 
     a, b = read_labels_folder(transferred), read_labels_folder(predicted)
     if len(a) != len(b):
         raise ValueError(f"{transferred} holds {len(a)} label images, {predicted} {len(b)}")
-    return write_labels_folder(out, (fuse_labels(read_image(x), read_image(y)) for x, y in zip(a, b, strict=True)))
+    return write_labels_folder(out, (fuse_labels(read_label_image(x), read_label_image(y)) for x, y in zip(a, b, strict=True)))
