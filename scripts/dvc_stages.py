@@ -74,14 +74,31 @@ stages = {
     figs=[*tbl("validation_panoptic_clustering", "table_panoptic_per_scene", "table_panoptic"),
           "table_panoptic.png", "fig_panoptic.png"]),
 }
+# stages whose headline numbers go to figures/<profile>/metrics/<stage>.json (semmatch.experiments.headline)
+METRICS = ("train_segmentation", "reconstruct_upper", "label_transfer", "evaluate_synthetic", "height_study",
+           "real_data", "panoptic")
+# curves and tables for `dvc plots show`: file -> (stage, x, y)
+PLOTS = {
+    "fig3_height.csv": ("height_study", "height", "miou"),
+    "table1_speed.csv": ("label_transfer", "method", "fps"),
+    "support_per_scene.csv": ("label_transfer", "scene", "support"),
+    "misregistration.csv": ("real_data", "translation_m", "mean_acc"),
+}
 out = {"stages": {}}
 for name, st in stages.items():
-    out["stages"][name] = {
+    plots = {f: v for f, v in PLOTS.items() if v[0] == name}
+    figs = [f for f in st["figs"] if f not in plots]
+    stage = {
         "cmd": f"python -m semmatch.experiments run {st['nb']}",
         "deps": [f"notebooks/{st['nb']}.ipynb", "semmatch", *st["deps"]],
         "params": st["params"],
-        "outs": [*st["outs"], f"reports/{P}/{st['nb']}.ipynb", *fig(*st["figs"])],
+        "outs": [*st["outs"], f"reports/{P}/{st['nb']}.ipynb", *fig(*figs)],
     }
+    if name in METRICS:
+        stage["metrics"] = [{f"figures/{P}/metrics/{name}.json": {"cache": False}}]
+    if plots:
+        stage["plots"] = [{f"figures/{P}/{f}": {"cache": False, "x": x, "y": y}} for f, (_, x, y) in plots.items()]
+    out["stages"][name] = stage
 head = """# The paper's results, one stage per notebook, run through papermill by
 # `python -m semmatch.experiments run NN_name` with the parameters of the active profile
 # (params.yaml: `profile`). Data goes to data/<profile>/, executed notebooks to

@@ -138,3 +138,39 @@ def test_full_profile_follows_the_protocol():
     assert len(full["eval_seeds"]) * len(full["kinds"]) >= 12
     assert min(validation_kinds(full["kinds"], full["val_seeds"]).values()) >= 2
     assert not set(full["eval_seeds"]) & set(full["dev_seeds"])
+
+
+def test_dvc_yaml_is_the_generators_output(tmp_path):
+    import subprocess
+    import sys
+
+    root = pipeline.ROOT
+    subprocess.run([sys.executable, str(root / "scripts" / "dvc_stages.py"), str(tmp_path / "dvc.yaml")], check=True)
+    assert (tmp_path / "dvc.yaml").read_text() == (root / "dvc.yaml").read_text(), \
+        "dvc.yaml was edited by hand: change scripts/dvc_stages.py and regenerate"
+
+
+def test_every_stage_depends_on_its_notebook_and_the_whole_package():
+    import yaml
+
+    stages = yaml.safe_load((pipeline.ROOT / "dvc.yaml").read_text())["stages"]
+    by_notebook = {st["cmd"].split()[-1]: st for st in stages.values()}
+    assert set(by_notebook) == set(pipeline.NOTEBOOKS)
+    for nb, st in by_notebook.items():
+        assert f"notebooks/{nb}.ipynb" in st["deps"] and "semmatch" in st["deps"]
+
+
+def test_stage_metrics_are_declared_and_written(tmp_path):
+    import yaml
+
+    from semmatch.experiments.headline import STAGE_METRICS, write_stage_metrics
+
+    stages = yaml.safe_load((pipeline.ROOT / "dvc.yaml").read_text())["stages"]
+    declared = {next(iter(m)) for st in stages.values() for m in st.get("metrics", [])}
+    assert declared == {f"figures/${{profile}}/metrics/{s}.json" for s in STAGE_METRICS}
+    (tmp_path / "table2_synthetic.csv").write_text(
+        "model,method,scenes,mean_acc\nground truth,3d-neighborhood,12,0.93\ncompact,lower,12,0.8\ncompact,2d-slic,12,0.7\n")
+    path = write_stage_metrics(tmp_path, "evaluate_synthetic")
+    assert json.loads(path.read_text()) == {"table2.ground_truth.3d-neighborhood.mean_acc": 0.93,
+                                            "table2.compact.lower.mean_acc": 0.8}
+    assert write_stage_metrics(tmp_path, "qualitative") is None

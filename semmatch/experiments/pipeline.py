@@ -164,6 +164,10 @@ def run_notebook(
             f"{', ' + repr(first[0]) if first else ''}): {e.ename}: {e.evalue}\n"
             f"  parameters: {params}\n  executed copy with the traceback: {out}"
         ) from None
+    from .headline import write_stage_metrics
+
+    figures_dir = Path(params.get("figures_dir") or f"figures/{params['profile']}")
+    write_stage_metrics(figures_dir if figures_dir.is_absolute() else Path(cwd) / figures_dir, section_of(notebook))
     print(f"[semmatch] {notebook} ({params['profile']}) done in {time.perf_counter() - t0:.0f} s -> {out}",
           file=sys.stderr)
     return out

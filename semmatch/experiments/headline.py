@@ -1,0 +1,122 @@
+"""Headline numbers of each pipeline stage as DVC metrics (``figures/<profile>/metrics/*.json``).
+
+``dvc metrics show`` / ``dvc metrics diff`` / ``dvc exp show`` read these files: one flat JSON
+object per stage, keys ``<table>.<row>.<measure>`` (e.g. ``table2.compact.3d-neighborhood.mean_acc``),
+taken from the stage's CSV tables after its notebook ran (:func:`write_stage_metrics`, called by
+:func:`semmatch.experiments.pipeline.run_notebook`). Stages without headline numbers write none.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from pathlib import Path
+
+import pandas as pd
+
+from ..io import atomic_write_text
+
+__all__ = ["STAGE_METRICS", "stage_metrics", "write_stage_metrics", "metrics_path"]
+
+
+def _rows(csv: Path, keys: tuple[str, ...], values: tuple[str, ...], prefix: str,
+          where: dict[str, tuple] | None = None) -> dict:
+    """``prefix.<key values>.<value>`` of every row (only rows whose ``where`` columns hold one of
+    the listed values)."""
+    if not csv.is_file():
+        return {}
+    df = pd.read_csv(csv)
+    for col, allowed in (where or {}).items():
+        if col in df.columns:
+            df = df[df[col].isin(allowed)]
+    out = {}
+    for _, r in df.iterrows():
+        name = ".".join(str(r[k]).replace(" ", "_") for k in keys if k in df.columns)
+        for v in values:
+            if v in df.columns and pd.notna(r[v]):
+                out[f"{prefix}.{name}.{v}" if name else f"{prefix}.{v}"] = round(float(r[v]), 4)
+    return out
+
+
+def _train(d: Path) -> dict:
+    return _rows(d / "segmentation_validation.csv", ("network",), ("val_miou",), "validation")
+
+
+def _upper(d: Path) -> dict:
+    return _rows(d / "upper_maps.csv", ("model",), ("mean_acc",), "upper_maps")
+
+
+def _transfer(d: Path) -> dict:
+    out = _rows(d / "table1_speed.csv", ("method",), ("fps",), "table1")
+    sup = d / "support_per_scene.csv"
+    if sup.is_file():
+        df = pd.read_csv(sup)
+        own = df[df["route"] == "own"] if "route" in df.columns else df
+        out["support.own.mean"] = round(float(own["support"].mean()), 4)
+    return out
+
+
+def _synthetic(d: Path) -> dict:
+    return _rows(d / "table2_synthetic.csv", ("model", "method"), ("mean_acc",), "table2", _HEADLINE_ROWS)
+
+
+def _height(d: Path) -> dict:
+    csv = d / "fig3_height.csv"
+    if not csv.is_file():
+        return {}
+    df = pd.read_csv(csv)
+    out = {}
+    for _, r in df[df["height"].round(2).isin((0.2, 1.6))].iterrows():
+        out[f"fig3.{r['model']}.h{r['height']:.1f}.miou"] = round(float(r["miou"]), 4)
+    return out
+
+
+def _real(d: Path) -> dict:
+    out = _rows(d / "table3_real.csv", ("model", "method"), ("mean_acc",), "table3", _HEADLINE_ROWS)
+    reg = d / "registration_error.csv"
+    if reg.is_file():
+        df = pd.read_csv(reg)
+        out["registration.trans_err_m.mean"] = round(float(df["reg_trans_err_m"].mean()), 4)
+    return out
+
+
+def _panoptic(d: Path) -> dict:
+    return _rows(d / "table_panoptic.csv", ("source", "method"), ("pq_things",), "panoptic",
+                 {"method": ("3d-neighborhood",)})
+
+
+#: the rows of Tables 2/3 shown as metrics: the paper's best method, the lower-view network, fused
+_HEADLINE_ROWS = {"method": ("3d-neighborhood", "lower", "fused")}
+
+
+#: headline numbers per notebook section (``pipeline.section_of``)
+STAGE_METRICS: dict[str, Callable[[Path], dict]] = {
+    "train_segmentation": _train,
+    "reconstruct_upper": _upper,
+    "label_transfer": _transfer,
+    "evaluate_synthetic": _synthetic,
+    "height_study": _height,
+    "real_data": _real,
+    "panoptic": _panoptic,
+}
+
+
+def metrics_path(figures_dir: str | Path, section: str) -> Path:
+    """Where the metrics of a stage go: ``<figures_dir>/metrics/<section>.json``."""
+    return Path(figures_dir) / "metrics" / f"{section}.json"
+
+
+def stage_metrics(figures_dir: str | Path, section: str) -> dict:
+    """The headline numbers of one stage from its tables in ``figures_dir`` (empty if none)."""
+    fn = STAGE_METRICS.get(section)
+    return fn(Path(figures_dir)) if fn else {}
+
+
+def write_stage_metrics(figures_dir: str | Path, section: str) -> Path | None:
+    """Write a stage's headline numbers as JSON (atomically); None for stages without any."""
+    if section not in STAGE_METRICS:
+        return None
+    path = metrics_path(figures_dir, section)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(path, json.dumps(stage_metrics(figures_dir, section), indent=1, sort_keys=True) + "\n")
+    return path
