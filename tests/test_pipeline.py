@@ -174,3 +174,27 @@ def test_stage_metrics_are_declared_and_written(tmp_path):
     assert json.loads(path.read_text()) == {"table2.ground_truth.3d-neighborhood.mean_acc": 0.93,
                                             "table2.compact.lower.mean_acc": 0.8}
     assert write_stage_metrics(tmp_path, "qualitative") is None
+
+
+@pytest.mark.parametrize("name", ["04_label_transfer", "10_panoptic"])
+def test_notebook_defaults_in_plain_jupyter_are_the_active_profiles(name, monkeypatch):
+    """Opened in Jupyter with the kernel in notebooks/ and nothing injected, a notebook's
+    parameters are the active profile's and its relative paths resolve from the repo root."""
+    import papermill as pm
+    from nbclient import NotebookClient
+
+    monkeypatch.setenv("SEMMATCH_PROFILE", "smoke")
+    path = ROOT / "notebooks" / f"{name}.ipynb"
+    params = pipeline.notebook_parameters(name, "smoke")
+    expected = {k: params[k] for k in pm.inspect_notebook(str(path)) if k in params}
+    nb = nbformat.read(path, as_version=4)
+    k = next(i for i, c in enumerate(nb.cells) if "parameters" in c.metadata.get("tags", []))
+    cells = nb.cells[: k + 2]  # the parameters cell and the set-up cell after it
+    names = sorted(expected)
+    check = nbformat.v4.new_code_cell(
+        f"import json, os\nprint(json.dumps({{'cwd': os.getcwd(), **{{k: globals()[k] for k in {names!r}}}}}))")
+    nb.cells = [c for c in cells if c.cell_type == "code"] + [check]
+    NotebookClient(nb, kernel_name="python3", resources={"metadata": {"path": str(ROOT / "notebooks")}}).execute()
+    got = json.loads(nb.cells[-1].outputs[-1]["text"])
+    assert Path(got.pop("cwd")) == ROOT
+    assert got == expected and got["data_root"] == "data/smoke"

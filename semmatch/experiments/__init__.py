@@ -4,6 +4,6 @@
 ``params.yaml``); :mod:`~semmatch.experiments.paper` holds the paper's reference numbers.
 """
 
-from .pipeline import NOTEBOOKS, load_params, notebook_parameters, run_all, run_notebook
+from .pipeline import NOTEBOOKS, load_params, notebook_parameters, notebook_setup, run_all, run_notebook
 
-__all__ = ["NOTEBOOKS", "load_params", "notebook_parameters", "run_notebook", "run_all"]
+__all__ = ["NOTEBOOKS", "load_params", "notebook_parameters", "notebook_setup", "run_notebook", "run_all"]

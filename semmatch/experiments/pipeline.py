@@ -33,6 +33,7 @@ __all__ = [
     "section_of",
     "load_params",
     "notebook_parameters",
+    "notebook_setup",
     "run_notebook",
     "run_all",
     "set_profile",
@@ -103,6 +104,34 @@ def notebook_parameters(
     params.setdefault("figures_dir", f"figures/{p['profile']}")
     params.update({k: v for k, v in overrides.items() if v is not None})
     return params
+
+
+def notebook_setup(notebook: str, namespace: dict) -> dict:
+    """Make a notebook run the same in plain Jupyter as under papermill.
+
+    Called by every notebook right after its parameters cell: the working directory becomes the
+    repository root (the notebook's relative paths, e.g. ``data/<profile>``, resolve there
+    whatever folder Jupyter started in), and every parameter the notebook left at ``None``
+    takes the active profile's value: the profile named by ``profile`` (when set), else by the
+    ``SEMMATCH_PROFILE`` environment variable, else ``params.yaml``'s ``profile``. Under
+    papermill the injected parameters are not ``None`` and stay as they are.
+
+    Parameters
+    ----------
+    notebook : str
+        The notebook's name (one of :data:`NOTEBOOKS`).
+    namespace : dict
+        The notebook's globals.
+
+    Returns
+    -------
+    dict
+        The filled-in parameters (``globals().update(...)`` them).
+    """
+    os.chdir(ROOT)
+    profile = namespace.get("profile") or os.environ.get("SEMMATCH_PROFILE") or None
+    params = notebook_parameters(notebook, profile)
+    return {k: v for k, v in params.items() if k in namespace and namespace[k] is None}
 
 
 def _declared(src: Path, params: dict, own: dict) -> dict:
