@@ -25,6 +25,7 @@ __all__ = [
     "transform",
     "voxel_keys",
     "pack_keys",
+    "unpack_keys",
 ]
 
 
@@ -315,3 +316,10 @@ def pack_keys(keys: np.ndarray) -> np.ndarray:
         raise ValueError("voxel coordinates out of the packable range ±2**20")
     k = k + lim
     return (k[:, 0] << 42) | (k[:, 1] << 21) | k[:, 2]
+
+
+def unpack_keys(packed: np.ndarray) -> np.ndarray:
+    """Inverse of :func:`pack_keys`: (N,) int64 packed keys to (N,3) int64 voxel coordinates."""
+    p = np.asarray(packed, dtype=np.int64)
+    mask = (1 << 21) - 1
+    return np.stack([(p >> 42) & mask, (p >> 21) & mask, p & mask], axis=1) - (1 << 20)

@@ -139,6 +139,7 @@ def panoptic_scene(
     frame_step: int = 4,
     tolerance: float = 0.05,
     eval_voxel_size: float = 0.05,
+    link_radius: float = 0.08,
 ) -> list[dict]:
     """The rows of :func:`panoptic_study` for one evaluation scene (folder name ``scene``)."""
     layout = Layout(data_root)
@@ -165,7 +166,7 @@ def panoptic_scene(
             res = [transfer_panoptic(method, f, index) for f in step_frames]
             evidence = (_frame(f, lab, inst) for f, (lab, inst) in zip(step_frames, res))
             pm = fuse_instances(read_map(layout.lower_map(scene, class_source, method)), evidence,
-                                tolerance=tolerance, eps=eps, min_vertices=min_vertices)
+                                tolerance=tolerance, eps=link_radius, min_vertices=min_vertices)
             write_map(out_dir / _folder(source) / f"{method}.ply", pm)
             q = panoptic_quality(gvox, pm, eval_voxel_size, grid_origin=origin)
             per_class = {f"pq_{k}": v["pq"] for k, v in q["per_class"].items() if v["class"] in THING_CLASSES}
@@ -183,6 +184,7 @@ def panoptic_study(
     frame_step: int = 4,
     tolerance: float = 0.05,
     eval_voxel_size: float = 0.05,
+    link_radius: float = 0.08,
     jobs: int = 1,
     progress: bool = True,
 ) -> pd.DataFrame:
@@ -206,7 +208,7 @@ def panoptic_study(
     layout = Layout(data_root)
     scenes = [sd.name for sd in layout.scene_dirs("eval")]
     kw = dict(eps=eps, min_vertices=min_vertices, frame_step=frame_step, tolerance=tolerance,
-              eval_voxel_size=eval_voxel_size)
+              eval_voxel_size=eval_voxel_size, link_radius=link_radius)
     bar = tqdm(total=len(scenes), desc="panoptic", disable=not progress)
     rows: list[dict] = []
     if int(jobs) <= 1:
