@@ -464,7 +464,8 @@ def panoptic_quality(
     Returns
     -------
     dict
-        ``pq``, ``sq``, ``rq`` (means over the classes with a segment in either map),
+        ``pq``, ``sq``, ``rq`` (means over the classes with a segment in either map; SQ over
+        those with a match, as it is undefined without one),
         ``pq_things``/``sq_things``/``rq_things`` and ``pq_stuff``/``sq_stuff``/``rq_stuff``,
         and ``per_class``: ``{name: {pq, sq, rq, tp, fp, fn}}``. Means over an empty class
         set are NaN.
@@ -509,14 +510,16 @@ def panoptic_quality(
         fp = int((p_sel & ~matched_p & ~ignored).sum())
         if tp + fp + fn == 0:
             continue
-        sq = float(tp_iou.mean()) if tp else 0.0
+        sq = float(tp_iou.mean()) if tp else float("nan")  # no match: SQ undefined, PQ 0
         rq = tp / (tp + 0.5 * fp + 0.5 * fn)
-        per_class[NAMES[c]] = {"pq": sq * rq, "sq": sq, "rq": rq, "tp": tp, "fp": fp, "fn": fn, "class": c}
+        per_class[NAMES[c]] = {"pq": sq * rq if tp else 0.0, "sq": sq, "rq": rq, "tp": tp, "fp": fp, "fn": fn,
+                               "class": c}
     out: dict = {"per_class": per_class}
     for suffix, classes in (("", range(1, NUM_CLASSES)), ("_things", THING_CLASSES), ("_stuff", STUFF_CLASSES)):
         rows = [v for v in per_class.values() if v["class"] in classes]
         for k in ("pq", "sq", "rq"):
-            out[k + suffix] = float(np.mean([r[k] for r in rows])) if rows else float("nan")
+            vals = [r[k] for r in rows if not np.isnan(r[k])]
+            out[k + suffix] = float(np.mean(vals)) if vals else float("nan")
     return out
 
 
