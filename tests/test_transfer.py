@@ -430,3 +430,45 @@ def test_a_second_writer_of_one_output_gets_a_clear_error(tmp_path):
     finally:
         os.close(fd)
     assert not (tmp_path / "out").exists()
+
+
+def _all_wall(fd, index, *, label: int = 1):
+    """A toy method: every pixel with depth and map support gets ``label``."""
+    sup = index.support_depth(fd.depth, fd.pose, fd.intrinsics)
+    lab = np.where(sup, label, 0).astype(np.uint8)
+    return lab, (lab > 0).astype(np.float32), None
+
+
+def test_register_method_is_the_one_way_to_add_a_method(tmp_path, capsys):
+    from semmatch.cli import main
+    from semmatch.transfer import available_methods, method_params, register_method, registry
+    from semmatch.transfer.benchmark import time_methods
+
+    register_method("all-wall", _all_wall, needs_rgb=False)
+    try:
+        assert "all-wall" in available_methods() and method_params("all-wall")["label"] == 1
+        with pytest.raises(ValueError, match="already registered"):
+            register_method("all-wall", _all_wall)
+        with pytest.raises(ValueError, match="two positional"):
+            register_method("bad", lambda fd: fd)
+        with pytest.raises(ValueError, match="reserved"):
+            register_method("fused", _all_wall)
+        scene = box_room(0)
+        frames = render_frames(scene, orbit_poses(scene, 2, 0.3, 1), INTR)
+        m = scene.to_semantic_map()
+        lab = transfer("all-wall", frames[0], m, label=5)
+        assert set(np.unique(lab)) <= {0, 5} and (lab == 5).any()
+        # the benchmark times it (no paper number: NaN, not a KeyError)
+        out = time_methods(frames, prepare(m), ["all-wall"], exact_variant=False)
+        assert np.isnan(out["methods"]["all-wall"]["paper_fps"])
+        # the command line offers it
+        root = tmp_path
+        with SequenceWriter(root / "lower", INTR) as w:
+            for f in frames:
+                w.add(f.rgb, f.depth, f.pose, labels=f.labels)
+        write_map(root / "map.ply", m)
+        assert main(["transfer", "--map", str(root / "map.ply"), "--sequence", str(root / "lower"),
+                     "--method", "all-wall", "--out", str(root / "lab"), "--no-progress"]) == 0
+        assert read_label_image(root / "lab" / "000000.png").max() == 1
+    finally:
+        registry._REGISTRY.pop("all-wall", None)

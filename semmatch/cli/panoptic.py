@@ -17,7 +17,7 @@ from pathlib import Path
 
 def register(sub) -> None:
     """Add the ``panoptic`` verb and its sub-commands."""
-    from semmatch.transfer import ALL_METHODS, DEFAULT_MAX_DISTANCE
+    from semmatch.transfer import DEFAULT_MAX_DISTANCE, available_methods
 
     p = sub.add_parser(
         "panoptic",
@@ -52,7 +52,7 @@ def register(sub) -> None:
                       "every frame of SEQ, fuse the classes (TSDF) and vote the instances onto the map.")
     tr.add_argument("--map", required=True, help="upper panoptic PLY (with an 'instance' property)")
     tr.add_argument("--sequence", required=True, help="lower sequence folder")
-    tr.add_argument("--method", required=True, choices=[m for m in ALL_METHODS if m != "fused"],
+    tr.add_argument("--method", required=True, choices=[m for m in available_methods() if m != "fused"],
                     help="transfer method")
     tr.add_argument("--out", required=True, help="lower panoptic PLY to write")
     tr.add_argument("--voxel-size", type=float, default=0.04, help="TSDF voxel in metres (default %(default)s)")

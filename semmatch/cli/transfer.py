@@ -7,7 +7,7 @@ import json
 
 def register(sub) -> None:
     """Add the ``transfer`` verb."""
-    from semmatch.transfer import ALL_METHODS, DEFAULT_MAX_DISTANCE
+    from semmatch.transfer import DEFAULT_MAX_DISTANCE, available_methods
 
     p = sub.add_parser(
         "transfer",
@@ -17,7 +17,7 @@ def register(sub) -> None:
     )
     p.add_argument("--map", required=True, help="upper semantic map or mesh (PLY)")
     p.add_argument("--sequence", required=True, help="lower sequence folder")
-    p.add_argument("--method", required=True, choices=list(ALL_METHODS),
+    p.add_argument("--method", required=True, choices=list(available_methods()),
                    help="transfer method (fused: also --probs)")
     p.add_argument("--probs", default=None,
                    help="fused: folder of per-frame class probabilities 000000.npy (H,W,C)")

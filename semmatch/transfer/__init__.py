@@ -8,12 +8,23 @@ The paper's five projection methods (§3.2) behind one call::
     r = transfer_frame("2d-slic", frame, index)       # r.labels, r.coverage, r.seconds, r.purity
 
 plus ``fused`` (transferred labels + a network's probabilities) and
-:func:`transfer_sequence` (a whole sequence into a labels folder).
+:func:`transfer_sequence` (a whole sequence into a labels folder). :func:`register_method` adds
+a method (the CLI, the benchmark and the notebooks pick it up).
 """
 
 from .fused import fuse, fuse_labels, write_fused_labels
 from .index import DEFAULT_MAX_DISTANCE, MapIndex, prepare
-from .registry import ALL_METHODS, METHODS, PAPER_FPS, TransferResult, method_params, transfer, transfer_frame
+from .registry import (
+    ALL_METHODS,
+    METHODS,
+    PAPER_FPS,
+    TransferResult,
+    available_methods,
+    method_params,
+    register_method,
+    transfer,
+    transfer_frame,
+)
 from .sequence import transfer_sequence
 from .superpixels import BACKENDS as SUPERPIXEL_BACKENDS
 from .superpixels import superpixels
@@ -27,6 +38,8 @@ __all__ = [
     "METHODS",
     "ALL_METHODS",
     "PAPER_FPS",
+    "register_method",
+    "available_methods",
     "MapIndex",
     "prepare",
     "DEFAULT_MAX_DISTANCE",

@@ -11,7 +11,7 @@ import numpy as np
 
 from ..io import Frame
 from .index import MapIndex
-from .registry import METHODS, PAPER_FPS, transfer_frame
+from .registry import METHODS, available_methods, method_info, transfer_frame
 
 __all__ = ["time_method", "time_methods"]
 
@@ -57,8 +57,9 @@ def time_methods(
         refinement near class edges).
     """
     for m in methods:
-        if m not in METHODS:
-            raise ValueError(f"unknown method {m!r}; valid: {', '.join(METHODS)}")
+        if m not in available_methods() or m == "fused":
+            valid = [x for x in available_methods() if x != "fused"]
+            raise ValueError(f"unknown method {m!r}; valid: {', '.join(valid)}")
     ref = time_method("3d-neighborhood", frames, index, backend="reference")
     ref_labels = ref.pop("labels")
     out: dict = {"methods": {}, "reference": ref}
@@ -68,8 +69,9 @@ def time_methods(
     for key, name, params in variants:
         r = time_method(name, frames, index, **params)
         labels = r.pop("labels")
-        r["paper_fps"] = PAPER_FPS[name]
-        r["speedup_vs_paper"] = r["fps"] / PAPER_FPS[name]
+        paper = method_info(name).paper_fps
+        r["paper_fps"] = float("nan") if paper is None else paper
+        r["speedup_vs_paper"] = float("nan") if paper is None else r["fps"] / paper
         r["speedup_vs_reference"] = r["fps"] / ref["fps"]
         if name == "3d-neighborhood":
             r["agreement_with_reference"] = float((labels == ref_labels).mean())

@@ -17,29 +17,131 @@ from .index import MapIndex, prepare
 
 __all__ = [
     "METHODS", "ALL_METHODS", "PAPER_FPS", "TransferResult", "transfer", "transfer_frame",
-    "method_params", "check_params",
+    "method_params", "check_params", "register_method", "available_methods", "method_info", "MethodInfo",
 ]
 
-_FUNCS: dict[str, Callable] = {
-    "2d-slic": _m.slic_2d,
-    "3d-projected-sp": _m.projected_sp_3d,
-    "3d-slic": _m.slic_3d,
-    "dbscan": _m.dbscan,
-    "3d-neighborhood": _m.neighborhood_3d,
-}
+
+@dataclass(frozen=True)
+class MethodInfo:
+    """A registered transfer method.
+
+    Attributes
+    ----------
+    name : str
+    fn : callable
+        ``fn(fd: FrameData, index: MapIndex, *, <keyword-only parameters>) -> (labels, purity,
+        groups)`` (see :mod:`semmatch.transfer.methods`).
+    needs_rgb : bool
+        Whether the method reads the frame's colours (``dbscan`` and ``3d-neighborhood`` do not).
+    paper_fps : float or None
+        The paper's Table 1 speed, shown beside ours by ``semmatch bench transfer``.
+    """
+
+    name: str
+    fn: Callable
+    needs_rgb: bool = True
+    paper_fps: float | None = None
+
+
+_REGISTRY: dict[str, MethodInfo] = {}
+
+
+def register_method(
+    name: str, fn: Callable, *, needs_rgb: bool = True, paper_fps: float | None = None, replace: bool = False
+) -> MethodInfo:
+    """Add a transfer method: the one way to do it.
+
+    A registered method is called by :func:`transfer` / :func:`transfer_frame` /
+    :func:`~semmatch.transfer.transfer_sequence`, offered by ``semmatch transfer --method`` and
+    ``semmatch panoptic transfer --method``, timed by ``semmatch bench transfer --methods`` and
+    run by the notebooks when listed in ``params.yaml`` (``methods``). Its keyword-only
+    parameters (with defaults) become its parameters (:func:`method_params`, ``--param
+    KEY=VALUE``). Packages register methods for the command line through the entry-point group
+    ``semmatch.transfer_methods`` (a callable that calls this function).
+
+    Parameters
+    ----------
+    name : str
+        Method name (not ``fused``, which combines a method with a network).
+    fn : callable
+        ``fn(fd, index, **params) -> (labels uint8 (H,W), purity float32 (H,W), groups int64
+        (H,W) or None)``: ``fd`` a validated :class:`~semmatch.transfer.frames.FrameData`,
+        ``index`` the upper map's :class:`~semmatch.transfer.index.MapIndex`; labels 0 where
+        the map gives no support; ``groups`` the pixel grouping (None for per-pixel methods).
+    needs_rgb, paper_fps
+        See :class:`MethodInfo`.
+    replace : bool
+        Allow replacing a registered method of the same name.
+
+    Returns
+    -------
+    MethodInfo
+
+    Raises
+    ------
+    ValueError
+        A reserved or taken name, or ``fn`` not taking ``(fd, index, *, ...)``.
+    """
+    if not isinstance(name, str) or not name or name == "fused":
+        raise ValueError(f"invalid transfer method name {name!r} ('fused' is reserved)")
+    if name in _REGISTRY and not replace:
+        raise ValueError(f"transfer method {name!r} is already registered (pass replace=True to replace it)")
+    if not callable(fn):
+        raise ValueError(f"{name}: fn must be callable, got {type(fn).__name__}")
+    params = list(inspect.signature(fn).parameters.values())
+    positional = [p for p in params if p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD)]
+    if len(positional) != 2 or params[:2] != positional:
+        raise ValueError(f"{name}: fn must be fn(fd, index, *, param=default, ...): two positional "
+                         "parameters, then keyword-only ones")
+    info = MethodInfo(name, fn, bool(needs_rgb), None if paper_fps is None else float(paper_fps))
+    _REGISTRY[name] = info
+    return info
+
+
+def available_methods() -> tuple[str, ...]:
+    """Every registered method (the paper's five first), then ``fused``."""
+    return tuple(_REGISTRY) + ("fused",)
+
+
+def method_info(name: str) -> MethodInfo:
+    """The :class:`MethodInfo` of a registered method (``ValueError`` naming the valid ones)."""
+    _check_name(name)
+    return _REGISTRY[name]
+
+
+for _name, _fn, _rgb, _fps in (  # the paper's methods, in the order of its Table 1, with its speeds
+    ("2d-slic", _m.slic_2d, True, 2.29),
+    ("3d-slic", _m.slic_3d, True, 1.04),
+    ("3d-projected-sp", _m.projected_sp_3d, True, 9.57),
+    ("dbscan", _m.dbscan, False, 0.84),
+    ("3d-neighborhood", _m.neighborhood_3d, False, 20.06),
+):
+    register_method(_name, _fn, needs_rgb=_rgb, paper_fps=_fps)
 
 #: The paper's five methods (the paper, §3), in the order of its Table 1.
-METHODS: tuple[str, ...] = ("2d-slic", "3d-slic", "3d-projected-sp", "dbscan", "3d-neighborhood")
+METHODS: tuple[str, ...] = tuple(_REGISTRY)
 
-#: The paper's methods plus ``fused`` (transfer + a network's probabilities).
+#: The paper's methods plus ``fused`` (transfer + a network's probabilities). Every registered
+#: method, plugins included: :func:`available_methods`.
 ALL_METHODS: tuple[str, ...] = METHODS + ("fused",)
 
 #: Paper Table 1 (FPS on an AMD EPYC 7401P server).
-PAPER_FPS: dict[str, float] = {
-    "2d-slic": 2.29, "3d-slic": 1.04, "3d-projected-sp": 9.57, "dbscan": 0.84, "3d-neighborhood": 20.06,
-}
+PAPER_FPS: dict[str, float] = {k: v.paper_fps for k, v in _REGISTRY.items()}
 
-_RGB_FREE = {"dbscan", "3d-neighborhood"}
+
+def _load_plugins() -> None:
+    """Run the ``semmatch.transfer_methods`` entry points (packages registering methods)."""
+    import warnings
+    from importlib.metadata import entry_points
+
+    for ep in entry_points(group="semmatch.transfer_methods"):
+        try:
+            ep.load()()
+        except Exception as e:  # noqa: BLE001 - a broken plugin must not break semmatch
+            warnings.warn(f"transfer-method plugin {ep.name!r} ({ep.value}) failed to load: {e}", stacklevel=2)
+
+
+_load_plugins()
 
 
 @dataclass
@@ -84,9 +186,9 @@ def method_params(name: str) -> dict:
 
 
 def _check_name(name: str) -> Callable:
-    if name not in _FUNCS:
-        raise ValueError(f"unknown transfer method {name!r}; valid: {', '.join(ALL_METHODS)}")
-    return _FUNCS[name]
+    if name not in _REGISTRY:
+        raise ValueError(f"unknown transfer method {name!r}; valid: {', '.join(available_methods())}")
+    return _REGISTRY[name].fn
 
 
 def check_params(name: str, params: dict) -> None:
@@ -94,7 +196,7 @@ def check_params(name: str, params: dict) -> None:
     valid = method_params(name)
     if name == "fused":
         base = params.get("base", "3d-projected-sp")
-        if base in _FUNCS:
+        if base in _REGISTRY:
             valid = {**valid, **method_params(base)}
     bad = sorted(set(params) - set(valid))
     if bad:
@@ -119,7 +221,8 @@ def transfer_frame(
     Parameters
     ----------
     name : str
-        One of :data:`ALL_METHODS`.
+        A registered method (:func:`available_methods`: the paper's five, ``fused`` and any
+        added with :func:`register_method`).
     frame : Frame
         RGB (not needed by ``dbscan``/``3d-neighborhood``), metric depth, pose, intrinsics.
     semantic_map : SemanticMap or MapIndex
@@ -156,14 +259,14 @@ def transfer_frame(
             raise ValueError("fused needs probs=(H,W,C) class probabilities (or frame.extras['probs'])")
         base = params.pop("base", "3d-projected-sp")
         min_purity = params.pop("min_purity", 0.5)
-        if base == "fused" or base not in _FUNCS:
-            raise ValueError(f"fused: base must be one of {', '.join(METHODS)}, got {base!r}")
-        fd = check_frame(frame, need_rgb=base not in _RGB_FREE)
+        if base == "fused" or base not in _REGISTRY:
+            raise ValueError(f"fused: base must be one of {', '.join(_REGISTRY)}, got {base!r}")
+        fd = check_frame(frame, need_rgb=_REGISTRY[base].needs_rgb)
         labels, purity, groups = _call(base, fd, index, params)
         labels = fuse(labels, probs, purity=purity, min_purity=min_purity)
         purity = np.where(labels == 0, 0, purity).astype(np.float32)
     else:
-        fd = check_frame(frame, need_rgb=name not in _RGB_FREE)
+        fd = check_frame(frame, need_rgb=_REGISTRY[name].needs_rgb)
         labels, purity, groups = _call(name, fd, index, params)
     seconds = time.perf_counter() - t1
     n_valid = fd.n_valid

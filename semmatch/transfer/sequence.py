@@ -21,7 +21,7 @@ from ..io import (
 )
 from ..workers import process_pool
 from .index import MapIndex, prepare
-from .registry import ALL_METHODS, check_params, transfer_frame
+from .registry import available_methods, check_params, transfer_frame
 
 __all__ = ["transfer_sequence", "LOW_SUPPORT", "LowSupportWarning"]
 
@@ -83,7 +83,7 @@ def transfer_sequence(
     Parameters
     ----------
     method : str
-        A name of :data:`~semmatch.transfer.ALL_METHODS`.
+        A registered method (:func:`~semmatch.transfer.available_methods`).
     sequence : path or sequence of Frame
         A sequence folder, a :class:`~semmatch.io.SequenceReader`, an
         :class:`~semmatch.io.InMemorySequence` (workers share its decoded frames instead of
@@ -119,8 +119,8 @@ def transfer_sequence(
         ``frames``, ``coverage`` (mean), ``coverage_per_frame``, ``ms_median``, ``fps``
         (1000 / median ms), ``out`` (the folder).
     """
-    if method not in ALL_METHODS:
-        raise ValueError(f"unknown transfer method {method!r}; valid: {', '.join(ALL_METHODS)}")
+    if method not in available_methods():
+        raise ValueError(f"unknown transfer method {method!r}; valid: {', '.join(available_methods())}")
     if int(jobs) < 1:
         raise ValueError(f"jobs must be >= 1, got {jobs}")
     check_params(method, params)

@@ -26,16 +26,17 @@ def register(sub) -> None:
 
 def run(args) -> int:
     """Run the benchmark."""
-    from semmatch.transfer import METHODS, prepare
+    from semmatch.transfer import METHODS, available_methods, prepare
     from semmatch.transfer.benchmark import time_methods
     from semmatch.transfer.demo import bench_scene, render_frames
 
     if args.frames < 1:
         raise ValueError("--frames must be >= 1")
     methods = list(args.methods or METHODS)
+    valid = [m for m in available_methods() if m != "fused"]
     for m in methods:
-        if m not in METHODS:
-            raise ValueError(f"unknown method {m!r}; valid: {', '.join(METHODS)}")
+        if m not in valid:
+            raise ValueError(f"unknown method {m!r}; valid: {', '.join(valid)}")
     scene, poses = bench_scene(args.seed, args.frames, args.height)
     frames = render_frames(scene, poses)
     gt_map = scene.to_semantic_map()
