@@ -26,6 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from ..metrics import MEASURES
 from ..stats import bootstrap_ci, paired_difference_ci
 
 __all__ = [
@@ -42,7 +43,6 @@ __all__ = [
     "claims_markdown",
 ]
 
-MEASURES = ("jaccard", "sorensen", "color_acc", "mean_acc")
 MEASURE_LABELS = {
     "jaccard": "Jaccard",
     "sorensen": "Sorensen",

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import pandas as pd
 
+from ..metrics import MEASURES
 from ..transfer.registry import PAPER_FPS
 
 __all__ = ["TABLE1_FPS", "TABLE2", "TABLE3", "FIG3_MEAN_ACC", "table2_frame", "table3_frame"]
@@ -16,7 +17,6 @@ __all__ = ["TABLE1_FPS", "TABLE2", "TABLE3", "FIG3_MEAN_ACC", "table2_frame", "t
 #: the methods: :func:`semmatch.transfer.register_method`).
 TABLE1_FPS: dict[str, float] = PAPER_FPS
 
-_COLS = ("jaccard", "sorensen", "color_acc", "mean_acc")
 
 # Table 2 (synthetic, Replica in Habitat). Keys: (upper-map model, row), row "upper" = the
 # upper-view network reconstruction, "lower" = lower-view network baseline, else a method.
@@ -69,7 +69,7 @@ PAPER_MODEL_OF = {"ground truth": "ground truth", "compact": "mask r-cnn", "stro
 
 
 def _frame(table: dict) -> pd.DataFrame:
-    rows = [dict(model=m, method=r, **dict(zip(_COLS, v, strict=True))) for (m, r), v in table.items()]
+    rows = [dict(model=m, method=r, **dict(zip(MEASURES, v, strict=True))) for (m, r), v in table.items()]
     return pd.DataFrame(rows)
 
 

@@ -14,6 +14,7 @@ import pandas as pd
 from tqdm.auto import tqdm
 
 from ..io import read_map, read_sequence
+from ..metrics import MEASURES
 from .layout import GT, ROUTES, Layout, model_name
 
 __all__ = [
@@ -29,7 +30,7 @@ __all__ = [
     "plot_table",
 ]
 
-MEASURE_COLUMNS = ("jaccard", "sorensen", "color_acc", "mean_acc")
+MEASURE_COLUMNS = MEASURES  # the paper's four measures (semmatch.metrics.MEASURES)
 
 
 def eval_grid_origin(voxel_size: float) -> tuple[float, float, float]:

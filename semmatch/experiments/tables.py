@@ -8,6 +8,7 @@ from pathlib import Path
 import pandas as pd
 
 from ..io import atomic_write_text
+from ..metrics import MEASURES
 from .paper import PAPER_MODEL_OF, TABLE1_FPS, table2_frame, table3_frame
 
 __all__ = [
@@ -22,7 +23,6 @@ __all__ = [
     "findings_markdown",
 ]
 
-MEASURES = ("jaccard", "sorensen", "color_acc", "mean_acc")
 
 
 @dataclass
