@@ -67,6 +67,13 @@ stages = {
     nb="08_qualitative", deps=[f"data/{P}/scenes", f"data/{P}/lower_maps"],
     params=["profile", *common("methods"), f"profiles.{P}.qualitative"],
     outs=[], figs=["fig4_qualitative.png"]),
+ "adapt_robot_view": dict(
+    nb="09_adapt_robot_view", deps=[f"data/{P}/scenes", f"data/{P}/models", f"data/{P}/lower_maps"],
+    params=["profile", *common("kinds", "train_seeds", "voxel_size", "eval_voxel_size", "fused_base", "seed"),
+            f"profiles.{P}.adapt_robot_view"],
+    outs=[f"data/{P}/adapted"],
+    figs=[*tbl("adapt_label_quality", "adapt_height_per_scene", "adapt_height", "adapt_gap",
+               "table2_adapted_per_scene", "table2_adapted"), "adapt_height.png"]),
  "panoptic": dict(
     nb="10_panoptic", deps=[f"data/{P}/scenes", f"data/{P}/upper", f"data/{P}/lower_maps"],
     params=["profile", *common("methods", "voxel_size", "eval_voxel_size", "jobs"), f"profiles.{P}.panoptic"],
@@ -76,7 +83,7 @@ stages = {
 }
 # stages whose headline numbers go to figures/<profile>/metrics/<stage>.json (semmatch.experiments.headline)
 METRICS = ("train_segmentation", "reconstruct_upper", "label_transfer", "evaluate_synthetic", "height_study",
-           "real_data", "panoptic")
+           "real_data", "adapt_robot_view", "panoptic")
 # curves and tables for `dvc plots show`: file -> (stage, x, y)
 PLOTS = {
     "fig3_height.csv": ("height_study", "height", "miou"),

@@ -16,8 +16,9 @@ _CHILD = """
 import os, sys, time
 from semmatch.workers import process_pool
 
-def work(_):
-    print(os.getpid(), flush=True)
+def work(i):
+    with open(os.path.join(sys.argv[1], f"{{i}}.pid"), "w") as fh:
+        fh.write(str(os.getpid()))
     time.sleep(60)
 
 if __name__ == "__main__":
@@ -49,8 +50,15 @@ def test_pool_computes():
 def test_workers_die_when_the_parent_is_killed(tmp_path, spawn):
     script = tmp_path / "child.py"
     script.write_text(_CHILD.format(spawn=spawn))
-    proc = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE, text=True)
-    pids = [int(proc.stdout.readline()) for _ in range(2)]
+    pid_dir = tmp_path / "pids"
+    pid_dir.mkdir()
+    proc = subprocess.Popen([sys.executable, str(script), str(pid_dir)])
+    deadline = time.monotonic() + 60
+    while len(list(pid_dir.glob("*.pid"))) < 2 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    time.sleep(0.1)  # the files are written before the workers sleep
+    pids = [int(p.read_text()) for p in sorted(pid_dir.glob("*.pid"))]
+    assert len(pids) == 2
     assert all(_alive(p) for p in pids)
     proc.send_signal(signal.SIGKILL)
     proc.wait()

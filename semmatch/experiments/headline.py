@@ -80,6 +80,10 @@ def _real(d: Path) -> dict:
     return out
 
 
+def _adapt(d: Path) -> dict:
+    return _rows(d / "adapt_gap.csv", ("source",), ("miou@0.2", "miou@1.6", "gap_closed"), "adapt")
+
+
 def _panoptic(d: Path) -> dict:
     return _rows(d / "table_panoptic.csv", ("source", "method"), ("pq_things",), "panoptic",
                  {"method": ("3d-neighborhood",)})
@@ -97,6 +101,7 @@ STAGE_METRICS: dict[str, Callable[[Path], dict]] = {
     "evaluate_synthetic": _synthetic,
     "height_study": _height,
     "real_data": _real,
+    "adapt_robot_view": _adapt,
     "panoptic": _panoptic,
 }
 

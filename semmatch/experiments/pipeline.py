@@ -52,6 +52,7 @@ NOTEBOOKS: tuple[str, ...] = (
     "06_height_study",
     "07_real_data",
     "08_qualitative",
+    "09_adapt_robot_view",
     "10_panoptic",
 )
 

@@ -1,0 +1,154 @@
+"""Notebook 09: adapt a network to the robot's viewpoint with transferred labels, and score it.
+
+Adaptation happens on training scenes only (:mod:`semmatch.adapt`); the adapted networks are
+scored on the **evaluation** scenes: the height sweep of Fig. 3 (every adapted network beside
+the unadapted one), a table at 0.2 m and 1.6 m with the share of the viewpoint gap closed and
+the change at human height (paired per-scene differences with 95 % intervals), and the adapted
+networks' own lower-view semantic maps as new rows of Table 2 (does the robot now beat transfer
+from the person's map on its own?).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from tqdm.auto import tqdm
+
+from ..adapt import adapted_name, fine_tune, robot_training_views
+from ..io import read_map, read_sequence
+from ..metrics import MEASURES, compare
+from ..stats import bootstrap_ci, paired_difference_ci
+from .layout import Layout
+from .synthetic import eval_grid_origin
+
+__all__ = ["adapt_networks", "adapted_height_study", "gap_table", "adapted_lower_maps"]
+
+
+def _adapt_dir(data_root: str | Path) -> Path:
+    return Path(data_root) / "adapted"
+
+
+def adapt_networks(
+    data_root: str | Path,
+    network: str,
+    sources: Sequence[str],
+    *,
+    kinds: Sequence[str],
+    seeds: Sequence[int],
+    n_frames: int = 40,
+    steps: int = 500,
+    batch_size: int = 16,
+    lr: float = 1e-3,
+    upper_share: float = 0.5,
+    voxel_size: float = 0.04,
+    fused_base: str = "3d-neighborhood",
+    seed: int = 0,
+    progress: bool = True,
+) -> tuple[dict[str, Path], pd.DataFrame]:
+    """Fine-tune ``network`` once per label source on the robot's frames of training scenes.
+
+    Returns
+    -------
+    checkpoints : dict
+        ``{adapted name: checkpoint path}`` (under ``data/<profile>/adapted/``).
+    coverage : DataFrame
+        ``source``, ``coverage`` (share of the robot's pixels with depth that carry a label),
+        ``agreement`` (share of the labelled pixels that match the ground truth).
+    """
+    layout = Layout(data_root)
+    robot = robot_training_views(layout.model(network), kinds=kinds, seeds=seeds, sources=sources,
+                                 n_frames=n_frames, voxel_size=voxel_size, fused_base=fused_base, seed=seed,
+                                 progress=progress)
+    gt = robot.views.labels
+    rows = []
+    for s in sources:
+        lab = robot.pseudo[s]
+        on = lab > 0
+        rows.append({"source": s, "coverage": robot.coverage[s],
+                     "agreement": float((lab[on] == gt[on]).mean()) if on.any() else float("nan")})
+    out = {}
+    for s in sources:
+        name = adapted_name(network, s)
+        out[name] = fine_tune(layout.model(network), robot, s, _adapt_dir(data_root) / f"{name}.pt", steps=steps,
+                              batch_size=batch_size, lr=lr, upper_share=upper_share, seed=seed, progress=progress)
+    return out, pd.DataFrame(rows)
+
+
+def adapted_height_study(data_root: str | Path, network: str, checkpoints: dict[str, Path], *,
+                         progress: bool = True) -> pd.DataFrame:
+    """Per-scene pixel scores of the unadapted and every adapted network on the evaluation
+    scenes' height sweeps (:func:`semmatch.segment.viewpoint.viewpoint_gap_sequences`)."""
+    from ..segment import load_model
+    from ..segment.viewpoint import viewpoint_gap_sequences
+    from .height import sweep_sequences
+
+    layout = Layout(data_root)
+    models = {network: layout.load_network(network)}
+    flip = models[network].flip  # the source network's inference recipe (chosen on validation)
+    models.update({name: load_model(p, flip=flip) for name, p in checkpoints.items()})
+    return viewpoint_gap_sequences(models, sweep_sequences(data_root), per_scene=True, progress=progress)
+
+
+def gap_table(per_scene: pd.DataFrame, network: str, *, low: float = 0.2, high: float = 1.6,
+              measure: str = "miou") -> pd.DataFrame:
+    """The viewpoint gap closed by each adapted network, with 95 % intervals over scenes.
+
+    Per model: ``measure`` at ``low`` and ``high`` (mean [interval]); ``gain_low`` (adapted minus
+    unadapted at ``low``, paired over scenes) and ``change_high`` (the same at ``high``: negative
+    = forgetting); ``gap_closed``: ``gain_low`` over the unadapted network's gap ``high - low``.
+    """
+    def at(model: str, h: float) -> pd.Series:
+        sel = per_scene[(per_scene["model"] == model) & np.isclose(per_scene["height"], h)]
+        return sel.set_index("scene")[measure]
+
+    base_lo, base_hi = at(network, low), at(network, high)
+    gap = float((base_hi - base_lo).mean())
+    rows = []
+    for model in dict.fromkeys(per_scene["model"]):
+        lo, hi = at(model, low), at(model, high)
+        row = {"model": model, "source": model.split("~", 1)[1] if "~" in model else "none (unadapted)"}
+        for name, s in ((f"{measure}@{low:g}", lo), (f"{measure}@{high:g}", hi)):
+            m, a, b = bootstrap_ci(s.values)
+            row.update({name: m, f"{name}_lo": a, f"{name}_hi": b})
+        g = paired_difference_ci(lo.reindex(base_lo.index).values, base_lo.values)
+        c = paired_difference_ci(hi.reindex(base_hi.index).values, base_hi.values)
+        row.update({"gain_low": g[0], "gain_low_lo": g[1], "gain_low_hi": g[2],
+                    "change_high": c[0], "change_high_lo": c[1], "change_high_hi": c[2],
+                    "gap_closed": g[0] / gap if gap > 0 else float("nan")})
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def adapted_lower_maps(data_root: str | Path, networks: dict[str, object], *, voxel_size: float = 0.04,
+                       eval_voxel_size: float = 0.05, progress: bool = True) -> pd.DataFrame:
+    """Table 2 rows of networks applied to the robot's own frames: per evaluation scene, the
+    robot's frames segmented by each network, fused (TSDF) and scored against the reference
+    (05's ``reference.ply``, on the protocol's grid).
+
+    Parameters
+    ----------
+    networks : dict
+        ``{name: Segmenter}``.
+
+    Returns
+    -------
+    DataFrame
+        ``scene``, ``model``, ``method`` (``lower``) and the paper's measures.
+    """
+    from ..fusion import reconstruct_many
+
+    layout = Layout(data_root)
+    origin = eval_grid_origin(eval_voxel_size)
+    rows = []
+    for sd in tqdm(layout.scene_dirs("eval"), desc="adapted lower maps", disable=not progress):
+        seq = read_sequence(layout.lower_sequence(sd)).load()
+        labelings = [[m.predict_labels(f.rgb) for f in seq] for m in networks.values()]
+        maps = reconstruct_many(seq, labelings, voxel_size)
+        ref = read_map(layout.lower_reference(sd.name))
+        for name, pred in zip(networks, maps, strict=True):
+            s = compare(ref, pred, eval_voxel_size, grid_origin=origin)
+            rows.append({"scene": sd.name, "model": name, "method": "lower", **{k: float(s[k]) for k in MEASURES}})
+    return pd.DataFrame(rows)
