@@ -13,7 +13,7 @@ import importlib
 import sys
 
 #: verb modules, in the order ``semmatch --help`` lists them
-VERBS = ("simulate", "train", "predict", "reconstruct", "transfer", "evaluate", "panoptic", "show", "bench")
+VERBS = ("simulate", "train", "adapt", "predict", "reconstruct", "transfer", "evaluate", "panoptic", "show", "bench")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -81,7 +81,7 @@ def plot_height_study(summary: pd.DataFrame, path: str | Path, *, metrics: Seque
         ax.set_xlabel("camera height [m]")
         ax.set_ylabel(names.get(m, m))
         ax.grid(alpha=0.3)
-    axes[0][0].legend(title="network")
+    axes[0][-1].legend(title="network", fontsize=7, title_fontsize=8, loc="lower right")
     fig.suptitle(title, fontsize=10)
     fig.tight_layout()
     return save_figure(fig, path)
