@@ -16,6 +16,29 @@ import sys
 VERBS = ("simulate", "train", "adapt", "predict", "reconstruct", "transfer", "evaluate", "panoptic", "show", "bench")
 
 
+def add_quiet(parser: argparse.ArgumentParser, what: str = "the progress bars") -> None:
+    """The one progress flag of every verb: ``--quiet`` (``--no-progress`` is kept as an alias)."""
+    parser.add_argument("--quiet", action="store_true", help=f"hide {what}")
+    parser.add_argument("--no-progress", dest="quiet", action="store_true", help=argparse.SUPPRESS)
+
+
+def add_sequence(parser: argparse.ArgumentParser, help: str) -> None:
+    """The sequence as the first positional argument, as every verb takes it (``--sequence SEQ``
+    is kept as an alias); read it with :func:`sequence_arg`."""
+    parser.add_argument("sequence", nargs="?", metavar="SEQ", help=help)
+    parser.add_argument("--sequence", dest="sequence_flag", metavar="SEQ", help=argparse.SUPPRESS)
+
+
+def sequence_arg(args: argparse.Namespace) -> str:
+    """The sequence given positionally or with ``--sequence`` (a clear error when neither or both)."""
+    pos, flag = getattr(args, "sequence", None), getattr(args, "sequence_flag", None)
+    if pos and flag and pos != flag:
+        raise ValueError(f"two sequences given ({pos} and --sequence {flag}); give SEQ once")
+    if not (pos or flag):
+        raise ValueError(f"the sequence folder SEQ is required (semmatch {args.verb} SEQ ...)")
+    return pos or flag
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The full ``semmatch`` argument parser."""
     parser = argparse.ArgumentParser(

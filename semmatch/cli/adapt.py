@@ -8,6 +8,7 @@ import argparse
 def register(sub) -> None:
     """Add ``semmatch adapt``."""
     from semmatch.adapt import LABEL_SOURCES
+    from semmatch.cli import add_quiet
 
     p = sub.add_parser(
         "adapt",
@@ -31,7 +32,7 @@ def register(sub) -> None:
     p.add_argument("--upper-share", type=float, default=0.5,
                    help="share of each batch from human-height training views (default %(default)s)")
     p.add_argument("--seed", type=int, default=0, help="default %(default)s")
-    p.add_argument("--no-progress", action="store_true", help="hide the progress bars")
+    add_quiet(p)
     p.set_defaults(func=run)
 
 
@@ -44,9 +45,9 @@ def run(args: argparse.Namespace) -> int:
     if Path(args.out).resolve() == Path(args.model).resolve():
         raise ValueError(f"--out {args.out}: refusing to overwrite the network being adapted")
     robot = robot_training_views(args.model, kinds=args.kinds, seeds=args.seeds, sources=[args.source],
-                                 n_frames=args.frames, seed=args.seed, progress=not args.no_progress)
+                                 n_frames=args.frames, seed=args.seed, progress=not args.quiet)
     out = fine_tune(args.model, robot, args.source, args.out, steps=args.steps, batch_size=args.batch_size,
-                    lr=args.lr, upper_share=args.upper_share, seed=args.seed, progress=not args.no_progress)
+                    lr=args.lr, upper_share=args.upper_share, seed=args.seed, progress=not args.quiet)
     print(f"{out}: {args.model} adapted with {args.source} labels on {len(robot.views)} robot frames "
           f"({robot.coverage[args.source]:.0%} of their pixels labelled)")
     return 0

@@ -17,6 +17,7 @@ from pathlib import Path
 
 def register(sub) -> None:
     """Add the ``panoptic`` verb and its sub-commands."""
+    from semmatch.cli import add_quiet, add_sequence
     from semmatch.transfer import DEFAULT_MAX_DISTANCE, available_methods
 
     p = sub.add_parser(
@@ -41,7 +42,7 @@ def register(sub) -> None:
     ref = s.add_parser("reference", help="fuse a sequence with its ground-truth classes and instances",
                        description="TSDF-fuse SEQ with its own labels, then vote its instances/ images "
                        "onto the map's vertices (the panoptic reference of a robot sequence).")
-    ref.add_argument("--sequence", required=True, help="sequence folder with labels/ and instances/")
+    add_sequence(ref, "sequence folder with labels/ and instances/")
     ref.add_argument("--out", required=True, help="panoptic PLY to write")
     ref.add_argument("--voxel-size", type=float, default=0.04, help="TSDF voxel in metres (default %(default)s)")
     ref.add_argument("--step", type=int, default=1, help="use every n-th frame for the instances (default 1)")
@@ -51,7 +52,7 @@ def register(sub) -> None:
                       description="Transfer the classes and instances of the upper panoptic map into "
                       "every frame of SEQ, fuse the classes (TSDF) and vote the instances onto the map.")
     tr.add_argument("--map", required=True, help="upper panoptic PLY (with an 'instance' property)")
-    tr.add_argument("--sequence", required=True, help="lower sequence folder")
+    add_sequence(tr, "the robot's (lower) sequence folder")
     tr.add_argument("--method", required=True, choices=[m for m in available_methods() if m != "fused"],
                     help="transfer method")
     tr.add_argument("--out", required=True, help="lower panoptic PLY to write")
@@ -62,7 +63,7 @@ def register(sub) -> None:
                     help="fragments joining a touching instance: linking radius, metres (default %(default)s)")
     tr.add_argument("--min-vertices", type=int, default=50,
                     help="fragments smaller than this may join a touching instance (default %(default)s)")
-    tr.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    add_quiet(tr, "the progress bar")
     tr.set_defaults(func=run_transfer)
 
     ev = s.add_parser("evaluate", help="panoptic quality of panoptic maps against ground truth",
@@ -104,14 +105,16 @@ def run_segment(args: argparse.Namespace) -> int:
 
 def run_reference(args: argparse.Namespace) -> int:
     """Fuse a sequence with its ground-truth classes and instances."""
+    from semmatch.cli import sequence_arg
     from semmatch.fusion import reconstruct
     from semmatch.io import read_sequence, write_map
     from semmatch.panoptic import fuse_instances, sequence_panoptic_frames
 
-    _refuse_input(args.out, args.sequence)
-    seq = read_sequence(args.sequence)
+    seq_path = sequence_arg(args)
+    _refuse_input(args.out, seq_path)
+    seq = read_sequence(seq_path)
     if not seq.has_labels:
-        raise ValueError(f"{args.sequence}: the sequence has no labels/ folder")
+        raise ValueError(f"{seq_path}: the sequence has no labels/ folder")
     seq.read_instances(0)  # a clear error before the fusion when instances/ is missing
     m = reconstruct(seq, voxel_size=args.voxel_size)
     m = fuse_instances(m, sequence_panoptic_frames(seq, step=args.step), clean=False)
@@ -124,21 +127,23 @@ def run_transfer(args: argparse.Namespace) -> int:
     """Transfer classes and instances into a sequence and fuse its panoptic map."""
     from tqdm.auto import tqdm
 
+    from semmatch.cli import sequence_arg
     from semmatch.fusion import reconstruct
     from semmatch.io import read_map, read_sequence, write_map
     from semmatch.panoptic import PanopticFrame, fuse_instances, require_instances, transfer_panoptic
     from semmatch.transfer import MapIndex
 
-    _refuse_input(args.out, args.sequence, args.map)
+    seq_path = sequence_arg(args)
+    _refuse_input(args.out, seq_path, args.map)
     upper = require_instances(read_map(args.map), "panoptic transfer")
     index = MapIndex(upper, max_distance=args.max_distance)
-    seq = read_sequence(args.sequence)
+    seq = read_sequence(seq_path)
     labels, evidence = [], []
-    for i in tqdm(range(len(seq)), desc=f"panoptic {args.method}", disable=args.no_progress):
+    for i in tqdm(range(len(seq)), desc=f"panoptic {args.method}", disable=args.quiet):
         f = seq[i]
         lab, inst = transfer_panoptic(args.method, f, index)
         labels.append(lab)
-        evidence.append(PanopticFrame(f.depth, f.pose, f.intrinsics, lab, inst, f"{args.sequence} frame {i}"))
+        evidence.append(PanopticFrame(f.depth, f.pose, f.intrinsics, lab, inst, f"{seq_path} frame {i}"))
     m = reconstruct(seq, labels, args.voxel_size)
     m = fuse_instances(m, evidence, eps=args.eps, min_vertices=args.min_vertices)
     write_map(args.out, m)

@@ -7,6 +7,8 @@ import argparse
 
 def register(sub) -> None:
     """Add ``semmatch predict``."""
+    from semmatch.cli import add_quiet
+
     p = sub.add_parser(
         "predict",
         help="write a labels folder for a sequence (network checkpoint, oracle or noisy oracle)",
@@ -18,12 +20,12 @@ def register(sub) -> None:
     p.add_argument("--out", required=True, help="labels folder to write")
     p.add_argument("--probs", action="store_true", help="also write probabilities to OUT/probs/*.npy (float16)")
     p.add_argument("--seed", type=int, default=0, help="seed of the noisy oracle")
-    p.add_argument("--device", choices=("auto", "cpu", "cuda"), default="auto")
+    p.add_argument("--device", choices=("auto", "cpu", "cuda"), default="auto", help="auto: CUDA when present (default %(default)s)")
     p.add_argument("--no-flip", action="store_true",
                    help="one network pass (default: average with the mirror image, twice the time)")
     p.add_argument("--overwrite", action="store_true",
                    help="replace an existing labels folder semmatch wrote at --out (anything else is refused)")
-    p.add_argument("--quiet", action="store_true", help="hide the progress bar")
+    add_quiet(p)
     p.set_defaults(func=run)
 
 

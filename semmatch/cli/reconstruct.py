@@ -9,6 +9,8 @@ from pathlib import Path
 
 def register(sub) -> None:
     """Add ``semmatch reconstruct``."""
+    from semmatch.cli import add_quiet
+
     p = sub.add_parser(
         "reconstruct",
         help="fuse a posed RGB-D sequence and its labels into a semantic mesh (PLY)",
@@ -36,7 +38,7 @@ def register(sub) -> None:
                    help="with --estimate-poses: seed the odometry with the recorded (rough) poses")
     p.add_argument("--poses-out", help="with --estimate-poses: write the estimated trajectory (TUM)")
     p.add_argument("--device", help="Open3D device (default: CUDA:0 when available, else CPU:0)")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_quiet(p)
     p.set_defaults(func=run)
 
 

@@ -58,6 +58,8 @@ def _intrinsics(args) -> Intrinsics:
 
 def register(sub) -> None:
     """Add ``semmatch simulate``."""
+    from semmatch.cli import add_quiet
+
     p = sub.add_parser(
         "simulate",
         help="render scenes into sequence folders (procedural scene or PLY; or the whole data set)",
@@ -69,7 +71,7 @@ def register(sub) -> None:
     src.add_argument("--ply", type=Path, help="semantic PLY mesh to use as the scene")
     p.add_argument("--seed", type=int, default=0, help="scene seed (and trajectory seed)")
     p.add_argument("--height", type=float, default=1.6, help="camera height above the floor (m)")
-    p.add_argument("--frames", type=int, default=300)
+    p.add_argument("--frames", type=int, default=300, help="frames of the trajectory (default %(default)s)")
     p.add_argument("--tilt", type=float, default=20.0, help="periodic camera tilt amplitude (degrees)")
     p.add_argument("--trajectory", default=None,
                    help="trajectory name (upper/lower/...); default: upper above 1 m, else lower")
@@ -77,13 +79,13 @@ def register(sub) -> None:
     p.add_argument("--noise", default=None, help="none | kinect | JSON of NoiseConfig parameters | file.json")
     p.add_argument("--size", default=None, help="image size WxH (intrinsics scaled from the default camera)")
     p.add_argument("--fx", type=float, default=None, help="focal length (pixels)")
-    p.add_argument("--fy", type=float, default=None)
+    p.add_argument("--fy", type=float, default=None, help="vertical focal length (pixels; default: --fx)")
     p.add_argument("--intrinsics", type=Path, default=None, help="intrinsics.json to use")
     p.add_argument("--save-scene", type=Path, default=None, help="also write the GT semantic mesh here")
     p.add_argument("--fast", action="store_true",
                    help="coarse-to-fine rendering (about 2x faster; thin objects under 2 px can be missed)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing sequence at --out")
-    p.add_argument("--no-progress", action="store_true")
+    add_quiet(p)
     dst = p.add_mutually_exclusive_group(required=True)
     dst.add_argument("--out", type=Path, help="sequence folder to write")
     dst.add_argument("--dataset", type=Path, help="write the generated data layout under this root")
@@ -91,9 +93,10 @@ def register(sub) -> None:
     d.add_argument("--train-seeds", type=int, nargs="*", default=[0, 1],
                    help="training scenes: the i-th seed gives one scene of kind KINDS[i %% len(KINDS)]")
     d.add_argument("--eval-seeds", type=int, nargs="*", default=[100], help="evaluation scenes: every kind per seed")
-    d.add_argument("--kinds", nargs="*", default=["living_room", "bedroom", "office"])
+    d.add_argument("--kinds", nargs="*", default=["living_room", "bedroom", "office"],
+                   help="scene kinds of the dataset (default %(default)s)")
     d.add_argument("--frames-lower", type=int, default=None, help="default: --frames")
-    d.add_argument("--frames-sweep", type=int, default=100)
+    d.add_argument("--frames-sweep", type=int, default=100, help="frames of each height-sweep sequence (default %(default)s)")
     d.add_argument("--sweep", type=float, nargs="*", default=None,
                    help="height-sweep heights (m); default 0.2 .. 1.6; give none to skip")
     d.add_argument("--jobs", type=int, default=1, help="scenes written in parallel (worker processes)")
@@ -114,7 +117,7 @@ def run(args) -> int:
 
     intr = _intrinsics(args)
     noise = _noise(args.noise)
-    progress = not args.no_progress
+    progress = not args.quiet
     if args.dataset is not None:
         sweep = sim.DEFAULT_SWEEP if args.sweep is None else (tuple(args.sweep) or None)
         res = sim.generate_dataset(

@@ -7,6 +7,8 @@ import argparse
 
 def register(sub) -> None:
     """Add ``semmatch train``."""
+    from semmatch.cli import add_quiet
+
     p = sub.add_parser(
         "train",
         help="train a segmentation network (compact | strong) on simulated upper views",
@@ -14,12 +16,12 @@ def register(sub) -> None:
         "training scenes; validate on held-out scenes; write a checkpoint.",
     )
     p.add_argument("--profile", choices=("smoke", "full"), default="smoke", help="size of the run (default smoke)")
-    p.add_argument("--arch", choices=("compact", "strong"), default="compact")
+    p.add_argument("--arch", choices=("compact", "strong"), default="compact", help="network architecture (default %(default)s)")
     p.add_argument("--out", required=True, help="checkpoint path (.pt)")
     p.add_argument("--depth", action="store_true", help="add the depth channel to the input")
     p.add_argument("--steps", type=int, help="optimisation steps (profile default otherwise)")
-    p.add_argument("--batch-size", type=int)
-    p.add_argument("--lr", type=float)
+    p.add_argument("--batch-size", type=int, help="views per step (profile default otherwise)")
+    p.add_argument("--lr", type=float, help="peak learning rate (profile default otherwise)")
     p.add_argument("--eval-every", type=int, help="validate every N steps")
     p.add_argument("--width", type=int, help="render width of the views (profile default otherwise)")
     p.add_argument("--height", type=int, help="render height of the views")
@@ -32,11 +34,11 @@ def register(sub) -> None:
     p.add_argument("--train-seeds", nargs="+", type=int, help="training scene seeds")
     p.add_argument("--val-seeds", nargs="+", type=int, help="validation scene seeds")
     p.add_argument("--eval-seeds", nargs="+", type=int, help="evaluation scene seeds (checked to be disjoint)")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--device", choices=("auto", "cpu", "cuda"), default="auto")
+    p.add_argument("--seed", type=int, default=0, help="seed of the views, the weights and the batches (default 0)")
+    p.add_argument("--device", choices=("auto", "cpu", "cuda"), default="auto", help="auto: CUDA when present (default %(default)s)")
     p.add_argument("--threads", type=int, help="torch threads")
     p.add_argument("--cache-dir", help="cache rendered views here")
-    p.add_argument("--quiet", action="store_true", help="no progress bars")
+    add_quiet(p)
     p.set_defaults(func=run)
 
 

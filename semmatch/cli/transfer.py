@@ -7,6 +7,7 @@ import json
 
 def register(sub) -> None:
     """Add the ``transfer`` verb."""
+    from semmatch.cli import add_quiet, add_sequence
     from semmatch.transfer import DEFAULT_MAX_DISTANCE, available_methods
 
     p = sub.add_parser(
@@ -16,7 +17,7 @@ def register(sub) -> None:
         "with one of the paper's label-projection methods; writes DIR/000000.png ... atomically.",
     )
     p.add_argument("--map", required=True, help="upper semantic map or mesh (PLY)")
-    p.add_argument("--sequence", required=True, help="lower sequence folder")
+    add_sequence(p, "the robot's (lower) sequence folder")
     p.add_argument("--method", required=True, choices=list(available_methods()),
                    help="transfer method (fused: also --probs)")
     p.add_argument("--probs", default=None,
@@ -30,7 +31,7 @@ def register(sub) -> None:
     p.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
                    help="method parameter (JSON value), e.g. --param n_segments=256; repeatable")
     p.add_argument("--jobs", type=int, default=1, help="worker processes (default 1)")
-    p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    add_quiet(p, "the progress bar")
     p.add_argument("--json", action="store_true", help="print the statistics as one JSON object")
     p.add_argument("--strict", action="store_true",
                    help="exit with an error when the map supports (almost) no pixel (default: a warning)")
@@ -52,12 +53,14 @@ def _parse_params(items: list[str]) -> dict:
 
 def run(args) -> int:
     """Run ``semmatch transfer``."""
+    from semmatch.cli import sequence_arg
     from semmatch.io import check_output_dir, read_map, read_sequence
     from semmatch.transfer import MapIndex, transfer_sequence
     from semmatch.transfer.registry import check_params
 
+    seq_path = sequence_arg(args)
     # before any work: never replace what semmatch did not write, nor an input
-    check_output_dir(args.out, "labels", overwrite=args.overwrite, inputs=[args.sequence, args.map])
+    check_output_dir(args.out, "labels", overwrite=args.overwrite, inputs=[seq_path, args.map])
     params = _parse_params(args.param)
     if args.probs is not None:
         if args.method != "fused":
@@ -66,7 +69,7 @@ def run(args) -> int:
     elif args.method == "fused":
         raise ValueError("--method fused needs --probs DIR (per-frame class probabilities)")
     check_params(args.method, params)
-    seq = read_sequence(args.sequence)
+    seq = read_sequence(seq_path)
     index = MapIndex(read_map(args.map), max_distance=args.max_distance, voxel_size=args.voxel_size)
     import warnings
 
@@ -77,8 +80,8 @@ def run(args) -> int:
             warnings.simplefilter("error", LowSupportWarning)
         try:
             stats = transfer_sequence(
-                args.method, seq, index, args.out, jobs=args.jobs, progress=not args.no_progress,
-                overwrite=args.overwrite, inputs=[args.sequence, args.map], **params
+                args.method, seq, index, args.out, jobs=args.jobs, progress=not args.quiet,
+                overwrite=args.overwrite, inputs=[seq_path, args.map], **params
             )
         except LowSupportWarning as e:
             raise ValueError(f"{e} (--strict: coverage below {LOW_SUPPORT:.0%}; the labels were written)") from None

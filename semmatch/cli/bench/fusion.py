@@ -21,8 +21,8 @@ def register(sub) -> None:
     )
     p.add_argument("--frames", type=int, default=60, help="timed frames (default 60)")
     p.add_argument("--voxel-size", type=float, default=0.04, help="voxel edge, metres (default 0.04)")
-    p.add_argument("--width", type=int, default=640)
-    p.add_argument("--height", type=int, default=480)
+    p.add_argument("--width", type=int, default=640, help="image width (default %(default)s)")
+    p.add_argument("--height", type=int, default=480, help="image height (default %(default)s)")
     p.add_argument("--camera-height", type=float, default=0.2,
                    help="camera height above the floor (default 0.2: the robot view)")
     p.add_argument("--scene", default="living_room", help="procedural scene kind (default living_room)")
@@ -36,7 +36,7 @@ def register(sub) -> None:
                    "reconstruct_many() call, and time both (default 0: skip)")
     p.add_argument("--threads", type=int, default=1,
                    help="CPU threads (default 1; applies when Open3D is not yet loaded)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0, help="scene seed (default 0)")
     add = __import__("semmatch.cli.bench", fromlist=["add_json_flag"]).add_json_flag
     add(p)
     p.set_defaults(func=run)

@@ -24,7 +24,7 @@ def register(sub) -> None:
     p.add_argument("--repeat", type=int, default=3, help="timed runs of the vectorised version (best)")
     p.add_argument("--no-dict-loop", action="store_true", help="skip the (slow) dict-loop reference")
     p.add_argument("--scene", default="apartment", help="procedural scene kind (default apartment)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0, help="seed of the scene and of the sampled maps (default 0)")
     add_json_flag(p)
     p.set_defaults(func=run)
 

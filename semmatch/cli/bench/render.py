@@ -49,13 +49,13 @@ def register(sub) -> None:
     """Add ``semmatch bench render``."""
     p = sub.add_parser("render", help="renderer frames/s (RGB + depth + labels)",
                        formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    p.add_argument("--kind", default="apartment")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--kind", default="apartment", help="procedural scene kind (default %(default)s)")
+    p.add_argument("--seed", type=int, default=0, help="scene seed (default 0)")
     p.add_argument("--triangles", type=int, default=200_000, help="densify the scene to at least this many")
-    p.add_argument("--frames", type=int, default=30)
-    p.add_argument("--size", default="640x480")
+    p.add_argument("--frames", type=int, default=30, help="timed frames (default %(default)s)")
+    p.add_argument("--size", default="640x480", help="image size WxH (default %(default)s)")
     p.add_argument("--threads", type=int, default=1, help="ray-casting threads (0 = all cores)")
-    p.add_argument("--height", type=float, default=1.6)
+    p.add_argument("--height", type=float, default=1.6, help="camera height in metres (default %(default)s)")
     p.add_argument("--mode", choices=("exact", "fast"), default="exact",
                    help="which renderer mode 'fps' reports (both are measured)")
     p.add_argument("--stream", type=int, default=0, help="also stream this many frames to disk, report memory")

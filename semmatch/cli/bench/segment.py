@@ -16,7 +16,7 @@ def register(sub) -> None:
                         "training profile's input size; speed does not depend on the weights)")
     p.add_argument("--frames", type=int, default=20, help="timed frames per size (default 20)")
     p.add_argument("--threads", type=int, help="torch threads (default: torch's choice)")
-    p.add_argument("--device", choices=("auto", "cpu", "cuda"), default="cpu")
+    p.add_argument("--device", choices=("auto", "cpu", "cuda"), default="cpu", help="default %(default)s")
     p.add_argument("--no-flip", action="store_true",
                    help="time one network pass (default: with the mirror-image average, as predictions run)")
     add_json_flag(p)
