@@ -124,10 +124,9 @@ def robot_training_views(
     ValueError
         Unknown source, or seeds that are validation/evaluation seeds of the network.
     """
-    from tqdm.auto import tqdm
-
     from .fusion import reconstruct
     from .geometry import DEFAULT_INTRINSICS
+    from .progress import tqdm
     from .segment import load_model
     from .segment.data import Views, make_scenes
     from .sim import Renderer
@@ -227,8 +226,8 @@ def fine_tune(
     """
     import torch
     import torch.nn.functional as F
-    from tqdm.auto import tqdm
 
+    from .progress import tqdm
     from .segment import load_model
     from .segment.training import TrainConfig, augment, build_views
 

@@ -527,7 +527,7 @@ def _check_dropouts(vol: SemanticTSDF, count: int, name: str) -> None:
 
 def _posed_frames(seq, poses, n: int | None, name: str, progress: bool):
     """Yield ``(i, where, frame, pose)``: the pose is ``poses[i]`` or the frame's own."""
-    from tqdm.auto import tqdm
+    from .progress import tqdm
 
     for i, frame in enumerate(tqdm(seq, total=n, desc="fuse", disable=not progress, leave=False)):
         where = f"{name} frame {getattr(frame, 'index', i)}"

@@ -450,7 +450,7 @@ class InMemorySequence(_SequenceABC):
     """
 
     def __init__(self, reader: SequenceReader, *, progress: bool = False) -> None:
-        from tqdm.auto import tqdm
+        from .progress import tqdm
 
         self.path, self.intrinsics = reader.path, reader.intrinsics
         self.timestamps, self.poses = reader.timestamps, reader.poses

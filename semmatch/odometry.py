@@ -127,7 +127,8 @@ def estimate_poses(
     """
     import open3d as o3d
     import open3d.core as o3c
-    from tqdm.auto import tqdm
+
+    from .progress import tqdm
 
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
@@ -350,9 +351,9 @@ def refine_pose_graph(
     """
     import open3d as o3d
     import open3d.core as o3c
-    from tqdm.auto import tqdm
 
     from .geometry import backproject
+    from .progress import tqdm
 
     reg = o3d.pipelines.registration
     poses = np.asarray(poses, dtype=np.float64)

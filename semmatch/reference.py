@@ -457,7 +457,7 @@ def observed_reference(
     ...                          read_sequence("data/full/scenes/eval/s0/lower"))
     >>> compare(ref, "lower_3d-neighborhood.ply", 0.05)["mean_acc"]
     """
-    from tqdm.auto import tqdm
+    from .progress import tqdm
 
     if not (np.isfinite(tolerance) and tolerance > 0):
         raise ValueError(f"tolerance must be > 0 (metres), got {tolerance}")

@@ -45,3 +45,13 @@ def test_smoke_run_writes_every_table_and_figure(smoke_run):
     assert {"upper", "lower"} <= set(t2["method"])
     assert t2[["jaccard", "sorensen", "color_acc", "mean_acc"]].apply(lambda c: c.between(0, 1)).all().all()
     assert "paper_mean_acc" in t2.columns
+
+
+def test_executed_reports_hold_text_progress_not_frozen_widgets(smoke_run):
+    import json
+
+    _, outs = smoke_run
+    for nb in outs:
+        for cell in json.loads(nb.read_text())["cells"]:
+            for o in cell.get("outputs", []):
+                assert "application/vnd.jupyter.widget-view+json" not in o.get("data", {}), nb.name

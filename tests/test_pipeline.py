@@ -198,3 +198,16 @@ def test_notebook_defaults_in_plain_jupyter_are_the_active_profiles(name, monkey
     got = json.loads(nb.cells[-1].outputs[-1]["text"])
     assert Path(got.pop("cwd")) == ROOT
     assert got == expected and got["data_root"] == "data/smoke"
+
+
+def test_progress_is_plain_text_under_the_pipeline(monkeypatch):
+    from tqdm.std import tqdm as text_tqdm
+
+    from semmatch.progress import text_mode, tqdm
+
+    monkeypatch.setenv("SEMMATCH_PROGRESS", "text")
+    assert text_mode()
+    bar = tqdm(range(3), disable=True)
+    assert type(bar) is text_tqdm
+    monkeypatch.delenv("SEMMATCH_PROGRESS")
+    assert not text_mode()

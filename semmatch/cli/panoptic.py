@@ -125,13 +125,13 @@ def run_reference(args: argparse.Namespace) -> int:
 
 def run_transfer(args: argparse.Namespace) -> int:
     """Transfer classes and instances into a sequence and fuse its panoptic map."""
-    from tqdm.auto import tqdm
-
     from semmatch.cli import sequence_arg
     from semmatch.fusion import reconstruct
     from semmatch.io import read_map, read_sequence, write_map
     from semmatch.panoptic import PanopticFrame, fuse_instances, require_instances, transfer_panoptic
     from semmatch.transfer import MapIndex
+
+    from ..progress import tqdm
 
     seq_path = sequence_arg(args)
     _refuse_input(args.out, seq_path, args.map)

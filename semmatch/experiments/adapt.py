@@ -15,11 +15,11 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-from tqdm.auto import tqdm
 
 from ..adapt import adapted_name, fine_tune, robot_training_views
 from ..io import read_map, read_sequence
 from ..metrics import MEASURES, compare
+from ..progress import tqdm
 from ..stats import bootstrap_ci, paired_difference_ci
 from .layout import Layout
 from .synthetic import eval_grid_origin

@@ -23,9 +23,9 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-from tqdm.auto import tqdm
 
 from ..io import read_map, read_sequence
+from ..progress import tqdm
 from .layout import GT, Layout
 from .synthetic import MEASURE_COLUMNS, eval_grid_origin
 

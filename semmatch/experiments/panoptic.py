@@ -25,7 +25,6 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-from tqdm.auto import tqdm
 
 from ..io import read_map, read_sequence, write_map
 from ..labels import THING_CLASSES
@@ -37,6 +36,7 @@ from ..panoptic import (
     sequence_panoptic_frames,
     transfer_panoptic,
 )
+from ..progress import tqdm
 from ..transfer.index import MapIndex
 from .layout import GT, Layout
 from .synthetic import eval_grid_origin

@@ -182,6 +182,10 @@ def run_notebook(
     out_dir.mkdir(parents=True, exist_ok=True)
     out = out_dir / f"{notebook}.ipynb"
     t0 = time.perf_counter()
+    # the kernel inherits the environment: plain-text progress lines instead of widgets that an
+    # executed notebook would keep frozen at 0 % (semmatch.progress)
+    saved = os.environ.get("SEMMATCH_PROGRESS")
+    os.environ["SEMMATCH_PROGRESS"] = "text"
     try:
         pm.execute_notebook(
             str(src), str(out), parameters=params, cwd=str(cwd), progress_bar=progress,
@@ -194,6 +198,11 @@ def run_notebook(
             f"{', ' + repr(first[0]) if first else ''}): {e.ename}: {e.evalue}\n"
             f"  parameters: {params}\n  executed copy with the traceback: {out}"
         ) from None
+    finally:
+        if saved is None:
+            os.environ.pop("SEMMATCH_PROGRESS", None)
+        else:
+            os.environ["SEMMATCH_PROGRESS"] = saved
     from .headline import write_stage_metrics
 
     figures_dir = Path(params.get("figures_dir") or f"figures/{params['profile']}")

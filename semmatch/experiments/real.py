@@ -39,7 +39,6 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-from tqdm.auto import tqdm
 
 from ..io import (
     Frame,
@@ -51,6 +50,7 @@ from ..io import (
     write_json,
     write_tum,
 )
+from ..progress import tqdm
 from .layout import GT, Layout, model_name, source_dir
 from .synthetic import MEASURE_COLUMNS, eval_grid_origin
 

@@ -11,10 +11,10 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-from tqdm.auto import tqdm
 
 from ..io import read_map, read_sequence
 from ..metrics import MEASURES
+from ..progress import tqdm
 from .layout import GT, ROUTES, Layout, model_name
 
 __all__ = [

@@ -16,11 +16,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from tqdm.auto import tqdm
 
 from ..geometry import DEFAULT_INTRINSICS, Intrinsics
 from ..io import atomic_path
 from ..labels import NUM_CLASSES, VOID
+from ..progress import tqdm
 
 __all__ = [
     "Views",

@@ -26,10 +26,10 @@ from pathlib import Path
 import numpy as np
 import torch
 import torch.nn.functional as F
-from tqdm.auto import tqdm
 
 from ..io import Frame, read_sequence, write_labels_folder
 from ..labels import NUM_CLASSES, table_fingerprint
+from ..progress import tqdm
 from .models import ModelConfig, build_network, normalise_inputs
 
 __all__ = ["Segmenter", "load_model", "predict_sequence", "check_rgb", "check_depth"]

@@ -20,11 +20,11 @@ import numpy as np
 import pandas as pd
 import torch
 import torch.nn.functional as F
-from tqdm.auto import tqdm
 
 from ..geometry import DEFAULT_INTRINSICS
 from ..io import atomic_path
 from ..labels import table_fingerprint
+from ..progress import tqdm
 from ..sim.trajectory import TRAJECTORY_VERSION
 from . import data as D
 from .models import ModelConfig, build_network, count_parameters

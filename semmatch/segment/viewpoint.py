@@ -15,10 +15,10 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-from tqdm.auto import tqdm
 
 from ..geometry import DEFAULT_INTRINSICS, Intrinsics
 from ..io import atomic_path, read_sequence
+from ..progress import tqdm
 from .scores import confusion, scores
 
 __all__ = [

@@ -26,10 +26,10 @@ from contextlib import ExitStack
 from pathlib import Path
 
 import numpy as np
-from tqdm.auto import tqdm
 
 from ..geometry import DEFAULT_INTRINSICS, Intrinsics
 from ..io import SequenceWriter, is_sequence, read_intrinsics, write_json, write_tum
+from ..progress import tqdm
 from .noise import NoiseConfig, estimated_poses, exposure_gains, noisy_depth, noisy_rgb
 from .procedural import SCENE_KINDS, generate_scene
 from .render import Renderer

@@ -9,7 +9,6 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-from tqdm import tqdm
 
 from ..io import (
     InMemorySequence,
@@ -19,6 +18,7 @@ from ..io import (
     read_sequence,
     write_labels_folder,
 )
+from ..progress import tqdm
 from ..workers import process_pool
 from .index import MapIndex, prepare
 from .registry import available_methods, check_params, transfer_frame
