@@ -454,7 +454,9 @@ class SemanticTSDF:
         return cap * self.res**3 * 4 * (1 + 1 + 3 + self.n_classes)
 
     def extract_mesh(self, *, min_weight: float = 1.0) -> SemanticMap:
-        """Marching-cubes mesh: vertices with labels, RGB colours, normals and faces."""
+        """Marching-cubes mesh: vertices with labels, RGB colours, normals and faces, in canonical
+        order (:meth:`~semmatch.io.SemanticMap.canonical`: the same frames give the same arrays and
+        the same file bytes, although Open3D's hash map orders its blocks differently each run)."""
         mesh = self.vbg.extract_triangle_mesh(weight_threshold=float(min_weight)).cpu()
         pts = mesh.vertex.positions.numpy() if "positions" in mesh.vertex else np.zeros((0, 3))
         if len(pts) == 0:
@@ -466,17 +468,17 @@ class SemanticTSDF:
             faces=mesh.triangle.indices.numpy(),
             normals=mesh.vertex.normals.numpy(),
             source="fusion:mesh",
-        )
+        ).canonical()
 
     def extract_point_cloud(self, *, min_weight: float = 1.0) -> SemanticMap:
-        """Surface points (TSDF zero crossings) with labels and RGB colours."""
+        """Surface points (TSDF zero crossings) with labels and RGB colours, in canonical order."""
         pcd = self.vbg.extract_point_cloud(weight_threshold=float(min_weight)).cpu()
         pts = pcd.point.positions.numpy() if "positions" in pcd.point else np.zeros((0, 3))
         if len(pts) == 0:
             return SemanticMap(np.zeros((0, 3)), np.zeros(0), source="fusion:points")
         cols = _to_uint8(pcd.point.colors.numpy()) if "colors" in pcd.point else None
         normals = pcd.point.normals.numpy() if "normals" in pcd.point else None
-        return SemanticMap(pts, self.labels_at(pts), colors=cols, normals=normals, source="fusion:points")
+        return SemanticMap(pts, self.labels_at(pts), colors=cols, normals=normals, source="fusion:points").canonical()
 
 
 def _to_uint8(c: np.ndarray) -> np.ndarray:

@@ -839,6 +839,31 @@ class SemanticMap:
             raise ValueError(f"{self.source}: {int(bad.sum())} vertices hold NaN or inf")
         return self
 
+    def canonical(self) -> SemanticMap:
+        """The same map with vertices sorted by (x, y, z) and triangles by their vertex indices
+        (each rotated to start at its smallest index, orientation kept).
+
+        Reconstructions are deterministic in content but not in order (Open3D's parallel hash
+        map); written in canonical order, the same content gives the same bytes.
+        """
+        p = self.points
+        order = np.lexsort((p[:, 2], p[:, 1], p[:, 0]))
+
+        def take(a):
+            return None if a is None else np.asarray(a)[order]
+
+        faces = None
+        if self.faces is not None:
+            inv = np.empty(len(order), np.int64)
+            inv[order] = np.arange(len(order))
+            f = inv[self.faces]
+            shift = np.argmin(f, axis=1)
+            rows = np.arange(len(f))[:, None]
+            f = f[rows, (shift[:, None] + np.arange(3)) % 3]
+            faces = f[np.lexsort((f[:, 2], f[:, 1], f[:, 0]))]
+        return SemanticMap(p[order], self.labels[order], colors=take(self.colors), faces=faces,
+                           normals=take(self.normals), source=self.source, instances=take(self.instances))
+
     def to_open3d(self, *, label_colors: bool = True):
         """Legacy ``open3d.geometry.TriangleMesh`` (mesh) or ``PointCloud`` with colours."""
         import open3d as o3d
@@ -948,6 +973,7 @@ def write_map(
     *,
     colors: str = "labels",
     binary: bool = True,
+    canonical: bool = False,
 ) -> Path:
     """Write a semantic map as PLY: vertex colours + ``label`` (uchar) property, atomically.
 
@@ -962,11 +988,18 @@ def write_map(
         map's appearance colours (an RGB mesh; ``label`` is written in both cases).
     binary : bool
         Binary little-endian (default) or ASCII.
+    canonical : bool
+        Write vertices and triangles in canonical order (:meth:`SemanticMap.canonical`), so that
+        the same content always gives the same bytes (the reconstructions of
+        :mod:`semmatch.fusion` are written so). Off by default: a mesh whose triangle order means
+        something (a scene's per-triangle data) keeps it.
     """
     from plyfile import PlyData, PlyElement
 
     if colors not in ("labels", "rgb"):
         raise ValueError(f"colors must be 'labels' or 'rgb', got {colors!r}")
+    if canonical:
+        m = m.canonical()
     if colors == "rgb" and m.colors is None:
         raise ValueError("colors='rgb' needs a map with appearance colours")
     col = m.label_colors if colors == "labels" else np.asarray(m.colors, dtype=np.uint8)

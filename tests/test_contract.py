@@ -213,3 +213,31 @@ def test_label_pngs_are_palette_images_read_back_id_exact(tmp_path):
     write_image(tmp_path / "rgb.png", np.zeros((6, 7, 3), np.uint8))
     with pytest.raises(ValueError, match="8-bit single-channel or palette"):
         read_label_image(tmp_path / "rgb.png")
+
+
+def test_maps_are_written_in_canonical_order(tmp_path):
+    """With canonical=True the same content in another vertex/triangle order gives the same bytes
+    (reconstructions are deterministic in content, not in order)."""
+    from semmatch.io import SemanticMap, read_map, write_map
+
+    rng = np.random.default_rng(0)
+    pts = rng.uniform(0, 1, (50, 3)).astype(np.float32)
+    faces = rng.integers(0, 50, (80, 3))
+    faces = faces[(faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 0] != faces[:, 2])]
+    lab = rng.integers(0, 5, 50).astype(np.uint8)
+    a = SemanticMap(pts, lab, faces=faces, instances=np.arange(50))
+    perm = rng.permutation(50)
+    inv = np.argsort(perm)
+    rolled = np.roll(inv[faces], 1, axis=1)[rng.permutation(len(faces))]  # same triangles, same orientation
+    b = SemanticMap(pts[perm], lab[perm], faces=rolled, instances=np.arange(50)[perm])
+    write_map(tmp_path / "a.ply", a, canonical=True)
+    write_map(tmp_path / "b.ply", b, canonical=True)
+    assert (tmp_path / "a.ply").read_bytes() == (tmp_path / "b.ply").read_bytes()
+    back = read_map(tmp_path / "a.ply")
+    assert len(back.faces) == len(a.faces)
+    def triangles(m):
+        return sorted(tuple(sorted(map(tuple, (m.points[f] * 1e4).round().astype(int).tolist()))) for f in m.faces)
+
+    assert triangles(back) == triangles(a)
+    assert dict(zip(map(tuple, back.points.tolist()), back.instances.tolist())) == \
+        dict(zip(map(tuple, a.points.tolist()), a.instances.tolist()))
