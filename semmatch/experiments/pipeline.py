@@ -112,7 +112,8 @@ def notebook_setup(notebook: str, namespace: dict) -> dict:
 
     Called by every notebook right after its parameters cell: the working directory becomes the
     repository root (the notebook's relative paths, e.g. ``data/<profile>``, resolve there
-    whatever folder Jupyter started in), and every parameter the notebook left at ``None``
+    whatever folder Jupyter started in; under :func:`run_notebook`, which sets
+    ``SEMMATCH_PIPELINE``, papermill's ``cwd`` is kept), and every parameter the notebook left at ``None``
     takes the active profile's value: the profile named by ``profile`` (when set), else by the
     ``SEMMATCH_PROFILE`` environment variable, else ``params.yaml``'s ``profile``. Under
     papermill the injected parameters are not ``None`` and stay as they are.
@@ -129,7 +130,8 @@ def notebook_setup(notebook: str, namespace: dict) -> dict:
     dict
         The filled-in parameters (``globals().update(...)`` them).
     """
-    os.chdir(ROOT)
+    if not os.environ.get("SEMMATCH_PIPELINE"):  # under run_notebook papermill sets the directory
+        os.chdir(ROOT)
     profile = namespace.get("profile") or os.environ.get("SEMMATCH_PROFILE") or None
     params = notebook_parameters(notebook, profile)
     return {k: v for k, v in params.items() if k in namespace and namespace[k] is None}
@@ -183,9 +185,11 @@ def run_notebook(
     out = out_dir / f"{notebook}.ipynb"
     t0 = time.perf_counter()
     # the kernel inherits the environment: plain-text progress lines instead of widgets that an
-    # executed notebook would keep frozen at 0 % (semmatch.progress)
-    saved = os.environ.get("SEMMATCH_PROGRESS")
-    os.environ["SEMMATCH_PROGRESS"] = "text"
+    # executed notebook would keep frozen at 0 % (semmatch.progress); papermill sets the working
+    # directory itself (notebook_setup leaves it)
+    kernel_env = {"SEMMATCH_PROGRESS": "text", "SEMMATCH_PIPELINE": "1"}
+    saved = {k: os.environ.get(k) for k in kernel_env}
+    os.environ.update(kernel_env)
     try:
         pm.execute_notebook(
             str(src), str(out), parameters=params, cwd=str(cwd), progress_bar=progress,
@@ -199,10 +203,11 @@ def run_notebook(
             f"  parameters: {params}\n  executed copy with the traceback: {out}"
         ) from None
     finally:
-        if saved is None:
-            os.environ.pop("SEMMATCH_PROGRESS", None)
-        else:
-            os.environ["SEMMATCH_PROGRESS"] = saved
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
     from .headline import write_stage_metrics
 
     figures_dir = Path(params.get("figures_dir") or f"figures/{params['profile']}")
