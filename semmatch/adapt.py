@@ -225,11 +225,10 @@ def fine_tune(
         Unknown source (or one ``robot`` was not prepared with), bad schedule.
     """
     import torch
-    import torch.nn.functional as F
 
     from .progress import tqdm
     from .segment import load_model
-    from .segment.training import TrainConfig, augment, build_views
+    from .segment.training import TrainConfig, augment, build_views, optimisation_step
 
     _check_sources([source])
     if source not in robot.pseudo:
@@ -275,14 +274,7 @@ def fine_tune(
         xs.append(x)
         ys.append(y)
         x = torch.cat(xs).contiguous(memory_format=torch.channels_last)
-        loss = F.cross_entropy(net(x), torch.cat(ys), weight=w_t, ignore_index=0)
-        if not torch.isfinite(loss):
-            raise FloatingPointError(f"adaptation loss became {loss.item()}")
-        opt.zero_grad(set_to_none=True)
-        loss.backward()
-        opt.step()
-        sched.step()
-        losses.append(float(loss.item()))
+        losses.append(optimisation_step(net, x, torch.cat(ys), w_t, opt, sched, what=f"adaptation loss ({source})"))
     net.eval()
     ckpt = {k: copy.deepcopy(v) for k, v in info.items()}
     ckpt["state_dict"] = {k: v.detach().cpu() for k, v in net.state_dict().items()}

@@ -32,7 +32,7 @@ from .scores import confusion, scores
 
 __all__ = [
     "TrainConfig", "PROFILES", "make_config", "network_spec", "train", "train_or_load", "validation_table", "augment",
-    "evaluate_views", "build_views", "CHECKPOINT_FORMAT",
+    "evaluate_views", "build_views", "optimisation_step", "CHECKPOINT_FORMAT",
 ]
 
 CHECKPOINT_FORMAT = "semmatch-segment/1"
@@ -325,6 +325,30 @@ def augment(
     return normalise_inputs(img, dep), y
 
 
+def optimisation_step(net, x: torch.Tensor, y: torch.Tensor, weights: torch.Tensor, opt, sched, *,
+                      what: str = "loss") -> float:
+    """One step: class-weighted cross-entropy (void ignored), backward, optimiser and schedule.
+
+    Returns
+    -------
+    float
+        The loss.
+
+    Raises
+    ------
+    FloatingPointError
+        The loss is not finite (``what`` names it in the message).
+    """
+    loss = F.cross_entropy(net(x), y, weight=weights, ignore_index=0)
+    if not torch.isfinite(loss):
+        raise FloatingPointError(f"{what} became {loss.item()}")
+    opt.zero_grad(set_to_none=True)
+    loss.backward()
+    opt.step()
+    sched.step()
+    return float(loss.item())
+
+
 def evaluate_views(segmenter, views: D.Views, *, batch_size: int = 16) -> dict:
     """Pixel scores (:func:`semmatch.segment.scores.scores`) of a segmenter on rendered views.
 
@@ -441,14 +465,7 @@ def train(config: TrainConfig, *, views: tuple[D.Views, D.Views] | None = None) 
                        crop=config.crop_size, zoom=config.zoom, jitter=config.jitter,
                        base_zoom=config.width / config.net_size[0],
                        use_depth=config.use_depth, device=device)
-        loss = F.cross_entropy(net(x), y, weight=w_t, ignore_index=0)
-        if not torch.isfinite(loss):
-            raise FloatingPointError(f"training loss became {loss.item()} at step {step}")
-        opt.zero_grad(set_to_none=True)
-        loss.backward()
-        opt.step()
-        sched.step()
-        running.append(float(loss.item()))
+        running.append(optimisation_step(net, x, y, w_t, opt, sched, what=f"training loss at step {step}"))
         if (step + 1) % config.eval_every == 0 or step + 1 == config.steps:
             net.eval()
             val = evaluate_views(seg, val_views)
