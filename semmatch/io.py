@@ -881,6 +881,62 @@ class SemanticMap:
         return pc
 
 
+_PLY_SIZES = {"char": 1, "int8": 1, "uchar": 1, "uint8": 1, "short": 2, "int16": 2, "ushort": 2, "uint16": 2,
+              "int": 4, "int32": 4, "uint": 4, "uint32": 4, "float": 4, "float32": 4, "double": 8, "float64": 8}
+
+
+def check_ply_header(path: PathLike) -> None:
+    """Refuse a PLY whose header claims more elements than the file can hold, before parsing it.
+
+    A 250-byte file claiming 3*10^8 faces would otherwise make the parser allocate gigabytes.
+    The smallest possible size of every element (binary: its fixed properties plus each list's
+    count; ASCII: two characters per value) times its count must fit in the bytes after the
+    header.
+
+    Raises
+    ------
+    ValueError
+        The header is unreadable or claims more than the file holds (names the element, its
+        count and the file size).
+    """
+    path = Path(path)
+    size = path.stat().st_size
+    with open(path, "rb") as fh:
+        head = fh.read(64 * 1024)
+    end = head.find(b"end_header")
+    if not head.startswith(b"ply") or end < 0:
+        return  # not a PLY header we can read: the parser gives its own error
+    body = size - (head.index(b"\n", end) + 1 if b"\n" in head[end:] else end + 10)
+    lines = head[:end].decode("ascii", errors="replace").splitlines()
+    fmt = next((ln.split()[1] for ln in lines if ln.startswith("format")), "ascii")
+    need, elements = 0, []
+    for ln in lines:
+        tok = ln.split()
+        if not tok:
+            continue
+        if tok[0] == "element" and len(tok) >= 3:
+            try:
+                elements.append([tok[1], int(tok[2]), 0])
+            except ValueError:
+                raise ValueError(f"{path}: bad PLY element line {ln!r}") from None
+        elif tok[0] == "property" and elements:
+            if fmt == "ascii":
+                elements[-1][2] += 2
+            elif tok[1] == "list" and len(tok) >= 5:
+                elements[-1][2] += _PLY_SIZES.get(tok[2], 1)
+            else:
+                elements[-1][2] += _PLY_SIZES.get(tok[1], 1)
+    for name, count, per in elements:
+        if count < 0:
+            raise ValueError(f"{path}: PLY header claims {count} {name} elements")
+        need += count * per
+        if need > body:
+            raise ValueError(
+                f"{path}: PLY header claims {count:,} {name} elements (at least {count * per:,} bytes) but the "
+                f"file holds {body:,} bytes after its header: truncated or corrupt"
+            )
+
+
 def read_map(path: PathLike, *, require_labels: bool = True) -> SemanticMap:
     """Read a semantic PLY (mesh or point cloud).
 
@@ -899,6 +955,7 @@ def read_map(path: PathLike, *, require_labels: bool = True) -> SemanticMap:
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such map file")
+    check_ply_header(path)
     errors = (PlyParseError, ValueError, IndexError, EOFError, TypeError)
     try:
         # fast path for triangle meshes: fixed-length face lists read as one array

@@ -241,3 +241,32 @@ def test_maps_are_written_in_canonical_order(tmp_path):
     assert triangles(back) == triangles(a)
     assert dict(zip(map(tuple, back.points.tolist()), back.instances.tolist())) == \
         dict(zip(map(tuple, a.points.tolist()), a.instances.tolist()))
+
+
+def test_ply_claiming_more_elements_than_it_holds_is_refused_before_parsing(tmp_path):
+    from semmatch.io import read_map
+
+    head = ("ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+            "property float z\nproperty uchar label\nelement face 300000000\n"
+            "property list uchar int vertex_indices\nend_header\n")
+    (tmp_path / "bomb.ply").write_bytes(head.encode() + bytes(3 * 13))
+    with pytest.raises(ValueError, match="claims 300,000,000 face elements"):
+        read_map(tmp_path / "bomb.ply")
+    ascii_head = "ply\nformat ascii 1.0\nelement vertex 1000\nproperty float x\nproperty float y\nproperty float z\nend_header\n"
+    (tmp_path / "short.ply").write_text(ascii_head + "0 0 0\n")
+    with pytest.raises(ValueError, match="truncated or corrupt"):
+        read_map(tmp_path / "short.ply")
+
+
+def test_out_of_memory_is_a_clear_error_not_a_traceback(monkeypatch, capsys):
+    from semmatch import cli
+
+    def boom(args):
+        raise MemoryError
+
+    parser = cli.build_parser()
+    monkeypatch.setattr(cli, "build_parser", lambda: parser)
+    for action in parser._subparsers._group_actions[0].choices.values():
+        action.set_defaults(func=boom)
+    assert cli.main(["evaluate", "a.ply", "b.ply"]) == 2
+    assert "out of memory" in capsys.readouterr().err

@@ -71,6 +71,11 @@ def main(argv: list[str] | None = None) -> int:
         msg = e.args[0] if isinstance(e, KeyError) and e.args else e
         print(f"semmatch {args.verb}: error: {msg}", file=sys.stderr)
         return 2
+    except MemoryError:
+        print(f"semmatch {args.verb}: error: out of memory; the input is larger than this machine can "
+              "hold at these settings (a map in millimetres instead of metres? a voxel size too small? "
+              "an image size too large?)", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":  # pragma: no cover
