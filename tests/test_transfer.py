@@ -472,3 +472,10 @@ def test_register_method_is_the_one_way_to_add_a_method(tmp_path, capsys):
         assert read_label_image(root / "lab" / "000000.png").max() == 1
     finally:
         registry._REGISTRY.pop("all-wall", None)
+
+
+def test_depth_in_millimetres_is_refused_by_transfer(scene, frames):
+    f = frames[0]
+    mm = dataclasses.replace(f, depth=f.depth * 1000.0)
+    with pytest.raises(ValueError, match="wrong unit"):
+        transfer("3d-neighborhood", mm, scene.to_semantic_map())

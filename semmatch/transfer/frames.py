@@ -92,7 +92,8 @@ def check_frame(frame: Frame, *, need_rgb: bool = True) -> FrameData:
     ------
     ValueError
         Missing pose, pose with NaN or a non-rotation block, image sizes that do not match the
-        intrinsics, RGB that is not ``uint8 (H,W,3)``.
+        intrinsics, RGB that is not ``uint8 (H,W,3)``, depth whose median is not plausible in
+        metres (:func:`semmatch.fusion.check_depth_units`).
     TypeError
         ``frame`` is not a Frame-like object.
     """
@@ -115,6 +116,9 @@ def check_frame(frame: Frame, *, need_rgb: bool = True) -> FrameData:
     if not np.issubdtype(depth.dtype, np.floating):
         raise ValueError(f"{name}: depth must be float metres, got {depth.dtype}")
     depth = depth.astype(np.float32, copy=False)
+    from ..fusion import check_depth_units
+
+    check_depth_units(depth, where=name)  # millimetres read as metres would silently find no support
     valid = depth > 0  # NaN compares False
     if np.isinf(depth).any():
         valid &= np.isfinite(depth)
