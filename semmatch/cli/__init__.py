@@ -35,7 +35,8 @@ def sequence_arg(args: argparse.Namespace) -> str:
     if pos and flag and pos != flag:
         raise ValueError(f"two sequences given ({pos} and --sequence {flag}); give SEQ once")
     if not (pos or flag):
-        raise ValueError(f"the sequence folder SEQ is required (semmatch {args.verb} SEQ ...)")
+        verb = " ".join(v for v in (getattr(args, "verb", None), getattr(args, "action", None)) if v)
+        raise ValueError(f"the sequence folder SEQ is required (semmatch {verb} SEQ ...)")
     return pos or flag
 
 
