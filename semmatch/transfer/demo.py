@@ -1,7 +1,7 @@
 """Small analytic scenes and posed frames for tests and benchmarks of the transfer methods.
 
-The simulator's ``generate_scene`` is used when it is available (:func:`bench_scene`); the
-box room of :func:`box_room` needs nothing but :class:`semmatch.sim.Scene`.
+:func:`bench_scene` is a generated living room with the robot's tour (benchmarks); the box room
+of :func:`box_room` is a small analytic scene (tests).
 """
 
 from __future__ import annotations
@@ -81,16 +81,9 @@ def box_room(seed: int = 0, size: tuple[float, float, float] = (5.0, 4.0, 2.6)) 
 
 
 def bench_scene(seed: int = 0, n_frames: int = 10, height: float = 0.25) -> tuple[Scene, np.ndarray]:
-    """A generated scene and lower-view poses for benchmarks.
+    """A generated living room and the robot's poses on its own tour, for benchmarks."""
+    from ..sim import generate_scene, make_trajectory
 
-    Uses the simulator's ``generate_scene("living_room", seed)`` and ``make_trajectory`` when
-    they are available, else :func:`box_room` and :func:`orbit_poses`.
-    """
-    try:
-        from ..sim import generate_scene, make_trajectory  # type: ignore[attr-defined]
-    except ImportError:
-        scene = box_room(seed)
-        return scene, orbit_poses(scene, n_frames, height, seed)
     scene = generate_scene("living_room", seed)
     return scene, make_trajectory(scene, height, n_frames, seed=seed, kind="lower")
 
