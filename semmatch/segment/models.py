@@ -25,7 +25,10 @@ from torch import nn
 
 from ..labels import NUM_CLASSES
 
-__all__ = ["ARCHITECTURES", "ModelConfig", "build_network", "normalise_inputs", "CompactNet", "StrongNet", "count_parameters"]
+#: the ``format`` entry of a semmatch segmentation checkpoint
+CHECKPOINT_FORMAT = "semmatch-segment/1"
+
+__all__ = ["CHECKPOINT_FORMAT", "ARCHITECTURES", "ModelConfig", "build_network", "normalise_inputs", "CompactNet", "StrongNet", "count_parameters"]
 
 #: depth values are divided by this (metres) and clipped to [0, 2]
 DEPTH_NORM = 4.0

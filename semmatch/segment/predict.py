@@ -30,7 +30,7 @@ import torch.nn.functional as F
 from ..io import Frame, read_sequence, write_labels_folder
 from ..labels import NUM_CLASSES, table_fingerprint
 from ..progress import tqdm
-from .models import ModelConfig, build_network, normalise_inputs
+from .models import CHECKPOINT_FORMAT, ModelConfig, build_network, normalise_inputs
 
 __all__ = ["Segmenter", "load_model", "predict_sequence", "check_rgb", "check_depth"]
 
@@ -230,8 +230,6 @@ def load_model(checkpoint: str | os.PathLike, *, arch: str | None = None, device
         Not a semmatch checkpoint, made for another category table or another architecture,
         or weights that do not fit the stored architecture.
     """
-    from .training import CHECKPOINT_FORMAT
-
     path = Path(checkpoint)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such checkpoint")

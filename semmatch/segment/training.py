@@ -27,7 +27,8 @@ from ..labels import table_fingerprint
 from ..progress import tqdm
 from ..sim.trajectory import TRAJECTORY_VERSION
 from . import data as D
-from .models import ModelConfig, build_network, count_parameters
+from .models import CHECKPOINT_FORMAT, ModelConfig, build_network, count_parameters
+from .predict import Segmenter, load_model
 from .scores import confusion, scores
 
 __all__ = [
@@ -35,7 +36,6 @@ __all__ = [
     "evaluate_views", "build_views", "optimisation_step", "CHECKPOINT_FORMAT",
 ]
 
-CHECKPOINT_FORMAT = "semmatch-segment/1"
 
 
 @dataclass
@@ -424,8 +424,6 @@ def train(config: TrainConfig, *, views: tuple[D.Views, D.Views] | None = None) 
         validation scores), ``history`` (per evaluation: step, train loss, val mIoU/accuracy,
         learning rate, seconds), ``train_config``, ``class_weights``, ``n_parameters``.
     """
-    from .predict import Segmenter
-
     config.validate()
     if config.threads:
         torch.set_num_threads(int(config.threads))
@@ -533,8 +531,6 @@ def train_or_load(config: TrainConfig, *, retrain: bool = False,
     """
     out = Path(config.out)
     if out.is_file() and not retrain:
-        from .predict import load_model
-
         try:
             stored = load_model(out).info.get("train_config")
         except ValueError:
@@ -558,7 +554,6 @@ def validation_table(checkpoints: dict) -> pd.DataFrame:
         val_mean_acc`` and ``iou_<class>`` for classes 1..10.
     """
     from ..labels import EVAL_CLASSES, NAMES
-    from .predict import load_model
 
     rows = []
     for name, path in checkpoints.items():
