@@ -53,6 +53,7 @@ __all__ = [
     "panoptic_quality",
     "instance_colors",
     "require_instances",
+    "sequence_panoptic_frames",
 ]
 
 _THINGS = np.zeros(NUM_CLASSES, bool)
@@ -105,9 +106,9 @@ def segment_instances(
     m : SemanticMap
         A semantic map (mesh or points), e.g. the network-built upper map.
     eps : float
-        DBSCAN neighbourhood radius in metres (vertices closer than this link up); a few times
-        the vertex spacing of the map bridges small label holes without merging objects that
-        stand apart.
+        DBSCAN neighbourhood radius in metres (vertices closer than this link up). Larger radii
+        bridge label holes and occlusion gaps within an object, but merge objects of one class
+        that stand closer than ``eps``; the pipeline chooses it on validation scenes.
     min_points : int
         DBSCAN core-point threshold.
     min_vertices : int

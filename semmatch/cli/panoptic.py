@@ -34,8 +34,8 @@ def register(sub) -> None:
     seg.add_argument("map", help="semantic PLY (mesh or point cloud)")
     seg.add_argument("--out", required=True, help="panoptic PLY to write")
     seg.add_argument("--eps", type=float, default=0.16,
-                     help="clustering radius in metres (default %(default)s: the full profile's "
-                     "validation choice for 4 cm TSDF maps)")
+                     help="clustering radius in metres (default %(default)s; notebook 10 chooses it on "
+                     "validation scenes: figures/<profile>/validation_panoptic_clustering.csv)")
     seg.add_argument("--min-vertices", type=int, default=50, help="smallest instance kept (default %(default)s)")
     seg.set_defaults(func=run_segment)
 
