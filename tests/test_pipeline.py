@@ -211,3 +211,24 @@ def test_progress_is_plain_text_under_the_pipeline(monkeypatch):
     assert type(bar) is text_tqdm
     monkeypatch.delenv("SEMMATCH_PROGRESS")
     assert not text_mode()
+
+
+def test_flip_choice_merges_into_the_recipe(tmp_path, monkeypatch):
+    """A choice made for some networks (e.g. extra training seeds) keeps the others' choices."""
+    import pandas as pd
+
+    import semmatch.segment as seg
+    import semmatch.segment.viewpoint as vp
+    from semmatch.experiments import height
+
+    (tmp_path / "models").mkdir()
+    (tmp_path / "models" / "recipe.json").write_text(json.dumps({"flip": {"strong": True}}))
+    (tmp_path / "models" / "compact@1.pt").write_bytes(b"")
+    monkeypatch.setattr(height, "sweep_sequences", lambda root, split: {0.2: []})
+    monkeypatch.setattr(seg, "load_model", lambda path, flip: flip)
+    monkeypatch.setattr(vp, "viewpoint_gap_sequences", lambda models, sweeps, progress: pd.DataFrame(
+        [{"model": name, "height": 0.2, "n_frames": 1, "miou": 0.5 if flip else 0.6, "mean_acc": 0.9}
+         for name, flip in models.items()]))
+    choice, _ = height.choose_test_time_flip(tmp_path, ["compact@1"], progress=False)
+    assert choice == {"compact@1": False}
+    assert json.loads((tmp_path / "models" / "recipe.json").read_text())["flip"] == {"strong": True, "compact@1": False}

@@ -95,8 +95,8 @@ def choose_test_time_flip(
 
     Every network labels the validation scenes' height sweeps with and without mirror
     averaging; the variant with the higher mIoU averaged over all heights and scenes is kept.
-    The choice goes to ``models/recipe.json`` (read by :meth:`Layout.load_network`), the scores
-    to ``figures_dir/validation_flip.{csv,md}``.
+    The choice goes to ``models/recipe.json`` (read by :meth:`Layout.load_network`; the choices
+    of networks not in this run are kept), the scores to ``figures_dir/validation_flip.{csv,md}``.
 
     Returns
     -------
@@ -124,7 +124,9 @@ def choose_test_time_flip(
         choice[net] = bool(mean.get(True, float("-inf")) > mean.get(False, float("-inf")))
     scores = pd.concat(rows, ignore_index=True)[["model", "flip", "height", "n_frames", "miou", "mean_acc"]]
     layout.recipe.parent.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(layout.recipe, json.dumps({"flip": choice, "chosen_on": "validation height sweeps"},
+    # merge: a run for some networks (e.g. extra training seeds) keeps the others' choices
+    known = json.loads(layout.recipe.read_text()).get("flip", {}) if layout.recipe.is_file() else {}
+    atomic_write_text(layout.recipe, json.dumps({"flip": {**known, **choice}, "chosen_on": "validation height sweeps"},
                                                 indent=2) + "\n")
     if figures_dir is not None:
         save_table(scores, figures_dir, "validation_flip")
