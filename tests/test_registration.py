@@ -64,7 +64,10 @@ def test_register_maps_recovers_a_known_transform_between_partial_views(two_view
     shuffled = SemanticMap(moved.points[perm], moved.labels[perm], faces=inv[moved.faces])
     again = register_maps(shuffled, upper, voxel_size=0.1, seed=0, restarts=2)
     np.testing.assert_allclose(again.transform, r.transform, atol=1e-9)
-    assert [c["global_fitness"] for c in again.candidates] == [c["global_fitness"] for c in r.candidates]
+    # the restarts' RANSAC fitness can differ by a few correspondences (Open3D's parallel
+    # correspondence search; seen once in CI: 0.7495 vs 0.7487), the chosen transform does not
+    np.testing.assert_allclose([c["global_fitness"] for c in again.candidates],
+                               [c["global_fitness"] for c in r.candidates], rtol=0.01)
 
 
 def test_register_maps_refuses_what_it_cannot_register():
