@@ -26,6 +26,7 @@ __all__ = [
     "voxel_keys",
     "pack_keys",
     "unpack_keys",
+    "cluster_dbscan",
 ]
 
 
@@ -323,3 +324,26 @@ def unpack_keys(packed: np.ndarray) -> np.ndarray:
     p = np.asarray(packed, dtype=np.int64)
     mask = (1 << 21) - 1
     return np.stack([(p >> 42) & mask, (p >> 21) & mask, p & mask], axis=1) - (1 << 20)
+
+
+def cluster_dbscan(points: np.ndarray, eps: float, min_points: int) -> np.ndarray:
+    """DBSCAN cluster id of every point (Open3D ``cluster_dbscan``; -1 = noise).
+
+    Parameters
+    ----------
+    points : float (N,3)
+    eps : float
+        Neighbourhood radius (metres).
+    min_points : int
+        Core-point threshold (1: single linkage at ``eps``).
+
+    Returns
+    -------
+    int64 (N,)
+    """
+    if len(points) == 0:
+        return np.zeros(0, np.int64)
+    import open3d as o3d
+
+    pc = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.asarray(points, dtype=np.float64)))
+    return np.asarray(pc.cluster_dbscan(float(eps), int(min_points)), dtype=np.int64)

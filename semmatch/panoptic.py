@@ -36,7 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .geometry import Intrinsics, check_pose, pack_keys, voxel_keys
+from .geometry import Intrinsics, check_pose, cluster_dbscan, pack_keys, voxel_keys
 from .io import Frame, SemanticMap, read_map
 from .labels import NAMES, NUM_CLASSES, STUFF_CLASSES, THING_CLASSES
 from .transfer.frames import check_frame
@@ -77,16 +77,6 @@ def _with_instances(m: SemanticMap, instances: np.ndarray) -> SemanticMap:
 
 
 # ----------------------------------------------------------------------------- 3D instance segmentation
-def _dbscan(points: np.ndarray, eps: float, min_points: int) -> np.ndarray:
-    """Open3D DBSCAN cluster ids (-1 = noise)."""
-    import open3d as o3d
-
-    if len(points) == 0:
-        return np.zeros(0, np.int64)
-    pc = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.asarray(points, dtype=np.float64)))
-    return np.asarray(pc.cluster_dbscan(float(eps), int(min_points)), dtype=np.int64)
-
-
 def segment_instances(
     m: SemanticMap,
     *,
@@ -133,7 +123,7 @@ def segment_instances(
         sel = np.flatnonzero(m.labels == c)
         if len(sel) < max(int(min_vertices), 1):
             continue
-        cl = _dbscan(m.points[sel], eps, min_points)
+        cl = cluster_dbscan(m.points[sel], eps, min_points)
         if (cl >= 0).sum() == 0:
             continue
         sizes = np.bincount(cl[cl >= 0])
@@ -193,7 +183,7 @@ def clean_instances(
             sel = in_c[inst[in_c] == i]
             if len(sel) >= min_vertices * 50:
                 continue  # a large instance: its fragments are rare and harmless, skip the DBSCAN
-            comp = _dbscan(pts[sel], eps, 1)
+            comp = cluster_dbscan(pts[sel], eps, 1)
             sizes = np.bincount(comp)
             for k in np.flatnonzero(sizes < min_vertices):
                 part = sel[comp == k]
@@ -292,14 +282,9 @@ def fuse_instances(
         raise ValueError(f"{m.source}: no frames to fuse instances from")
     out = np.zeros(len(pts), np.int32)
     if votes:
-        pair, counts = np.unique(np.concatenate(votes), return_counts=True)
-        if len(pair):
-            vert = pair >> 32
-            # per vertex: most votes, ties to the smaller id (pairs are sorted by id within a vertex)
-            order = np.lexsort((pair & 0xFFFFFFFF, -counts, vert))
-            vert_o = vert[order]
-            first = np.r_[True, vert_o[1:] != vert_o[:-1]]
-            out[vert_o[first]] = (pair[order][first] & 0xFFFFFFFF).astype(np.int32)
+        pairs = np.concatenate(votes)
+        vert, winner = _plurality(pairs >> 32, pairs & 0xFFFFFFFF)
+        out[vert] = winner
     if clean:
         out = clean_instances(m.points, m.labels, out, eps=eps, min_vertices=min_vertices)
     return _with_instances(m, out)
@@ -325,6 +310,19 @@ def sequence_panoptic_frames(seq, *, labels=None, step: int = 1) -> Iterator[Pan
 
 
 # ----------------------------------------------------------------------------- transfer
+def _plurality(keys: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per distinct key (>= 0, < 2**31) the most frequent value (ids < 2**32; ties: the smaller).
+
+    Returns the distinct keys (sorted) and their winning values (int32).
+    """
+    pair, counts = np.unique((np.asarray(keys, np.int64) << 32) | np.asarray(values, np.int64), return_counts=True)
+    key = pair >> 32
+    order = np.lexsort((pair & 0xFFFFFFFF, -counts, key))
+    key_o = key[order]
+    first = np.r_[True, key_o[1:] != key_o[:-1]] if len(key_o) else np.zeros(0, bool)
+    return key_o[first], (pair[order][first] & 0xFFFFFFFF).astype(np.int32)
+
+
 def _group_majority(groups: np.ndarray, instances: np.ndarray) -> np.ndarray:
     """Per pixel: the majority non-zero instance of its group (ties: smaller id)."""
     g = groups.reshape(-1)
@@ -333,13 +331,9 @@ def _group_majority(groups: np.ndarray, instances: np.ndarray) -> np.ndarray:
     sel = np.flatnonzero((g >= 0) & (inst > 0))
     if len(sel) == 0:
         return out.reshape(groups.shape)
-    pair, counts = np.unique((g[sel] << 32) | inst[sel], return_counts=True)
-    grp = pair >> 32
-    order = np.lexsort((pair & 0xFFFFFFFF, -counts, grp))
-    grp_o = grp[order]
-    first = np.r_[True, grp_o[1:] != grp_o[:-1]]
     best = np.zeros(int(g.max()) + 1, np.int32)
-    best[grp_o[first]] = (pair[order][first] & 0xFFFFFFFF).astype(np.int32)
+    grp, winner = _plurality(g[sel], inst[sel])
+    best[grp] = winner
     has = g >= 0
     out[has] = best[g[has]]
     return out.reshape(groups.shape)

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..geometry import pixel_rays
+from ..geometry import cluster_dbscan, pixel_rays
 from .frames import FrameData
 from .index import MapIndex
 from .superpixels import skimage_slic, superpixels
@@ -282,13 +282,6 @@ def _cloud(points: np.ndarray):
     return o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.asarray(points, dtype=np.float64)))
 
 
-def _dbscan_labels(points: np.ndarray, eps: float, min_points: int) -> np.ndarray:
-    """Open3D DBSCAN cluster ids (-1 = noise)."""
-    if len(points) == 0:
-        return np.zeros(0, np.int64)
-    return np.asarray(_cloud(points).cluster_dbscan(float(eps), int(min_points)), dtype=np.int64)
-
-
 def _peel_planes(
     points: np.ndarray,
     *,
@@ -323,7 +316,7 @@ def _peel_planes(
         inliers = np.flatnonzero(dist <= distance)
         if len(inliers) < int(min_points):
             break
-        lab = _dbscan_labels(rest[inliers], eps, min_points)
+        lab = cluster_dbscan(rest[inliers], eps, min_points)
         if (lab >= 0).sum() == 0:
             break  # too much noise: stop peeling (as the authors' code)
         best = np.bincount(lab[lab >= 0]).argmax()
@@ -367,7 +360,7 @@ def dbscan(
         eps=eps, min_points=min_points, sample=int(ransac_sample), rng=np.random.default_rng(seed),
     )
     if len(remaining):
-        lab = _dbscan_labels(cen[remaining], eps, min_points)
+        lab = cluster_dbscan(cen[remaining], eps, min_points)
         cluster[remaining] = np.where(lab >= 0, lab + k, -1)
     n = int(cluster.max()) + 1
     winner, purity = vote(cluster, index.lookup(cen, exact=exact), n)
