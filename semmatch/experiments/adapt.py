@@ -24,7 +24,7 @@ from ..stats import bootstrap_ci, paired_difference_ci
 from .layout import Layout
 from .synthetic import eval_grid_origin
 
-__all__ = ["adapt_networks", "adapted_height_study", "gap_table", "adapted_lower_maps"]
+__all__ = ["adapt_networks", "load_adapted", "adapted_height_study", "gap_table", "adapted_lower_maps"]
 
 
 def _adapt_dir(data_root: str | Path) -> Path:
@@ -77,18 +77,23 @@ def adapt_networks(
     return out, pd.DataFrame(rows)
 
 
+def load_adapted(data_root: str | Path, network: str, checkpoints: dict[str, Path]) -> dict:
+    """The adapted networks (``{name: Segmenter}``) with the source network's inference recipe
+    (mirror averaging as chosen for it on validation)."""
+    from ..segment import load_model
+
+    flip = Layout(data_root).inference_flip(network)
+    return {name: load_model(p) if flip is None else load_model(p, flip=flip) for name, p in checkpoints.items()}
+
+
 def adapted_height_study(data_root: str | Path, network: str, checkpoints: dict[str, Path], *,
                          progress: bool = True) -> pd.DataFrame:
     """Per-scene pixel scores of the unadapted and every adapted network on the evaluation
     scenes' height sweeps (:func:`semmatch.segment.viewpoint.viewpoint_gap_sequences`)."""
-    from ..segment import load_model
     from ..segment.viewpoint import viewpoint_gap_sequences
     from .height import sweep_sequences
 
-    layout = Layout(data_root)
-    models = {network: layout.load_network(network)}
-    flip = models[network].flip  # the source network's inference recipe (chosen on validation)
-    models.update({name: load_model(p, flip=flip) for name, p in checkpoints.items()})
+    models = {network: Layout(data_root).load_network(network), **load_adapted(data_root, network, checkpoints)}
     return viewpoint_gap_sequences(models, sweep_sequences(data_root), per_scene=True, progress=progress)
 
 

@@ -84,19 +84,22 @@ class Layout:
         Test-time mirror averaging follows the choice stored in :attr:`recipe` (made on the
         validation scenes); without a recipe file the loader's default applies.
         """
-        import json
-
         from ..segment import load_model
 
         path = self.model(network)
         if not path.is_file():
             raise FileNotFoundError(f"{path}: no trained {network} network; run 02_train_segmentation first")
-        kw = {}
-        if self.recipe.is_file():
-            choice = json.loads(self.recipe.read_text()).get("flip", {})
-            if network in choice:
-                kw["flip"] = bool(choice[network])
-        return load_model(path, **kw)
+        flip = self.inference_flip(network)
+        return load_model(path) if flip is None else load_model(path, flip=flip)
+
+    def inference_flip(self, network: str) -> bool | None:
+        """The mirror-averaging choice for ``network`` in :attr:`recipe` (None: no choice made)."""
+        import json
+
+        if not self.recipe.is_file():
+            return None
+        choice = json.loads(self.recipe.read_text()).get("flip", {})
+        return bool(choice[network]) if network in choice else None
 
     def upper_map(self, scene_id: str, source: str) -> Path:
         return self.root / "upper" / scene_id / f"{source_dir(source)}.ply"
