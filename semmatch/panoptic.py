@@ -209,6 +209,12 @@ class PanopticFrame:
     instances: np.ndarray
     name: str = "frame"
 
+    @classmethod
+    def of(cls, frame: Frame, labels: np.ndarray, instances: np.ndarray, name: str | None = None) -> PanopticFrame:
+        """The evidence of a posed :class:`~semmatch.io.Frame` with its class and instance images."""
+        return cls(frame.depth, frame.pose, frame.intrinsics, labels, instances,
+                   name or f"frame {getattr(frame, 'index', '?')}")
+
 
 def fuse_instances(
     m: SemanticMap,
@@ -306,7 +312,7 @@ def sequence_panoptic_frames(seq, *, labels=None, step: int = 1) -> Iterator[Pan
         lab = f.labels if labels is None else labels(i)
         if lab is None:
             raise ValueError(f"{seq.path}: frame {i} has no labels")
-        yield PanopticFrame(f.depth, f.pose, f.intrinsics, lab, seq.read_instances(i), f"{seq.path} frame {i}")
+        yield PanopticFrame.of(f, lab, seq.read_instances(i), f"{seq.path} frame {i}")
 
 
 # ----------------------------------------------------------------------------- transfer

@@ -143,7 +143,7 @@ def run_transfer(args: argparse.Namespace) -> int:
         f = seq[i]
         lab, inst = transfer_panoptic(args.method, f, index)
         labels.append(lab)
-        evidence.append(PanopticFrame(f.depth, f.pose, f.intrinsics, lab, inst, f"{seq_path} frame {i}"))
+        evidence.append(PanopticFrame.of(f, lab, inst, f"{seq_path} frame {i}"))
     m = reconstruct(seq, labels, args.voxel_size)
     m = fuse_instances(m, evidence, eps=args.eps, min_vertices=args.min_vertices)
     write_map(args.out, m)

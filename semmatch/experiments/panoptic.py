@@ -29,6 +29,7 @@ import pandas as pd
 from ..io import read_map, read_sequence, write_map
 from ..labels import THING_CLASSES
 from ..panoptic import (
+    PanopticFrame,
     fuse_instances,
     panoptic_quality,
     panoptic_voxels,
@@ -164,7 +165,7 @@ def panoptic_scene(
             index = indexes[class_source] = MapIndex(upper)
         for method in methods:
             res = [transfer_panoptic(method, f, index) for f in step_frames]
-            evidence = (_frame(f, lab, inst) for f, (lab, inst) in zip(step_frames, res))
+            evidence = (PanopticFrame.of(f, lab, inst) for f, (lab, inst) in zip(step_frames, res))
             pm = fuse_instances(read_map(layout.lower_map(scene, class_source, method)), evidence,
                                 tolerance=tolerance, eps=link_radius, min_vertices=min_vertices)
             write_map(out_dir / _folder(source) / f"{method}.ply", pm)
@@ -223,12 +224,6 @@ def panoptic_study(
                 bar.update()
     bar.close()
     return pd.DataFrame(rows)
-
-
-def _frame(f, labels: np.ndarray, instances: np.ndarray):
-    from ..panoptic import PanopticFrame
-
-    return PanopticFrame(f.depth, f.pose, f.intrinsics, labels, instances, f"frame {f.index}")
 
 
 def panoptic_summary(per_scene: pd.DataFrame, *, seed: int = 0) -> pd.DataFrame:
