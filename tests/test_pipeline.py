@@ -52,6 +52,26 @@ def test_failing_notebook_names_cell_and_parameters(tmp_path):
     assert "'profile': 'smoke'" in msg and "'seed': 0" in msg and "unused" not in msg
 
 
+def test_cell_output_streams_to_the_console_while_the_notebook_runs(tmp_path, caplog):
+    nb = nbformat.v4.new_notebook()
+    nb.metadata["kernelspec"] = {"name": "python3", "display_name": "Python 3", "language": "python"}
+    params = nbformat.v4.new_code_cell("seed = 1\nprofile = None")
+    params.metadata["tags"] = ["parameters"]
+    nb.cells = [params, nbformat.v4.new_code_cell("print('step 7 of 9: loss 0.25')")]
+    (tmp_path / "nb").mkdir()
+    nbformat.write(nb, tmp_path / "nb" / "01_simulate.ipynb")
+    (tmp_path / "params.yaml").write_text("profile: smoke\nprofiles:\n  smoke:\n    common: {seed: 0}\n    simulate: {}\n")
+    kw = dict(notebooks_dir=tmp_path / "nb", params_file=tmp_path / "params.yaml", reports_dir=tmp_path / "rep",
+              cwd=tmp_path)
+    with caplog.at_level("INFO", logger="papermill"):
+        pipeline.run_notebook("01_simulate", "smoke", log_output=True, **kw)
+    assert "step 7 of 9: loss 0.25" in caplog.text
+    caplog.clear()
+    with caplog.at_level("INFO", logger="papermill"):
+        pipeline.run_notebook("01_simulate", "smoke", **kw)  # quiet by default (library use, tests)
+    assert "step 7 of 9" not in caplog.text
+
+
 def test_parameter_the_notebook_does_not_declare_is_refused(tmp_path):
     nb = nbformat.v4.new_notebook()
     nb.metadata["kernelspec"] = {"name": "python3", "display_name": "Python 3", "language": "python"}

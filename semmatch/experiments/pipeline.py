@@ -159,11 +159,15 @@ def run_notebook(
     reports_dir: str | os.PathLike | None = None,
     cwd: str | os.PathLike = ROOT,
     progress: bool = False,
+    log_output: bool = False,
     **overrides,
 ) -> Path:
     """Execute one notebook with papermill; return the executed copy.
 
     The executed copy goes to ``reports/<profile>/<notebook>.ipynb`` (or ``reports_dir``).
+    With ``log_output`` the cells' output (progress lines, tables) is also streamed to this
+    process's log while the notebook runs (papermill's ``--log-output``), so a long stage run by
+    ``dvc repro`` shows its progress on the console.
 
     Raises
     ------
@@ -193,7 +197,7 @@ def run_notebook(
     try:
         pm.execute_notebook(
             str(src), str(out), parameters=params, cwd=str(cwd), progress_bar=progress,
-            kernel_name="python3", log_output=False,
+            kernel_name="python3", log_output=log_output,
         )
     except pm.PapermillExecutionError as e:
         first = (e.source or "").strip().splitlines()[:1]
@@ -255,6 +259,8 @@ def main(argv: list[str] | None = None) -> int:
         p.add_argument("--data-root", help="override common.data_root")
         p.add_argument("--figures-dir", help="override common.figures_dir")
         p.add_argument("--reports-dir", help="where executed notebooks go (default reports/<profile>)")
+        p.add_argument("--quiet", action="store_true",
+                       help="do not stream the cells' output (progress lines, tables) to the console")
     sub.add_parser("profiles", help="list the profiles of params.yaml")
     sp = sub.add_parser("set-profile", help="select the profile dvc repro runs")
     sp.add_argument("name")
@@ -276,7 +282,16 @@ def main(argv: list[str] | None = None) -> int:
             update_readme(ROOT / "README.md", ROOT / "figures" / name)
             return 0
         kw = dict(params_file=args.params, reports_dir=args.reports_dir, data_root=args.data_root,
-                  figures_dir=args.figures_dir)
+                  figures_dir=args.figures_dir, log_output=not args.quiet)
+        if not args.quiet:
+            import logging
+
+            # papermill logs the streamed cell output at INFO on its own logger
+            handler = logging.StreamHandler(sys.stderr)
+            handler.setFormatter(logging.Formatter("%(message)s"))
+            log = logging.getLogger("papermill")
+            log.addHandler(handler)
+            log.setLevel(logging.INFO)
         if args.cmd == "run":
             run_notebook(args.notebook, args.profile, **kw)
         else:
