@@ -12,10 +12,35 @@ pytestmark = [pytest.mark.notebooks, pytest.mark.slow]
 
 @pytest.fixture(scope="module")
 def smoke_run(tmp_path_factory):
+    import os
+
+    from semmatch.experiments.stagedeps import RECORD_ENV
+
     base = tmp_path_factory.mktemp("smoke")
     dirs = dict(data_root=str(base / "data"), figures_dir=str(base / "figures"), reports_dir=str(base / "reports"))
-    outs = pipeline.run_all("smoke", **dirs)
+    saved = os.environ.get(RECORD_ENV)
+    os.environ[RECORD_ENV] = str(base / "modules")  # each kernel records the modules it loaded
+    try:
+        outs = pipeline.run_all("smoke", **dirs)
+    finally:
+        if saved is None:
+            os.environ.pop(RECORD_ENV, None)
+        else:
+            os.environ[RECORD_ENV] = saved
     return base, outs
+
+
+def test_every_stage_depends_on_the_code_it_ran(smoke_run):
+    import yaml
+
+    base, outs = smoke_run
+    stages = yaml.safe_load((pipeline.ROOT / "dvc.yaml").read_text())["stages"]
+    deps_of = {st["cmd"].split()[-1]: set(st["deps"]) for st in stages.values()}
+    for nb in outs:
+        loaded = (base / "modules" / f"{nb.stem}.txt").read_text().split()
+        assert any(m.endswith("experiments/pipeline.py") for m in loaded), nb.stem
+        missing = sorted(m for m in loaded if m.startswith("semmatch/") and m not in deps_of[nb.stem])
+        assert not missing, f"{nb.stem} ran {missing} but its dvc.yaml stage does not depend on them"
 
 
 def test_every_notebook_ran(smoke_run):

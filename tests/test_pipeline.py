@@ -170,14 +170,16 @@ def test_dvc_yaml_is_the_generators_output(tmp_path):
         "dvc.yaml was edited by hand: change scripts/dvc_stages.py and regenerate"
 
 
-def test_every_stage_depends_on_its_notebook_and_the_whole_package():
+def test_every_stage_depends_on_its_notebook_and_its_modules():
     import yaml
+
+    from semmatch.experiments.stagedeps import stage_modules
 
     stages = yaml.safe_load((pipeline.ROOT / "dvc.yaml").read_text())["stages"]
     by_notebook = {st["cmd"].split()[-1]: st for st in stages.values()}
     assert set(by_notebook) == set(pipeline.NOTEBOOKS)
     for nb, st in by_notebook.items():
-        assert f"notebooks/{nb}.ipynb" in st["deps"] and "semmatch" in st["deps"]
+        assert f"notebooks/{nb}.ipynb" in st["deps"] and set(stage_modules(nb)) <= set(st["deps"])
 
 
 def test_stage_metrics_are_declared_and_written(tmp_path):
@@ -252,3 +254,39 @@ def test_flip_choice_merges_into_the_recipe(tmp_path, monkeypatch):
     choice, _ = height.choose_test_time_flip(tmp_path, ["compact@1"], progress=False)
     assert choice == {"compact@1": False}
     assert json.loads((tmp_path / "models" / "recipe.json").read_text())["flip"] == {"strong": True, "compact@1": False}
+
+
+def test_stage_modules_follow_imports_everywhere(tmp_path):
+    import json
+
+    from semmatch.experiments.stagedeps import stage_modules
+
+    pkg = tmp_path / "semmatch"
+    (pkg / "sub").mkdir(parents=True)
+    (pkg / "__init__.py").write_text("")
+    (pkg / "runner.py").write_text("")
+    (pkg / "a.py").write_text("def f():\n    from .b import g  # inside a function: still a dependency\n")
+    (pkg / "b.py").write_text("from semmatch.sub import lazy_name\n")
+    (pkg / "sub" / "__init__.py").write_text("_EXPORTS = {'lazy_name': 'impl'}\n")
+    (pkg / "sub" / "impl.py").write_text("import numpy\n")
+    (pkg / "unused.py").write_text("")
+    (tmp_path / "notebooks").mkdir()
+    cell = {"cell_type": "code", "metadata": {}, "outputs": [], "execution_count": None,
+            "source": ["%matplotlib inline\n", "from semmatch import a\n"]}
+    (tmp_path / "notebooks" / "nb.ipynb").write_text(json.dumps({"cells": [cell], "metadata": {}, "nbformat": 4,
+                                                                  "nbformat_minor": 5}))
+    mods = stage_modules("nb", root=tmp_path, runner="semmatch.runner")
+    assert mods == ["semmatch/__init__.py", "semmatch/a.py", "semmatch/b.py", "semmatch/runner.py",
+                    "semmatch/sub/__init__.py", "semmatch/sub/impl.py"]
+    with pytest.raises(FileNotFoundError, match="no such notebook"):
+        stage_modules("missing", root=tmp_path)
+
+
+def test_stages_depend_on_what_they_use_and_not_on_the_rest():
+    import yaml
+
+    stages = yaml.safe_load((pipeline.ROOT / "dvc.yaml").read_text())["stages"]
+    assert "semmatch/metrics.py" in stages["evaluate_synthetic"]["deps"]
+    assert "semmatch/metrics.py" not in stages["simulate"]["deps"]  # editing the measures keeps the data
+    for st in stages.values():
+        assert "semmatch/experiments/pipeline.py" in st["deps"] and "semmatch" not in st["deps"]

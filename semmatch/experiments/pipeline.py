@@ -132,6 +132,9 @@ def notebook_setup(notebook: str, namespace: dict) -> dict:
     """
     if not os.environ.get("SEMMATCH_PIPELINE"):  # under run_notebook papermill sets the directory
         os.chdir(ROOT)
+    from .stagedeps import record_loaded_modules
+
+    record_loaded_modules(notebook)  # only with SEMMATCH_RECORD_MODULES set (the DVC deps test)
     profile = namespace.get("profile") or os.environ.get("SEMMATCH_PROFILE") or None
     params = notebook_parameters(notebook, profile)
     return {k: v for k, v in params.items() if k in namespace and namespace[k] is None}
