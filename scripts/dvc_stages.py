@@ -9,7 +9,10 @@ import sys
 
 import yaml
 
+from semmatch.experiments.pipeline import OVERRIDABLE, ROOT
 from semmatch.experiments.stagedeps import stage_modules
+
+PROFILES = yaml.safe_load((ROOT / "params.yaml").read_text())["profiles"]
 
 P = "${profile}"
 
@@ -94,6 +97,20 @@ PLOTS = {
     "support_per_scene.csv": ("label_transfer", "scene", "support"),
     "misregistration.csv": ("real_data", "translation_m", "mean_acc"),
 }
+
+
+def with_overrides(params):
+    """The stage's params plus the top-level overrides (``-S key=value``) that reach them."""
+    extra = []
+    for p in params:
+        parts = p.split(".")
+        if len(parts) == 4 and parts[2] == "common" and parts[3] in OVERRIDABLE:
+            extra.append(parts[3])
+        elif len(parts) == 3 and parts[0] == "profiles":
+            extra += [k for k in OVERRIDABLE if any(k in (prof.get(parts[2]) or {}) for prof in PROFILES.values())]
+    return [*params, *dict.fromkeys(extra)]
+
+
 out = {"stages": {}}
 for name, st in stages.items():
     plots = {f: v for f, v in PLOTS.items() if v[0] == name}
@@ -101,7 +118,7 @@ for name, st in stages.items():
     stage = {
         "cmd": f"python -m semmatch.experiments run {st['nb']}",
         "deps": [f"notebooks/{st['nb']}.ipynb", *stage_modules(st["nb"]), *st["deps"]],
-        "params": st["params"],
+        "params": with_overrides(st["params"]),
         "outs": [*st["outs"], f"reports/{P}/{st['nb']}.ipynb", *fig(*figs)],
     }
     if name in METRICS:

@@ -290,3 +290,33 @@ def test_stages_depend_on_what_they_use_and_not_on_the_rest():
     assert "semmatch/metrics.py" not in stages["simulate"]["deps"]  # editing the measures keeps the data
     for st in stages.values():
         assert "semmatch/experiments/pipeline.py" in st["deps"] and "semmatch" not in st["deps"]
+
+
+def test_top_level_overrides_reach_the_profile(tmp_path):
+    body = ("profiles:\n  p:\n    common: {seed: 0, voxel_size: 0.05, methods: [a, b]}\n"
+            "    simulate: {n_frames_lower: 8}\n")
+    f = tmp_path / "params.yaml"
+    f.write_text("profile: p\nvoxel_size: null\nmethods: [b]\nn_frames_lower: 3\n" + body)
+    p = pipeline.load_params(f)
+    assert p["common"] == {"seed": 0, "voxel_size": 0.05, "methods": ["b"]}
+    assert p["simulate"] == {"n_frames_lower": 3}
+    assert pipeline.notebook_parameters("01_simulate", params_file=f)["n_frames_lower"] == 3
+    f.write_text("profile: p\nvoxel_sise: 0.1\n" + body)
+    with pytest.raises(ValueError, match="unknown top-level key.*voxel_sise"):
+        pipeline.load_params(f)
+    f.write_text("profile: p\nimage_width: 64\n" + body)
+    with pytest.raises(ValueError, match="image_width=64 must match exactly one section"):
+        pipeline.load_params(f)
+
+
+def test_every_override_key_is_in_params_and_reaches_a_stage():
+    import yaml
+
+    top = yaml.safe_load((pipeline.ROOT / "params.yaml").read_text())
+    stages = yaml.safe_load((pipeline.ROOT / "dvc.yaml").read_text())["stages"]
+    declared = {p for st in stages.values() for p in st["params"]}
+    for key in pipeline.OVERRIDABLE:
+        assert key in top and top[key] is None, key  # committed params.yaml: the profiles decide
+        assert key in declared, f"no stage reruns when {key} is overridden"
+    for name in top["profiles"]:
+        pipeline.load_params(pipeline.ROOT / "params.yaml", name)  # every override key resolves

@@ -68,13 +68,42 @@ def section_of(notebook: str) -> str:
     return notebook.split("_", 1)[1]
 
 
+#: parameters a researcher varies, settable at the top level of params.yaml (``null`` = the
+#: active profile's value), so that ``dvc exp run -S eval_voxel_size=0.1`` works with a short key
+OVERRIDABLE = ("eval_seeds", "methods", "networks", "fused_base", "voxel_size", "eval_voxel_size",
+               "n_frames_upper", "n_frames_lower", "routes", "image_width", "image_height")
+_TOP_LEVEL = ("profile", "profiles", *OVERRIDABLE)
+
+
+def _apply_overrides(params_file: Path, data: dict, name: str, profile: dict) -> dict:
+    """The profile with the non-null top-level overrides put where their key lives."""
+    unknown = sorted(set(data) - set(_TOP_LEVEL))
+    if unknown:
+        raise ValueError(f"{params_file}: unknown top-level key(s) {', '.join(unknown)}; valid: "
+                         f"{', '.join(_TOP_LEVEL)}")
+    out = {k: dict(v) if isinstance(v, dict) else v for k, v in profile.items()}
+    for key in OVERRIDABLE:
+        if data.get(key) is None:
+            continue
+        where = [sec for sec, v in out.items() if isinstance(v, dict) and key in v]
+        if len(where) != 1:
+            raise ValueError(f"{params_file}: the override {key}={data[key]!r} must match exactly one "
+                             f"section of profile {name!r}, found {where or 'none'}")
+        out[where[0]][key] = data[key]
+    return out
+
+
 def load_params(params_file: str | os.PathLike = ROOT / "params.yaml", profile: str | None = None) -> dict:
     """Load ``params.yaml`` and return the selected profile as a dict (plus ``profile``).
+
+    Top-level keys of :data:`OVERRIDABLE` that are not ``null`` replace the profile's value
+    (in ``common`` or in the section that holds the key).
 
     Raises
     ------
     ValueError
-        If the profile does not exist; the message lists the valid ones.
+        If the profile does not exist (the message lists the valid ones), a top-level key is
+        unknown, or an override matches no section of the profile.
     """
     params_file = Path(params_file)
     try:
@@ -87,7 +116,7 @@ def load_params(params_file: str | os.PathLike = ROOT / "params.yaml", profile: 
         raise ValueError(
             f"{params_file}: profile {name!r} does not exist; valid profiles: {', '.join(sorted(profiles))}"
         )
-    out = dict(profiles[name])
+    out = _apply_overrides(params_file, data, name, profiles[name])
     out["profile"] = name
     return out
 
