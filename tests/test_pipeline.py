@@ -320,3 +320,44 @@ def test_every_override_key_is_in_params_and_reaches_a_stage():
         assert key in declared, f"no stage reruns when {key} is overridden"
     for name in top["profiles"]:
         pipeline.load_params(pipeline.ROOT / "params.yaml", name)  # every override key resolves
+
+
+def test_snapshot_shrinks_figures_and_drops_interactive_outputs(tmp_path):
+    import base64
+    import io
+
+    import numpy as np
+    from PIL import Image
+
+    from semmatch.experiments.snapshot import snapshot_notebook, snapshot_reports
+
+    rng = np.random.default_rng(0)
+    img = (np.linspace(0, 255, 2000)[None, :, None] * np.ones((800, 1, 3)) + rng.normal(0, 8, (800, 2000, 3)))
+    buf = io.BytesIO()
+    Image.fromarray(np.clip(img, 0, 255).astype(np.uint8)).save(buf, "PNG")
+    png = base64.b64encode(buf.getvalue()).decode()
+    nb = nbformat.v4.new_notebook()
+    cell = nbformat.v4.new_code_cell("plot()")
+    cell.outputs = [
+        nbformat.v4.new_output("display_data", data={"image/png": png, "text/plain": "<Figure>"}),
+        nbformat.v4.new_output("display_data", data={"application/vnd.plotly.v1+json": {"data": []}}),
+        nbformat.v4.new_output("stream", name="stdout", text="table\n"),
+    ]
+    nb.cells = [nbformat.v4.new_markdown_cell("# narrative"), cell]
+    src = tmp_path / "rep" / "05_x.ipynb"
+    src.parent.mkdir()
+    nbformat.write(nb, src)
+    [dst] = snapshot_reports(tmp_path / "rep", tmp_path / "snap", profile="smoke", max_width=400)
+    assert dst.stat().st_size < src.stat().st_size / 5
+    out = nbformat.read(dst, as_version=4)
+    fig, plotly, stream = out.cells[1].outputs
+    assert "image/png" not in fig["data"] and "text/plain" in fig["data"]
+    small = Image.open(io.BytesIO(base64.b64decode(fig["data"]["image/jpeg"])))
+    assert small.size == (400, 160)
+    assert "semmatch show" in plotly["data"]["text/markdown"] and stream["text"] == "table\n"
+    assert out.metadata["semmatch_snapshot"]["profile"] == "smoke"
+    with pytest.raises(FileNotFoundError, match="no executed notebooks"):
+        snapshot_reports(tmp_path / "empty", tmp_path / "snap2", profile="smoke")
+    (tmp_path / "bad.ipynb").write_text("{not json")
+    with pytest.raises(ValueError, match="bad.ipynb: not a readable notebook"):
+        snapshot_notebook(tmp_path / "bad.ipynb", tmp_path / "o.ipynb")

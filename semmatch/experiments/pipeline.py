@@ -298,6 +298,9 @@ def main(argv: list[str] | None = None) -> int:
     sp.add_argument("name")
     rd = sub.add_parser("readme", help="write README.md's results section from figures/<profile>/")
     rd.add_argument("--profile", help="profile whose figures to show (default: params.yaml's)")
+    sn = sub.add_parser("snapshot", help="small copies of the executed notebooks for git (reports/snapshot/<profile>/)")
+    sn.add_argument("--profile", help="profile whose executed notebooks to copy (default: params.yaml's)")
+    sn.add_argument("--max-width", type=int, default=960, help="scale figures down to this width (pixels)")
     args = ap.parse_args(argv)
     try:
         if args.cmd == "profiles":
@@ -312,6 +315,14 @@ def main(argv: list[str] | None = None) -> int:
 
             name = load_params(ROOT / "params.yaml", args.profile)["profile"]
             update_readme(ROOT / "README.md", ROOT / "figures" / name)
+            return 0
+        if args.cmd == "snapshot":
+            from .snapshot import snapshot_reports
+
+            name = load_params(ROOT / "params.yaml", args.profile)["profile"]
+            for p in snapshot_reports(ROOT / "reports" / name, ROOT / "reports" / "snapshot" / name, profile=name,
+                                      max_width=args.max_width):
+                print(f"{p.relative_to(ROOT)}: {p.stat().st_size / 1024:.0f} KB")
             return 0
         kw = dict(params_file=args.params, reports_dir=args.reports_dir, data_root=args.data_root,
                   figures_dir=args.figures_dir, log_output=not args.quiet)

@@ -1,0 +1,143 @@
+"""Small executed copies of the pipeline's notebooks, viewable without running anything.
+
+The executed notebooks of a pipeline run (``reports/<profile>/NN_*.ipynb``) are pipeline outputs
+(DVC-tracked, several MB: full-size PNGs, interactive plotly maps). :func:`snapshot_reports`
+writes a small copy of each for git (``reports/snapshot/<profile>/``; GitHub and any notebook
+viewer render them): figures re-encoded as JPEG no wider than ``max_width`` pixels (kept as PNG
+where that is smaller), interactive outputs (plotly maps, widgets) replaced by a line saying how
+to get them, and the commit and profile they were executed with in the notebook's metadata.
+"""
+
+from __future__ import annotations
+
+import base64
+import io
+import os
+import subprocess
+from pathlib import Path
+
+__all__ = ["snapshot_notebook", "snapshot_reports"]
+
+_INTERACTIVE = ("application/vnd.plotly.v1+json", "application/vnd.jupyter.widget-view+json")
+_NOTE = ("*(interactive output left out of this snapshot: run the notebook, or view a map with "
+         "`semmatch show MAP.ply --html OUT.html`)*")
+
+
+def _small_image(png_b64: str, max_width: int, quality: int) -> tuple[str, str]:
+    """(mime, base64) of the smaller of a downscaled JPEG and the (downscaled) PNG."""
+    from PIL import Image
+
+    img = Image.open(io.BytesIO(base64.b64decode(png_b64)))
+    img.load()
+    if img.width > max_width:
+        img = img.resize((max_width, max(1, round(img.height * max_width / img.width))), Image.LANCZOS)
+    rgb = img.convert("RGBA")
+    flat = Image.new("RGB", rgb.size, (255, 255, 255))
+    flat.paste(rgb, mask=rgb.getchannel("A"))
+    jpg, png = io.BytesIO(), io.BytesIO()
+    flat.save(jpg, "JPEG", quality=quality, optimize=True)
+    img.save(png, "PNG", optimize=True)
+    best = ("image/jpeg", jpg) if jpg.tell() < png.tell() else ("image/png", png)
+    return best[0], base64.b64encode(best[1].getvalue()).decode()
+
+
+def snapshot_notebook(src: str | os.PathLike, dst: str | os.PathLike, *, max_width: int = 960,
+                      quality: int = 80, meta: dict | None = None) -> Path:
+    """Write a small copy of one executed notebook.
+
+    Parameters
+    ----------
+    src, dst : path
+        Executed notebook and where its snapshot goes (written atomically).
+    max_width : int
+        Figures wider than this are scaled down (pixels).
+    quality : int
+        JPEG quality (1-95).
+    meta : dict, optional
+        Stored as the notebook's ``semmatch_snapshot`` metadata.
+
+    Returns
+    -------
+    Path
+        ``dst``.
+
+    Raises
+    ------
+    ValueError
+        If ``src`` is not a notebook (named in the message) or the settings are out of range.
+    """
+    import nbformat
+
+    from ..io import atomic_path
+
+    if max_width < 16 or not 1 <= quality <= 95:
+        raise ValueError(f"max_width must be >= 16 and quality in 1..95, got {max_width}, {quality}")
+    try:
+        nb = nbformat.read(str(src), as_version=4)
+    except Exception as e:  # nbformat raises several types for a broken file
+        raise ValueError(f"{src}: not a readable notebook ({e})") from None
+    for cell in nb.cells:
+        outputs = []
+        for out in cell.get("outputs", []):
+            data = out.get("data")
+            if data is not None:
+                if any(k in data for k in _INTERACTIVE):
+                    for k in _INTERACTIVE:
+                        data.pop(k, None)
+                    if not any(k.startswith("image/") or k in ("text/html", "text/markdown") for k in data):
+                        out["data"] = data = {"text/markdown": _NOTE}
+                        out.get("metadata", {}).clear()
+                if "image/png" in data:
+                    mime, b64 = _small_image(data.pop("image/png"), max_width, quality)
+                    data[mime] = b64
+                    out.get("metadata", {}).pop("image/png", None)
+            outputs.append(out)
+        if cell.cell_type == "code":
+            cell.outputs = outputs
+    nb.metadata.pop("widgets", None)
+    nb.metadata["semmatch_snapshot"] = dict(meta or {})
+    dst = Path(dst)
+    dst.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_path(dst) as tmp:
+        nbformat.write(nb, str(tmp))
+    return dst
+
+
+def snapshot_reports(src_dir: str | os.PathLike, dst_dir: str | os.PathLike, *, profile: str,
+                     max_width: int = 960, quality: int = 80) -> list[Path]:
+    """Snapshot every executed notebook of ``src_dir`` into ``dst_dir``.
+
+    Parameters
+    ----------
+    src_dir : path
+        Executed notebooks (``reports/<profile>``).
+    dst_dir : path
+        Where the snapshots go (``reports/snapshot/<profile>``).
+    profile : str
+        The profile they were executed with (stored in each snapshot's metadata).
+    max_width, quality : int
+        See :func:`snapshot_notebook`.
+
+    Returns
+    -------
+    list of Path
+        The snapshots written.
+
+    Raises
+    ------
+    FileNotFoundError
+        If ``src_dir`` holds no executed notebook.
+    """
+    from .pipeline import ROOT
+
+    src = sorted(Path(src_dir).glob("[0-9][0-9]_*.ipynb"))
+    if not src:
+        raise FileNotFoundError(f"{src_dir}: no executed notebooks (NN_*.ipynb); run the pipeline first")
+    try:
+        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True,
+                                text=True, timeout=10).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        commit = ""
+    meta = {"profile": profile, "commit": commit or "unknown"}
+    return [snapshot_notebook(p, Path(dst_dir) / p.name, max_width=max_width, quality=quality, meta=meta)
+            for p in src]
