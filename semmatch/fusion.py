@@ -151,6 +151,9 @@ class SemanticTSDF:
 
         if not (np.isfinite(voxel_size) and voxel_size > 0):
             raise ValueError(f"voxel_size must be > 0 (metres), got {voxel_size}")
+        if voxel_size < 1e-3:
+            raise ValueError(f"voxel_size {voxel_size:g} m is below 1 mm, finer than any depth camera resolves "
+                             "(sizes are in metres: 0.04 is 4 cm)")
         if not 2 <= int(n_classes) <= 256:
             raise ValueError(f"n_classes must lie in 2..256, got {n_classes}")
         if int(label_stride) < 1:

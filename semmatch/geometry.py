@@ -30,6 +30,10 @@ __all__ = [
 ]
 
 
+#: largest image (pixels) an :class:`Intrinsics` accepts: 8K is 33 M; a frame costs ~40 bytes a pixel
+MAX_PIXELS = 64 * 2**20
+
+
 @dataclass(frozen=True)
 class Intrinsics:
     """Pinhole intrinsics of a depth-registered RGB-D camera.
@@ -55,6 +59,9 @@ class Intrinsics:
     def __post_init__(self) -> None:
         if int(self.width) <= 0 or int(self.height) <= 0:
             raise ValueError(f"image size must be positive, got {self.width}x{self.height}")
+        if int(self.width) * int(self.height) > MAX_PIXELS:
+            raise ValueError(f"image size {self.width}x{self.height} ({int(self.width) * int(self.height):,} pixels) "
+                             f"is larger than any RGB-D camera's (limit {MAX_PIXELS:,} pixels)")
         for name in ("fx", "fy"):
             v = float(getattr(self, name))
             if not np.isfinite(v) or v <= 0:

@@ -18,6 +18,7 @@ import os
 import shutil
 import tempfile
 import uuid
+import warnings
 from collections.abc import Iterator
 from collections.abc import Sequence as _SequenceABC
 from concurrent.futures import ThreadPoolExecutor
@@ -79,11 +80,17 @@ def atomic_path(path: PathLike) -> Iterator[Path]:
     extension (OpenCV, Open3D, matplotlib) still work. On error it is removed.
     """
     path = Path(path)
+    if path.is_dir():
+        raise ValueError(f"{path}: is a folder; give the name of the file to write")
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.stem}.{uuid.uuid4().hex[:8]}.tmp{path.suffix}")
     try:
         yield tmp
         os.replace(tmp, path)
+    except OSError as e:
+        if e.filename is not None and Path(e.filename).name == tmp.name:  # name the file the user asked for
+            raise type(e)(e.errno, f"cannot write {path}: {e.strerror}", str(path)) from None
+        raise
     finally:
         if tmp.exists():
             tmp.unlink()
@@ -942,13 +949,14 @@ def read_map(path: PathLike, *, require_labels: bool = True) -> SemanticMap:
 
     The ``label`` vertex property wins when present; otherwise labels come from the vertex
     colours through the palette (colours outside it read as void and are counted in a
-    ``UserWarning``).
+    ``UserWarning``; with ``require_labels``, a map whose colours are mostly outside the palette
+    is refused: it is not a semantic map of this label table).
 
     Raises
     ------
     ValueError
-        The file is not a PLY with vertices, has neither colours nor ``label``
-        (with ``require_labels``), or holds NaN vertices.
+        The file is not a PLY with vertices, has neither colours nor ``label`` or mostly
+        off-palette colours (with ``require_labels``), or holds NaN vertices.
     """
     from plyfile import PlyData, PlyParseError
 
@@ -986,7 +994,16 @@ def read_map(path: PathLike, *, require_labels: bool = True) -> SemanticMap:
             raise ValueError(f"{path}: label property outside 0..{NUM_CLASSES - 1}")
         labels = labels.astype(np.uint8)
     elif colors is not None:
-        labels, _ = colors_to_labels(colors, source=str(path))
+        labels, n_unknown = colors_to_labels(colors, source=str(path), warn=False)
+        if require_labels and n_unknown * 2 > len(colors):
+            bad = colors[np.flatnonzero(labels == 0)[0]] if n_unknown else colors[0]
+            raise ValueError(
+                f"{path}: {n_unknown:,} of {len(colors):,} vertex colours are not colours of the category "
+                f"palette (e.g. RGB {tuple(int(x) for x in bad)}); this is not a semantic map of this label "
+                "table (an RGB map? another palette?). Write labels as palette colours or a 'label' property")
+        if n_unknown:
+            warnings.warn(f"{n_unknown} of {len(colors)} colours in {path} are not in the category palette; "
+                          "they read as void (0)", UserWarning, stacklevel=2)
     elif require_labels:
         raise ValueError(f"{path}: PLY has neither vertex colours nor a 'label' property")
     else:

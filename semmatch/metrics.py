@@ -152,6 +152,10 @@ def voxelize(
     return VoxelGrid(packed, labels, float(voxel_size), m.source)
 
 
+#: most surface samples :func:`voxelize` adds to a coarse mesh (about 40 bytes each while built)
+MAX_DENSIFY_SAMPLES = 60_000_000
+
+
 def _densify(m: SemanticMap, max_edge: float, spacing: float) -> tuple[np.ndarray, np.ndarray]:
     """Surface samples (barycentric grid, ``spacing`` apart) of the triangles longer than ``max_edge``."""
     f = m.faces
@@ -164,6 +168,13 @@ def _densify(m: SemanticMap, max_edge: float, spacing: float) -> tuple[np.ndarra
     lab3 = np.sort(m.labels[f[big]].astype(np.int64), axis=1)
     tri_lab = np.where(lab3[:, 1] == lab3[:, 2], lab3[:, 1], lab3[:, 0])
     k = np.ceil(edge[big] / spacing).astype(np.int64)
+    n_samples = int(((k + 1) * (k + 2) // 2).sum())
+    if n_samples > MAX_DENSIFY_SAMPLES:  # refuse before allocating (about 40 bytes a sample)
+        raise ValueError(
+            f"{m.source}: sampling its {big.size:,} large triangles every {spacing:g} m would make "
+            f"{n_samples:,} points (limit {MAX_DENSIFY_SAMPLES:,}, about {n_samples * 40 / 2**30:.0f} GiB); "
+            f"longest edge {edge.max():.3g}: is the map in metres (not millimetres)? is the voxel size "
+            f"({2 * spacing:g} m) too small?")
     pts, labs = [], []
     for kk in np.unique(k):
         sel = big[k == kk]

@@ -72,6 +72,10 @@ def main(argv: list[str] | None = None) -> int:
         msg = e.args[0] if isinstance(e, KeyError) and e.args else e
         print(f"semmatch {args.verb}: error: {msg}", file=sys.stderr)
         return 2
+    except OSError as e:  # permissions, read-only or full disks, folders where files are expected
+        where = f"{e.filename}: " if getattr(e, "filename", None) else ""
+        print(f"semmatch {args.verb}: error: {where}{e.strerror or e}", file=sys.stderr)
+        return 2
     except MemoryError:
         print(f"semmatch {args.verb}: error: out of memory; the input is larger than this machine can "
               "hold at these settings (a map in millimetres instead of metres? a voxel size too small? "

@@ -36,8 +36,13 @@ def register(sub) -> None:
 def _load_transform(path: str) -> np.ndarray:
     from semmatch.geometry import check_pose
 
-    T = np.load(path) if path.endswith(".npy") else np.loadtxt(path)
-    return check_pose(T, what=path)
+    if not Path(path).is_file():
+        raise FileNotFoundError(f"{path}: no such transform file (--transform)")
+    try:
+        T = np.load(path) if path.endswith(".npy") else np.loadtxt(path)
+    except (OSError, ValueError) as e:
+        raise ValueError(f"{path}: not a 4x4 transform, as text or .npy (--transform): {e}") from None
+    return check_pose(T, what=f"{path} (--transform)")
 
 
 def results_table(results: dict[str, dict], *, per_class: bool = False):

@@ -46,6 +46,10 @@ def run(args: argparse.Namespace) -> int:
     """Train and print the checkpoint path and validation scores."""
     from semmatch.segment.training import make_config, train
 
+    for flag in ("lr", "steps", "batch_size", "eval_every", "width", "height"):
+        v = getattr(args, flag, None)
+        if v is not None and v <= 0:
+            raise ValueError(f"--{flag.replace('_', '-')} must be > 0, got {v}")
     for a, b in (("width", "height"), ("net_width", "net_height")):
         if bool(getattr(args, a)) != bool(getattr(args, b)):
             raise ValueError(f"give both --{a.replace('_', '-')} and --{b.replace('_', '-')}")

@@ -20,6 +20,7 @@ network time. ``flip=False`` gives the single pass (used for validation during t
 from __future__ import annotations
 
 import os
+import pickle
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 
@@ -235,8 +236,15 @@ def load_model(checkpoint: str | os.PathLike, *, arch: str | None = None, device
         raise FileNotFoundError(f"{path}: no such checkpoint")
     try:
         ckpt = torch.load(path, map_location="cpu", weights_only=True)
+    except pickle.UnpicklingError as e:
+        lines = [ln.strip() for ln in str(e).splitlines() if ln.strip()]
+        detail = next((lines[i + 1] for i, ln in enumerate(lines[:-1]) if "WeightsUnpickler error" in ln),
+                      lines[0][:200] if lines else "")
+        raise ValueError(f"{path}: not loadable as a weights-only checkpoint ({detail}): a corrupt file, or a "
+                         "pickle of other Python objects, which semmatch refuses to load (it could run code)") from None
     except Exception as e:  # torch raises many types for a corrupt file
-        raise ValueError(f"{path}: not a readable PyTorch checkpoint ({type(e).__name__}: {e})") from None
+        first = (str(e).strip().splitlines() or [""])[0][:200]
+        raise ValueError(f"{path}: not a readable PyTorch checkpoint ({type(e).__name__}: {first})") from None
     if not isinstance(ckpt, dict) or ckpt.get("format") != CHECKPOINT_FORMAT:
         raise ValueError(f"{path}: not a semmatch segmentation checkpoint (expected format {CHECKPOINT_FORMAT})")
     _check_table(ckpt.get("categories"), path)
