@@ -526,6 +526,10 @@ class SequenceWriter:
         self.intrinsics = intrinsics
         self.overwrite = overwrite
         self.path.parent.mkdir(parents=True, exist_ok=True)
+        # one writer at a time (a second one gets a clear error); what a killed writer left is cleaned
+        self._lock = contextlib.ExitStack()
+        self._lock.enter_context(_writer_lock(self.path))
+        _recover(self.path)
         self._tmp = Path(tempfile.mkdtemp(prefix=f".{self.path.name}.", suffix=".partial", dir=self.path.parent))
         for sub in ("rgb", "depth"):
             (self._tmp / sub).mkdir()
@@ -582,12 +586,14 @@ class SequenceWriter:
         else:
             os.replace(self._tmp, self.path)
         self._closed = True
+        self._lock.close()
         return self.path
 
     def abort(self) -> None:
         """Drop everything written so far."""
         shutil.rmtree(self._tmp, ignore_errors=True)
         self._closed = True
+        self._lock.close()
 
     def __enter__(self) -> SequenceWriter:
         return self
