@@ -94,3 +94,31 @@ def test_replica_mesh_becomes_a_scene(shared_dir):
     r = Renderer(s, SMALL).render(pose)
     hit = r.triangle >= 0
     np.testing.assert_array_equal(r.labels[hit], s.labels[r.triangle[hit]])
+
+
+def test_stray_ceiling_labels_do_not_lower_the_ceiling(tmp_path):
+    # a 2.8 m room (two big ceiling triangles) whose scan labelled three small triangles of a
+    # table (0.9 m) as ceiling: more stray triangles than real ones, a fraction of their area
+    m = box_room((4.0, 3.0, 2.8), cell=5.0).to_semantic_map()
+    pts, faces = m.points, m.faces
+    assert (m.labels[faces].min(axis=1) == id_of("ceiling")).sum() == 2
+    stray = np.array([[x + dx, 1.0 + dy, 0.9] for x in (1.0, 2.0, 3.0) for dx, dy in ((0, 0), (0.1, 0), (0, 0.1))])
+    labels = np.concatenate([m.labels, np.full(len(stray), id_of("ceiling"), np.uint8)])
+    faces = np.concatenate([faces, len(pts) + np.arange(len(stray)).reshape(-1, 3)])
+    p = write_ply(tmp_path / "scan.ply", np.concatenate([pts, stray]), labels_to_colors(labels), faces)
+    s = scene_from_ply(p)
+    assert abs(s.meta["ceiling_height"] - 2.8) < 1e-3
+    assert len(make_trajectory(s, 1.6, 4, margin=0.3)) == 4  # 1.6 m fits under a 2.8 m ceiling
+
+
+def test_no_free_space_says_why(tmp_path):
+    from semmatch.sim.trajectory import free_space
+
+    m = box_room((4.0, 3.0, 2.5)).to_semantic_map()
+    walls = np.isin(m.labels[m.faces], [id_of("floor"), id_of("ceiling")]).sum(axis=1) == 0  # walls only
+    p = write_ply(tmp_path / "walls.ply", m.points, labels_to_colors(m.labels), m.faces[walls])
+    with pytest.raises(ValueError, match="no free space.*no cell lies inside the mesh, and the mesh has no floor"):
+        free_space(scene_from_ply(p), 1.0, margin=0.3)
+    s2 = scene_from_ply(box_ply(tmp_path / "room.ply"))
+    with pytest.raises(ValueError, match=r"largest distance to an obstacle or wall is 1\.\d\d m \(< margin\)"):
+        free_space(s2, 1.0, margin=1.6)

@@ -94,24 +94,43 @@ class FreeSpace:
         return rc[:, ::-1] * self.resolution + self.origin
 
 
+def _dominant_level(z: np.ndarray, area: np.ndarray, bin_size: float = 0.02) -> float | None:
+    """Height holding the most triangle area (area-weighted mode over ``bin_size`` bins, refined
+    to the area-weighted mean within one bin of it), or None without area."""
+    if len(z) == 0 or not area.sum() > 0:
+        return None
+    k = np.floor((z - z.min()) / bin_size).astype(np.int64)
+    hist = np.bincount(k, weights=area)
+    top = int(np.argmax(hist))
+    near = np.abs(k - top) <= 1
+    return float(np.average(z[near], weights=area[near]))
+
+
 def scene_levels(scene: Scene) -> tuple[float, float]:
     """World heights ``(floor_z, ceiling_z)`` of a scene.
 
-    From ``scene.meta`` (``floor_z``, ``ceiling_height``) when present, otherwise the median
-    height of the floor / ceiling triangles, otherwise the scene bounds.
+    From ``scene.meta`` (``floor_z``, ``ceiling_height``) when present. Otherwise the level
+    holding most of the floor- (ceiling-) labelled triangle area: robust to stray labels (a few
+    mislabelled triangles on a table do not lower the ceiling), checked against the mesh extent
+    (a "ceiling" less than 1.5 m above the floor, or a floor more than 1 m above the mesh's
+    lowest point, is ignored); without usable labels, the scene bounds.
     """
     lo, hi = scene.bounds
-    cz = scene.vertices[scene.triangles].mean(axis=1)[:, 2]
+    v = scene.vertices[scene.triangles]
+    cz = v.mean(axis=1)[:, 2]
+    area = 0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
     if "floor_z" in scene.meta:
         floor = float(scene.meta["floor_z"])
     else:
         m = scene.labels == _FLOOR
-        floor = float(np.median(cz[m])) if m.any() else float(lo[2])
+        level = _dominant_level(cz[m], area[m])
+        floor = level if level is not None and level <= lo[2] + 1.0 else float(lo[2])
     if "ceiling_height" in scene.meta:
         ceiling = floor + float(scene.meta["ceiling_height"])
     else:
         m = scene.labels == _CEILING
-        ceiling = float(np.median(cz[m])) if m.any() else float(hi[2])
+        level = _dominant_level(cz[m], area[m])
+        ceiling = level if level is not None and level >= floor + 1.5 else float(hi[2])
     return floor, ceiling
 
 
@@ -221,13 +240,27 @@ def free_space(
     free = inside & headroom & (clearance >= margin)
     lab, n = ndimage.label(free)
     if n == 0:
-        raise ValueError(
-            f"scene {scene.name!r}: no free space at camera height {height:.2f} m with a "
-            f"{margin:.2f} m margin"
-        )
+        raise ValueError(f"scene {scene.name!r}: no free space at camera height {height:.2f} m with a "
+                         f"{margin:.2f} m margin: {_why_not_free(scene, inside, headroom, clearance, margin)}")
     sizes = ndimage.sum(free, lab, index=np.arange(1, n + 1))
     free = lab == (1 + int(np.argmax(sizes)))
     return FreeSpace(free, clearance, origin, float(resolution), floor_z, ceiling_z)
+
+
+def _why_not_free(scene: Scene, inside: np.ndarray, headroom: np.ndarray, clearance: np.ndarray,
+                  margin: float) -> str:
+    """The reason a free-space grid came out empty, for the error message."""
+    if not inside.any():
+        if not (scene.labels == _FLOOR).any():
+            return ("no cell lies inside the mesh, and the mesh has no floor-labelled triangles (is the floor "
+                    "missing from the scan, or labelled as another class?)")
+        return ("no cell lies inside the mesh: the camera is not enclosed by walls at this height (an open or "
+                "partial scan: lower min_enclosure)")
+    if not (inside & headroom).any():
+        return "every cell inside the mesh has a ceiling or an obstacle less than 5 cm above the camera"
+    best = float(clearance[inside & headroom].max())
+    return (f"{int((inside & headroom).sum())} cells are inside, but the largest distance to an obstacle or "
+            f"wall is {best:.2f} m (< margin); lower the margin, or check for clutter labelled across the room")
 
 
 def _waypoints(fs: FreeSpace, rng: np.random.Generator, spacing: float) -> np.ndarray:
