@@ -41,6 +41,10 @@ __all__ = ["estimate_poses", "refine_pose_graph", "shrink_frame", "align_traject
 METHODS = ("frame-to-frame",)
 
 
+#: a frame with fewer valid depth pixels than this share is a sensor dropout (as in fusion)
+MIN_VALID_DEPTH = 0.001
+
+
 def _depth_mm(depth: np.ndarray, where: str) -> np.ndarray:
     check_depth_units(depth, where=where)
     d = np.where(np.isfinite(depth) & (depth > 0), depth, 0.0) * 1000.0
@@ -149,6 +153,8 @@ def estimate_poses(
     criteria = [o3d.t.pipelines.odometry.OdometryConvergenceCriteria(n) for n in (30, 15, 8)]
     prev_frame = None
     lost: list[int] = []
+    dropped: list[int] = []  # sensor dropouts: (almost) no valid depth, not tracked
+    T_prev, i_prev = None, -1  # pose and index of the last tracked frame
     dev = o3c.Device(device or default_device())
     T = np.eye(4) if init_pose is None else check_pose(init_pose, what="init_pose").copy()
     name = str(getattr(seq, "path", "sequence"))
@@ -169,6 +175,17 @@ def estimate_poses(
             raise ValueError(f"{where}: frame size/intrinsics differ from the first frame's")
         if pose_graph:
             depths_mm.append(d_mm)
+        if np.count_nonzero((d_mm > 0) & (d_mm <= depth_max * 1000.0)) < MIN_VALID_DEPTH * d_mm.size:
+            # a sensor dropout: no tracking; its pose follows the prior (else constant velocity)
+            # from the last tracked frame, which stays the reference of the next one
+            dropped.append(getattr(f, "index", i))
+            if T_prev is None:
+                poses.append(T.copy())
+            elif prior is not None:
+                poses.append(T_prev @ np.linalg.inv(prior[i_prev]) @ prior[i])
+            else:
+                poses.append(T_prev @ np.linalg.matrix_power(motion, i - i_prev))
+            continue
         depth = o3d.t.geometry.Image(o3c.Tensor(d_mm)).to(dev)
         color = o3d.t.geometry.Image(o3c.Tensor(np.ascontiguousarray(f.rgb, dtype=np.uint8))).to(dev)
         K = o3c.Tensor(f.intrinsics.K)
@@ -179,10 +196,11 @@ def estimate_poses(
                 # views (a wall and the floor), the other geometric/photometric one; the
                 # candidate with the smaller photometric + depth misfit wins
                 cands = [odo_method] + [m for m in candidates if m != odo_method]
-                inits = [motion]
+                gap = i - i_prev  # > 1 after dropouts: the motion since the last tracked frame
+                inits = [motion if gap == 1 else np.linalg.matrix_power(motion, gap)]
                 prior_motion = None
                 if prior is not None:
-                    prior_motion = np.linalg.inv(prior[i - 1]) @ prior[i]
+                    prior_motion = np.linalg.inv(prior[i_prev]) @ prior[i]
                     inits = [prior_motion] + inits
                 best, best_cost = None, np.inf
                 for init in inits + [np.eye(4)]:
@@ -207,13 +225,24 @@ def estimate_poses(
                             best, best_cost = Tm, cost
                 if best is None:  # tracking lost: the prior's motion, else constant velocity
                     lost.append(getattr(f, "index", i))
-                    best = motion if prior_motion is None else prior_motion
-                motion = best  # T_prev_cur
-                T = T @ motion
+                    best = inits[-1] if prior_motion is None else prior_motion
+                T = T_prev @ best  # best = T_prev_cur
+                # per-frame motion for the constant-velocity guesses (the step's rotation and
+                # translation spread over the frames of a gap)
+                motion = best if gap == 1 else _fractional_motion(best, gap)
             prev, prev_frame = rgbd, f
+        T_prev, i_prev = T.copy(), i
         poses.append(T.copy())
     if not poses:
         raise ValueError(f"{name}: the sequence has no frames")
+    if T_prev is None:
+        raise ValueError(f"{name}: none of its {len(poses)} frame(s) has usable depth (all empty or out of range)")
+    if dropped:
+        import warnings
+
+        warnings.warn(f"{name}: {len(dropped)} of {len(poses)} frame(s) had (almost) no valid depth and were not "
+                      f"tracked (sensor dropouts; first: {dropped[:5]}); their poses follow the "
+                      + ("prior" if prior is not None else "motion of the frames before"), UserWarning, stacklevel=2)
     if lost:
         import warnings
 
@@ -228,6 +257,17 @@ def estimate_poses(
     if pose_graph and len(out) > 2:
         out = refine_pose_graph(depths_mm, intrinsics, out, depth_max=depth_max, device=device,
                                 progress=progress, name=name)
+    return out
+
+
+def _fractional_motion(motion: np.ndarray, steps: int) -> np.ndarray:
+    """The rigid motion that, applied ``steps`` times, gives ``motion`` (rotation by the same axis
+    at 1/steps of the angle, translation along the same screw approximated linearly)."""
+    from scipy.spatial.transform import Rotation
+
+    out = np.eye(4)
+    out[:3, :3] = Rotation.from_rotvec(Rotation.from_matrix(motion[:3, :3]).as_rotvec() / steps).as_matrix()
+    out[:3, 3] = motion[:3, 3] / steps
     return out
 
 

@@ -168,3 +168,17 @@ def test_real_like_chain_on_a_noisy_simulated_sequence(tmp_path, capsys):
     assert rc == 0
     info = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert info["ate_rmse"] < 0.05 and info["n_frames"] == 10 and (tmp_path / "est.txt").is_file()
+
+
+def test_sensor_dropouts_are_bridged_not_tracked(recwarn):
+    from dataclasses import replace
+
+    frames, gt = rendered_slide(160, 120, n=12)
+    clean = estimate_poses(frames, init_pose=gt[0], pose_graph=False, progress=False)
+    dropped = [replace(f, depth=np.zeros_like(f.depth)) if f.index in (4, 5) else f for f in frames]
+    with pytest.warns(UserWarning, match=r"2 of 12 frame\(s\) had \(almost\) no valid depth.*first: \[4, 5\]"):
+        est = estimate_poses(dropped, init_pose=gt[0], pose_graph=False, progress=False)
+    # frames after the gap are tracked against the last good frame: the trajectory stays on course
+    assert ate(est[6:], gt[6:], align=False) < 0.03 + ate(clean[6:], gt[6:], align=False)
+    with pytest.raises(ValueError, match="none of its 12 frame"):
+        estimate_poses([replace(f, depth=np.zeros_like(f.depth)) for f in frames], pose_graph=False, progress=False)
