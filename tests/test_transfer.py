@@ -415,6 +415,30 @@ def test_a_map_that_misses_the_frames_is_not_a_silent_zero(seq_and_map, gt_map, 
     assert rc == 2 and "input" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("jobs", [1, 2])
+def test_sensor_dropouts_give_void_labels_and_one_warning(seq_and_map, gt_map, tmp_path, jobs):
+    import shutil
+
+    import cv2
+
+    from semmatch.io import read_label_image
+
+    seq = tmp_path / "lower"
+    shutil.copytree(seq_and_map / "lower", seq)
+    depths = sorted((seq / "depth").iterdir())
+    shape = cv2.imread(str(depths[0]), cv2.IMREAD_UNCHANGED).shape
+    cv2.imwrite(str(depths[1]), np.zeros(shape, np.uint16))
+    with pytest.warns(UserWarning, match=r"1 of \d+ frame\(s\) had \(almost\) no valid depth .*first: \[1\]"):
+        res = transfer_sequence("3d-slic", seq, MapIndex(gt_map, **FAST), tmp_path / "out", progress=False, jobs=jobs)
+    assert (read_label_image(tmp_path / "out" / "000001.png") == 0).all()
+    assert res["coverage_per_frame"][1] == 0 and len(res["coverage_per_frame"]) == len(depths)
+    for d in depths:
+        cv2.imwrite(str(d), np.zeros(shape, np.uint16))
+    with pytest.raises(ValueError, match="none of its .* has usable depth"):
+        transfer_sequence("3d-slic", seq, MapIndex(gt_map, **FAST), tmp_path / "none", progress=False)
+    assert not (tmp_path / "none").exists()
+
+
 def test_a_second_writer_of_one_output_gets_a_clear_error(tmp_path):
     import fcntl
     import os

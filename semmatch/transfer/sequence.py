@@ -58,10 +58,22 @@ def _init_worker(index: MapIndex, source, method: str, params: dict, poses) -> N
     _WORKER.update(index=index, seq=seq, method=method, params=params, poses=poses)
 
 
+#: a frame with fewer valid depth pixels than this share is a sensor dropout (as in fusion)
+MIN_VALID_DEPTH = 0.001
+
+
+def _transfer_one(frames, poses, index, method: str, params: dict, i: int):
+    """``(i, labels, coverage, seconds, dropout)`` of frame ``i``."""
+    f = _frame(frames, poses, i)
+    r = transfer_frame(method, f, index, **_frame_params(params, i))
+    d = np.asarray(f.depth)
+    dropout = np.count_nonzero(np.isfinite(d) & (d > 0)) < MIN_VALID_DEPTH * d.size
+    return i, r.labels, r.coverage, r.seconds, dropout
+
+
 def _run_one(i: int):
     w = _WORKER
-    r = transfer_frame(w["method"], _frame(w["seq"], w["poses"], i), w["index"], **_frame_params(w["params"], i))
-    return i, r.labels, r.coverage, r.seconds
+    return _transfer_one(w["seq"], w["poses"], w["index"], w["method"], w["params"], i)
 
 
 def transfer_sequence(
@@ -149,22 +161,29 @@ def transfer_sequence(
     labels: list = [None] * n
     cov = np.zeros(n)
     secs = np.zeros(n)
+    dropouts = np.zeros(n, dtype=bool)
     bar = tqdm(total=n, desc=f"transfer {method}", disable=not progress, unit="frame")
     if int(jobs) > 1 and source is not None:
         with process_pool(int(jobs), initializer=_init_worker, initargs=(index, source, method, params, poses)) as ex:
-            for i, lab, c, s in ex.map(_run_one, range(n), chunksize=max(1, n // (4 * int(jobs)))):
-                labels[i], cov[i], secs[i] = lab, c, s
+            results = ex.map(_run_one, range(n), chunksize=max(1, n // (4 * int(jobs))))
+            for i, lab, c, s, d in results:
+                labels[i], cov[i], secs[i], dropouts[i] = lab, c, s, d
                 bar.update()
     else:
         for i in range(n):
-            r = transfer_frame(method, _frame(frames, poses, i), index, **_frame_params(params, i))
-            labels[i], cov[i], secs[i] = r.labels, r.coverage, r.seconds
+            _, labels[i], cov[i], secs[i], dropouts[i] = _transfer_one(frames, poses, index, method, params, i)
             bar.update()
     bar.close()
+    if dropouts.all():
+        raise ValueError(f"{seq_path or 'sequence'}: none of its {n} frame(s) has usable depth (all empty)")
     out = write_labels_folder(out_dir, labels, overwrite=overwrite, inputs=inputs)
-    if cov.mean() < LOW_SUPPORT:
+    if dropouts.any():
+        first = np.flatnonzero(dropouts)[:5].tolist()
+        warnings.warn(f"{seq_path or 'sequence'}: {int(dropouts.sum())} of {n} frame(s) had (almost) no valid depth "
+                      f"(sensor dropouts; first: {first}); their labels are all void", UserWarning, stacklevel=2)
+    if cov[~dropouts].mean() < LOW_SUPPORT:  # over the frames that had depth
         warnings.warn(
-            f"{seq_path or 'sequence'}: the map supports only {cov.mean():.2%} of the pixels with depth "
+            f"{seq_path or 'sequence'}: the map supports only {cov[~dropouts].mean():.2%} of the pixels with depth "
             f"({method}); does the map overlap these frames (same world frame, same units)?",
             LowSupportWarning, stacklevel=2)
     ms = float(np.median(secs) * 1000)
