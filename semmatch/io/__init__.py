@@ -1,0 +1,75 @@
+"""Files of the data contract: sequence folders, TUM poses, images, PLY semantic maps, safe writes.
+
+Submodules, by what they handle: :mod:`~semmatch.io.files` (atomic writes, output folders that
+never replace what semmatch did not write), :mod:`~semmatch.io.images` (RGB, depth and palette
+label PNGs), :mod:`~semmatch.io.sequences` (intrinsics, TUM poses, frames, sequence readers and
+the writer, label folders), :mod:`~semmatch.io.maps` (semantic maps as PLY). Every public name
+is importable from ``semmatch.io`` itself.
+
+Writers never leave a half-written file behind: files are written to a temporary name in the
+same folder and renamed; a sequence is written into a hidden temporary folder and renamed to
+its final name only when complete.
+"""
+
+from .files import (
+    OUTPUT_MARKER,
+    atomic_path,
+    atomic_write_text,
+    check_output_dir,
+    output_kind,
+    replace_output_dir,
+    save_figure,
+    write_json,
+)
+from .images import read_depth, read_image, read_label_image, write_depth, write_image, write_label_image
+from .maps import INSTANCE_MAX, SemanticMap, check_ply_header, read_map, write_map
+from .sequences import (
+    Frame,
+    InMemorySequence,
+    SequenceReader,
+    SequenceWriter,
+    frame_index,
+    is_sequence,
+    read_intrinsics,
+    read_labels_folder,
+    read_sequence,
+    read_tum,
+    write_intrinsics,
+    write_labels_folder,
+    write_tum,
+)
+
+__all__ = [
+    "Frame",
+    "SequenceReader",
+    "InMemorySequence",
+    "SequenceWriter",
+    "SemanticMap",
+    "INSTANCE_MAX",
+    "atomic_path",
+    "atomic_write_text",
+    "save_figure",
+    "write_json",
+    "read_intrinsics",
+    "write_intrinsics",
+    "read_tum",
+    "write_tum",
+    "read_image",
+    "write_image",
+    "read_label_image",
+    "write_label_image",
+    "read_depth",
+    "write_depth",
+    "read_labels_folder",
+    "write_labels_folder",
+    "OUTPUT_MARKER",
+    "output_kind",
+    "check_output_dir",
+    "replace_output_dir",
+    "frame_index",
+    "is_sequence",
+    "read_sequence",
+    "check_ply_header",
+    "read_map",
+    "write_map",
+]

@@ -1,0 +1,185 @@
+"""Writing files safely: atomic writes, and output folders that never replace what semmatch did not write.
+
+A file is written to a temporary name beside it and renamed; an output folder is written beside
+its final name, carries :data:`OUTPUT_MARKER`, and replaces only an earlier output of the same
+kind (the old one moved aside, the new one moved in, the old one removed: a kill at any point
+leaves one of them complete). One writer at a time holds a lock on the output.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import shutil
+import uuid
+from collections.abc import Iterator
+from collections.abc import Sequence as _SequenceABC
+from pathlib import Path
+
+__all__ = ['atomic_path', 'atomic_write_text', 'save_figure', 'write_json', 'OUTPUT_MARKER', 'output_kind', 'check_output_dir', 'replace_output_dir']
+
+PathLike = str | os.PathLike
+
+
+# ----------------------------------------------------------------------------- atomic writes
+@contextlib.contextmanager
+def atomic_path(path: PathLike) -> Iterator[Path]:
+    """Yield a temporary path beside ``path``; rename it to ``path`` when the block succeeds.
+
+    The temporary file keeps the suffix of ``path`` so that libraries choosing a format by
+    extension (OpenCV, Open3D, matplotlib) still work. On error it is removed.
+    """
+    path = Path(path)
+    if path.is_dir():
+        raise ValueError(f"{path}: is a folder; give the name of the file to write")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.stem}.{uuid.uuid4().hex[:8]}.tmp{path.suffix}")
+    try:
+        yield tmp
+        os.replace(tmp, path)
+    except OSError as e:
+        if e.filename is not None and Path(e.filename).name == tmp.name:  # name the file the user asked for
+            raise type(e)(e.errno, f"cannot write {path}: {e.strerror}", str(path)) from None
+        raise
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+
+
+def atomic_write_text(path: PathLike, text: str) -> None:
+    """Write ``text`` to ``path`` atomically."""
+    with atomic_path(path) as tmp:
+        tmp.write_text(text)
+
+
+def save_figure(fig, path: PathLike, *, dpi: int = 120, close: bool = True, **kwargs) -> Path:
+    """Save a matplotlib figure (format from the suffix) atomically; close it by default."""
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=dpi, **kwargs)
+    if close:
+        import matplotlib.pyplot as plt
+
+        plt.close(fig)
+    return path
+
+
+def write_json(path: PathLike, obj) -> None:
+    """Write ``obj`` as indented JSON, atomically."""
+    atomic_write_text(path, json.dumps(obj, indent=2, sort_keys=False) + "\n")
+
+
+
+#: marker file of a folder semmatch wrote (``{"kind": ...}``); only such folders are ever replaced
+OUTPUT_MARKER = ".semmatch-output"
+
+
+def output_kind(path: PathLike) -> str | None:
+    """The kind of semmatch output folder ``path`` is (its :data:`OUTPUT_MARKER`), else None."""
+    marker = Path(path) / OUTPUT_MARKER
+    try:
+        return str(json.loads(marker.read_text()).get("kind"))
+    except (OSError, ValueError, AttributeError):
+        return None
+
+
+def check_output_dir(path: PathLike, kind: str, *, overwrite: bool = False, inputs: _SequenceABC[PathLike] = ()) -> Path:
+    """Refuse an output folder whose replacement could destroy what semmatch did not write.
+
+    Parameters
+    ----------
+    path : path
+        The folder to write.
+    kind : str
+        The kind of output (e.g. ``"labels"``).
+    overwrite : bool
+        Allow replacing an existing complete semmatch output of the same kind.
+    inputs : sequence of paths
+        Inputs of the command: the output may be neither one of them, nor inside one, nor
+        contain one.
+
+    Returns
+    -------
+    Path
+
+    Raises
+    ------
+    ValueError
+        The output is, lies inside or contains an input.
+    FileExistsError
+        ``path`` exists and is not an empty folder or a semmatch output of this kind, or it is
+        one and ``overwrite`` is False (the message names ``--overwrite``).
+    """
+    path = Path(path)
+    target = path.resolve()
+    for inp in inputs:
+        src = Path(inp).resolve()
+        if target == src or src in target.parents or target in src.parents:
+            raise ValueError(f"{path}: the output folder is, lies inside or contains the input {inp}; "
+                             f"choose an --out outside the inputs")
+    if not path.exists() and not path.is_symlink():
+        return path
+    if not path.is_dir() or path.is_symlink():
+        raise FileExistsError(f"{path} exists and is not a folder; choose another --out")
+    if not any(path.iterdir()):
+        return path
+    have = output_kind(path)
+    if have != kind:
+        what = f"a semmatch {have} output" if have else "files semmatch did not write"
+        raise FileExistsError(f"{path} holds {what}; refusing to replace it with {kind} (choose another --out)")
+    if not overwrite:
+        raise FileExistsError(f"{path} already holds semmatch {kind}; pass --overwrite to replace it")
+    return path
+
+
+@contextlib.contextmanager
+def _writer_lock(path: Path) -> Iterator[None]:
+    """Hold an exclusive lock for writing ``path`` (a second writer gets a clear error)."""
+    import fcntl
+
+    lock = path.parent / f".{path.name}.lock"
+    fd = os.open(lock, os.O_CREAT | os.O_RDWR, 0o644)
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise FileExistsError(f"{path}: another semmatch process is writing it right now") from None
+        try:
+            yield
+        finally:
+            lock.unlink(missing_ok=True)  # still held: a writer waiting on this file fails clearly
+    finally:
+        os.close(fd)
+
+
+def _recover(path: Path) -> None:
+    """Clean up after a writer of ``path`` that was killed: drop partial folders, and bring back
+    the previous output when the kill fell between moving it aside and moving the new one in."""
+    olds = sorted(path.parent.glob(f".{path.name}.*.old"))
+    if olds and not path.exists():
+        os.replace(olds[-1], path)
+        olds = olds[:-1]
+    for junk in [*path.parent.glob(f".{path.name}.*.partial"), *olds]:
+        shutil.rmtree(junk, ignore_errors=True)
+
+
+def replace_output_dir(tmp: PathLike, path: PathLike, kind: str) -> Path:
+    """Move the complete folder ``tmp`` to ``path``, replacing a previous output of ``kind``.
+
+    The new folder gets the :data:`OUTPUT_MARKER`; an existing ``path`` is moved aside, the
+    new one moved in, then the old one removed: a kill at any point leaves the old or the new
+    output complete (a later writer restores the old one if the kill fell between the moves).
+    """
+    tmp, path = Path(tmp), Path(path)
+    (tmp / OUTPUT_MARKER).write_text(json.dumps({"kind": kind}) + "\n")
+    old = None
+    if path.exists():
+        old = path.parent / f".{path.name}.{uuid.uuid4().hex[:8]}.old"
+        os.replace(path, old)
+    os.replace(tmp, path)
+    if old is not None:
+        shutil.rmtree(old, ignore_errors=True)
+    return path
+
+

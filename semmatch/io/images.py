@@ -1,0 +1,107 @@
+"""Images of the data contract: RGB, 16-bit depth and palette label PNGs, written atomically.
+"""
+
+from __future__ import annotations
+
+import os
+
+import cv2
+import numpy as np
+
+from .files import atomic_path
+
+__all__ = ['read_image', 'write_image', 'read_label_image', 'write_label_image', 'read_depth', 'write_depth']
+
+PathLike = str | os.PathLike
+
+
+# ----------------------------------------------------------------------------- images
+def write_image(path: PathLike, image: np.ndarray) -> None:
+    """Write an RGB ``uint8 (H,W,3)``, a ``uint8``/``uint16 (H,W)`` image as PNG, atomically."""
+    image = np.asarray(image)
+    if image.ndim == 3:
+        if image.shape[2] != 3 or image.dtype != np.uint8:
+            raise ValueError(f"{path}: RGB must be uint8 (H,W,3), got {image.dtype} {image.shape}")
+        image = image[..., ::-1]
+    elif image.ndim != 2 or image.dtype not in (np.uint8, np.uint16):
+        raise ValueError(f"{path}: expected uint8/uint16 (H,W), got {image.dtype} {image.shape}")
+    with atomic_path(path) as tmp:
+        if not cv2.imwrite(str(tmp), np.ascontiguousarray(image), [cv2.IMWRITE_PNG_COMPRESSION, 1]):
+            raise OSError(f"could not write image {path}")
+
+
+def _png_palette() -> list[int]:
+    from ..labels import PALETTE
+
+    pal = np.zeros((256, 3), np.uint8)
+    pal[: len(PALETTE)] = PALETTE
+    return pal.reshape(-1).tolist()
+
+
+def write_label_image(path: PathLike, labels: np.ndarray) -> None:
+    """Write category ids (uint8 (H,W)) as a palette PNG, atomically.
+
+    The pixel values are the ids (read back id-exact by :func:`read_label_image`); the PNG's
+    palette holds the category colours, so any image viewer shows the labels in colour.
+    """
+    from PIL import Image
+
+    lab = np.asarray(labels)
+    if lab.ndim != 2 or lab.dtype != np.uint8:
+        raise ValueError(f"{path}: labels must be uint8 (H,W), got {lab.dtype} {lab.shape}")
+    img = Image.fromarray(np.ascontiguousarray(lab), mode="P")
+    img.putpalette(_png_palette())
+    with atomic_path(path) as tmp:
+        img.save(tmp, format="PNG", compress_level=1)
+
+
+def read_label_image(path: PathLike) -> np.ndarray:
+    """Read a label PNG as category ids (uint8 (H,W)): palette PNGs (their indices) and 8-bit
+    grayscale PNGs (their values).
+
+    Raises
+    ------
+    FileNotFoundError
+        No such file.
+    ValueError
+        The file is not a single-channel 8-bit or palette image.
+    """
+    from PIL import Image, UnidentifiedImageError
+
+    try:
+        with Image.open(path) as img:
+            if img.mode not in ("P", "L"):
+                raise ValueError(f"{path}: labels must be an 8-bit single-channel or palette PNG, got mode {img.mode}")
+            return np.asarray(img, dtype=np.uint8).copy()
+    except FileNotFoundError:
+        raise FileNotFoundError(f"cannot read image {path}") from None
+    except (UnidentifiedImageError, OSError) as e:
+        raise ValueError(f"{path}: not a readable image ({e})") from None
+
+
+def read_image(path: PathLike, *, flags: int = cv2.IMREAD_UNCHANGED) -> np.ndarray:
+    """Read a PNG/JPEG; colour images come back as RGB."""
+    img = cv2.imread(str(path), flags)
+    if img is None:
+        raise FileNotFoundError(f"cannot read image {path}")
+    if img.ndim == 3:
+        img = img[..., 2::-1] if img.shape[2] >= 3 else img
+        img = np.ascontiguousarray(img)
+    return img
+
+
+def write_depth(path: PathLike, depth: np.ndarray, depth_scale: float = 1000.0) -> None:
+    """Write metric depth as a 16-bit PNG (``value = metres * depth_scale``, 0 = none)."""
+    d = np.asarray(depth, dtype=np.float64)
+    d = np.where(np.isfinite(d) & (d > 0), d, 0.0) * depth_scale
+    write_image(path, np.clip(np.rint(d), 0, 65535).astype(np.uint16))
+
+
+def read_depth(path: PathLike, depth_scale: float = 1000.0) -> np.ndarray:
+    """Read a 16-bit depth PNG as float32 metres."""
+    raw = read_image(path)
+    if raw.ndim != 2 or raw.dtype != np.uint16:
+        raise ValueError(f"{path}: depth must be a 16-bit single-channel PNG, got {raw.dtype} {raw.shape}")
+    return raw.astype(np.float32) / np.float32(depth_scale)
+
+
