@@ -37,7 +37,8 @@ from .geometry import Intrinsics, check_pose, pixel_rays
 from .io import Frame, SemanticMap, read_label_image, read_labels_folder, write_map
 from .labels import NUM_CLASSES
 
-__all__ = ["SemanticTSDF", "reconstruct", "reconstruct_many", "check_depth_units", "default_device"]
+__all__ = ["SemanticTSDF", "EvidencePixels", "fuse", "extract", "reconstruct", "reconstruct_many", "check_depth_units",
+           "default_device"]
 
 #: median depths outside this range (metres) mean the depth unit is wrong
 DEPTH_UNIT_RANGE = (0.05, 20.0)
@@ -97,6 +98,26 @@ def _torch_view(t):
     import torch.utils.dlpack
 
     return torch.utils.dlpack.from_dlpack(t.to_dlpack())
+
+
+@dataclasses.dataclass(frozen=True)
+class EvidencePixels:
+    """The label-evidence pixels of one integrated frame (:meth:`SemanticTSDF.evidence_pixels`).
+
+    Attributes
+    ----------
+    depth : float32 (M_all,)
+        Depth of every ``label_stride``-th pixel (flat).
+    pose : float64 (4, 4)
+    index : int32 (M,)
+        The pixels (into ``depth``) that carry evidence.
+    intrinsics : Intrinsics
+    """
+
+    depth: np.ndarray
+    pose: np.ndarray
+    index: np.ndarray
+    intrinsics: Intrinsics
 
 
 class SemanticTSDF:
@@ -179,6 +200,7 @@ class SemanticTSDF:
         self._rays: dict[tuple[Intrinsics, int], np.ndarray] = {}
         self._K: dict[Intrinsics, object] = {}
         self.n_frames = 0
+        self.name = "sequence"  # what was fused, for messages (set by fuse())
         self.n_label_points = 0
         #: frames skipped for lack of valid depth (sensor dropouts), by their ``where`` names
         self.skipped: list[str] = []
@@ -402,6 +424,73 @@ class SemanticTSDF:
             )
         self.n_label_points += int(len(voxel))
 
+    # ------------------------------------------------------------------ labels after geometry
+    def evidence_pixels(self, depth: np.ndarray, pose: np.ndarray, intrinsics: Intrinsics) -> EvidencePixels:
+        """The label-evidence pixels of a frame already integrated (geometry first, labels later).
+
+        Every ``label_stride``-th pixel with depth in range whose voxel block exists now (as
+        :meth:`integrate` with ``labels`` adds them). Keep these for each frame while the
+        geometry is integrated; once it is complete, :meth:`locate` finds their voxels and
+        :meth:`add_labels` adds any number of labelings, each after :meth:`clear_labels`.
+
+        Parameters
+        ----------
+        depth : float32 (H, W)
+            The frame's depth (metres; NaN and 0 = no measurement).
+        pose : (4, 4)
+            ``T_world_camera`` it was integrated with.
+        intrinsics : Intrinsics
+
+        Returns
+        -------
+        EvidencePixels
+        """
+        depth = np.where(np.isfinite(depth), depth, 0).astype(np.float32, copy=False)
+        d, T = self._sampled_depth(depth), np.asarray(pose, dtype=np.float64)
+        sel = np.flatnonzero((d > 0) & (d <= self.depth_max))
+        sel = sel[(self._voxels_of(d, sel, T, intrinsics) >= 0).cpu().numpy()].astype(np.int32)
+        return EvidencePixels(d, T, sel, intrinsics)
+
+    def locate(self, pixels: EvidencePixels):
+        """Voxels (flat label-attribute indices, a torch tensor) of evidence pixels. Call once the
+        geometry is complete: allocating blocks moves the voxels."""
+        return self._voxels_of(pixels.depth, pixels.index, pixels.pose, pixels.intrinsics)
+
+    def clear_labels(self) -> None:
+        """Drop all label evidence (the geometry stays): start the next labeling."""
+        _torch_view(self.vbg.attribute("label")).zero_()
+        self.n_label_points = 0
+
+    def add_labels(self, labels: np.ndarray, pixels: EvidencePixels, voxels=None, *, where: str = "frame") -> None:
+        """Add one frame's labels at its evidence pixels.
+
+        Parameters
+        ----------
+        labels : uint8 (H, W) or float (H, W, C)
+            Category ids (0 = no evidence) or class probabilities of the frame.
+        pixels : EvidencePixels
+            From :meth:`evidence_pixels` of that frame.
+        voxels : torch tensor, optional
+            ``locate(pixels)``, when already computed (several labelings share it).
+        where : str
+            Name of the frame (and labeling) for error messages.
+
+        Raises
+        ------
+        ValueError
+            Labels of another size than the intrinsics, ids or channels that do not fit.
+        """
+        import torch
+
+        voxels = self.locate(pixels) if voxels is None else voxels
+        values, has = self._sampled_labels(np.asarray(labels), pixels.intrinsics, where)
+        values = values[pixels.index]
+        if has is not None:
+            keep = has[pixels.index]
+            values, voxels = values[keep], voxels[torch.from_numpy(keep).to(voxels.device)]
+        if len(values):
+            self._add_at(voxels, values)
+
     # ------------------------------------------------------------------ queries
     def _evidence_at(self, keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Evidence rows (N, C) and an observed flag (N,) of voxel samples ``keys`` (N,3) int."""
@@ -556,22 +645,16 @@ def _check_counts(count: int, lab_iter: Iterator | None, name: str) -> None:
         raise ValueError(f"more label images than the {count} frames of {name}")
 
 
-def reconstruct(
+def fuse(
     seq: Iterable[Frame],
     labels: str | os.PathLike | Iterable[np.ndarray] | None = None,
     voxel_size: float = 0.04,
     *,
     poses: np.ndarray | None = None,
-    output: str = "mesh",
-    out: str | os.PathLike | None = None,
-    rgb_out: str | os.PathLike | None = None,
-    points_out: str | os.PathLike | None = None,
-    min_weight: float = 1.0,
     progress: bool = False,
-    return_volume: bool = False,
     **tsdf_options,
-) -> SemanticMap | tuple[SemanticMap, SemanticTSDF]:
-    """Fuse posed RGB-D frames and their labels into a semantic map.
+) -> SemanticTSDF:
+    """Fuse posed RGB-D frames and their labels into a semantic TSDF volume.
 
     Parameters
     ----------
@@ -587,41 +670,23 @@ def reconstruct(
         Voxel edge in metres (default 4 cm).
     poses : ndarray (N, 4, 4), optional
         ``T_world_camera`` per frame, replacing the frames' poses (e.g. estimated ones).
-    output : {"mesh", "points"}
-        What to return: the marching-cubes mesh or the surface point cloud.
-    out, rgb_out, points_out : path, optional
-        Write the semantic mesh (label colours + ``label``), the RGB mesh (appearance colours +
-        ``label``) and the semantic point cloud as PLY, atomically.
-    min_weight : float
-        Minimum integration weight of a surface voxel in the extracted mesh/points.
     progress : bool
-        Show a tqdm bar.
-    return_volume : bool
-        Also return the :class:`SemanticTSDF` (e.g. for more extraction options).
+        Show a progress bar.
     **tsdf_options
         Passed to :class:`SemanticTSDF` (``trunc_voxels``, ``depth_max``, ``label_stride``,
         ``match_probability``, ``device`` ...).
 
     Returns
     -------
-    SemanticMap
-        Mesh (``faces``) or points with ``labels`` (0 = no evidence) and RGB ``colors``; with
-        ``return_volume`` a tuple ``(map, volume)``.
+    SemanticTSDF
+        Extract a map with :meth:`SemanticTSDF.extract_mesh` / ``extract_point_cloud``.
 
     Raises
     ------
     ValueError
         A frame without pose, depth in the wrong unit, mismatching label count or shape, an
-        empty sequence, a reconstruction with no surface.
-
-    Examples
-    --------
-    >>> from semmatch.io import read_sequence, write_map           # doctest: +SKIP
-    >>> m = reconstruct(read_sequence("data/scenes/eval/s0/lower"), voxel_size=0.04)
-    >>> write_map("lower.ply", m)
+        empty sequence, no frame with usable depth.
     """
-    if output not in ("mesh", "points"):
-        raise ValueError(f"output must be 'mesh' or 'points', got {output!r}")
     n, poses = _check_poses(seq, poses)
     name = str(getattr(seq, "path", "sequence"))
     lab_iter = _label_source(labels, n)
@@ -635,18 +700,79 @@ def reconstruct(
     _check_dropouts(vol, count, name)
     if vol.n_label_points == 0:
         warnings.warn(f"{name}: no label evidence was integrated; all labels are 0 (void)", stacklevel=2)
-    mesh = vol.extract_mesh(min_weight=min_weight) if (output == "mesh" or out or rgb_out) else None
-    pcd = vol.extract_point_cloud(min_weight=min_weight) if (output == "points" or points_out) else None
-    result = mesh if output == "mesh" else pcd
-    if len(result) == 0:
-        raise ValueError(f"{name}: the reconstruction is empty (no surface with weight >= {min_weight})")
-    if out is not None:
-        write_map(Path(out), mesh)
-    if rgb_out is not None:
-        write_map(Path(rgb_out), mesh, colors="rgb")
-    if points_out is not None:
-        write_map(Path(points_out), pcd)
-    return (result, vol) if return_volume else result
+    vol.name = name
+    return vol
+
+
+def reconstruct(
+    seq: Iterable[Frame],
+    labels: str | os.PathLike | Iterable[np.ndarray] | None = None,
+    voxel_size: float = 0.04,
+    *,
+    poses: np.ndarray | None = None,
+    output: str = "mesh",
+    min_weight: float = 1.0,
+    progress: bool = False,
+    **tsdf_options,
+) -> SemanticMap:
+    """Fuse posed RGB-D frames and their labels into a semantic map (:func:`fuse`, then extract).
+
+    Parameters
+    ----------
+    seq, labels, voxel_size, poses, progress, **tsdf_options
+        As :func:`fuse`.
+    output : {"mesh", "points"}
+        What to extract: the marching-cubes mesh or the surface point cloud.
+    min_weight : float
+        Minimum integration weight of a surface voxel in the extracted mesh/points.
+
+    Returns
+    -------
+    SemanticMap
+        Mesh (``faces``) or points with ``labels`` (0 = no evidence) and RGB ``colors``. Write
+        it with :func:`semmatch.io.write_map` (``colors="rgb"`` for the appearance mesh).
+
+    Raises
+    ------
+    ValueError
+        As :func:`fuse`; also a reconstruction with no surface.
+
+    Examples
+    --------
+    >>> from semmatch.io import read_sequence, write_map           # doctest: +SKIP
+    >>> m = reconstruct(read_sequence("data/scenes/eval/s0/lower"), voxel_size=0.04)
+    >>> write_map("lower.ply", m)
+    """
+    if output not in ("mesh", "points"):
+        raise ValueError(f"output must be 'mesh' or 'points', got {output!r}")
+    vol = fuse(seq, labels, voxel_size, poses=poses, progress=progress, **tsdf_options)
+    return extract(vol, output, min_weight=min_weight)
+
+
+def extract(vol: SemanticTSDF, output: str = "mesh", *, min_weight: float = 1.0) -> SemanticMap:
+    """The mesh or point cloud of a fused volume; an empty one is a clear error.
+
+    Parameters
+    ----------
+    vol : SemanticTSDF
+    output : {"mesh", "points"}
+    min_weight : float
+        Minimum integration weight of a surface voxel.
+
+    Returns
+    -------
+    SemanticMap
+
+    Raises
+    ------
+    ValueError
+        No surface with weight >= ``min_weight`` (named with the sequence the volume fused).
+    """
+    m = vol.extract_mesh(min_weight=min_weight) if output == "mesh" else vol.extract_point_cloud(min_weight=min_weight)
+    if len(m) == 0:
+        raise ValueError(f"{getattr(vol, 'name', 'sequence')}: the reconstruction is empty "
+                         f"(no surface with weight >= {min_weight})")
+    return m
 
 
 def reconstruct_many(
@@ -700,7 +826,6 @@ def reconstruct_many(
         As :func:`reconstruct`, naming the labeling's folder and frame; ``outs`` of another
         length than ``labelings``.
     """
-    import torch
 
     labelings = list(labelings)
     outs = [None] * len(labelings) if outs is None else list(outs)
@@ -712,43 +837,27 @@ def reconstruct_many(
     name = str(getattr(seq, "path", "sequence"))
     vol = SemanticTSDF(voxel_size, **tsdf_options)
     own_labels = any(lab is None for lab in labelings)
-    frames = []  # per frame: (where, intrinsics, own labels)
-    pending = []  # per frame: (sampled depth, pose, evidence pixels) until the grid is final
+    frames = []  # per frame: (where, own labels)
+    pixels = []  # per frame: its evidence pixels (voxel blocks that exist when it is integrated)
     for _, where, frame, pose in _posed_frames(seq, poses, n, name, progress):
         used = vol.integrate(frame.depth, frame.rgb, pose, frame.intrinsics, where=where)
-        depth = np.where(np.isfinite(frame.depth), frame.depth, 0).astype(np.float32, copy=False)
-        d, T = vol._sampled_depth(depth), np.asarray(pose, dtype=np.float64)
-        # evidence pixels whose voxel block exists now, as when reconstruct() adds them here
-        # (a block that only a later frame allocates is skipped there: ~3 of 100 000 points)
-        sel = np.flatnonzero((d > 0) & (d <= vol.depth_max)) if used else np.zeros(0, np.int64)
-        sel = sel[(vol._voxels_of(d, sel, T, frame.intrinsics) >= 0).cpu().numpy()].astype(np.int32)
-        frames.append((where, frame.intrinsics, frame.labels if own_labels else None))
-        pending.append((d, T, sel))
+        ev = vol.evidence_pixels(frame.depth, pose, frame.intrinsics)
+        pixels.append(ev if used else dataclasses.replace(ev, index=ev.index[:0]))
+        frames.append((where, frame.labels if own_labels else None))
     _check_counts(len(frames), None, name)
     _check_dropouts(vol, len(frames), name)
-    # the grid is final now (growing it moves blocks): the voxel of each evidence pixel
-    targets = [(sel, vol._voxels_of(d, sel, T, intr)) for (d, T, sel), (_, intr, _) in zip(pending, frames, strict=True)]
-    del pending
-    evidence = _torch_view(vol.vbg.attribute("label"))
+    voxels = [vol.locate(ev) for ev in pixels]  # the grid is final now (growing it moves blocks)
     mesh = None
     maps = []
     for labels, out in zip(labelings, outs, strict=True):
         folder = labels if isinstance(labels, str | os.PathLike) else None
         what = name if folder is None else f"{name} with {folder}"
         lab_iter = _label_source(labels, len(frames))
-        evidence.zero_()
-        vol.n_label_points = 0
-        for i, ((where, intr, own), (sel, voxel)) in enumerate(zip(frames, targets, strict=True)):
+        vol.clear_labels()
+        for i, ((where, own), ev, vox) in enumerate(zip(frames, pixels, voxels, strict=True)):
             lab = own if lab_iter is None else _next_labels(lab_iter, i, where)
-            if lab is None:
-                continue
-            values, has = vol._sampled_labels(np.asarray(lab), intr, where if folder is None else f"{folder} ({where})")
-            values = values[sel]
-            if has is not None:
-                keep = has[sel]
-                values, voxel = values[keep], voxel[torch.from_numpy(keep).to(voxel.device)]
-            if len(values):
-                vol._add_at(voxel, values)
+            if lab is not None:
+                vol.add_labels(lab, ev, vox, where=where if folder is None else f"{folder} ({where})")
         _check_counts(len(frames), lab_iter, what)
         if vol.n_label_points == 0:
             warnings.warn(f"{what}: no label evidence was integrated; all labels are 0 (void)", stacklevel=2)

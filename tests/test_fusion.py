@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from semmatch.fusion import SemanticTSDF, check_depth_units, reconstruct, reconstruct_many
+from semmatch.fusion import SemanticTSDF, check_depth_units, extract, fuse, reconstruct, reconstruct_many
 from semmatch.geometry import DEFAULT_INTRINSICS, look_at
-from semmatch.io import Frame, SequenceWriter, read_map, read_sequence, write_labels_folder
+from semmatch.io import Frame, SequenceWriter, read_map, read_sequence, write_labels_folder, write_map
 from semmatch.labels import NUM_CLASSES
 from semmatch.sim import Renderer, box_room
 
@@ -88,8 +88,11 @@ def test_labels_from_folder_and_outputs(tmp_path, room_frames):
     # a labels folder that says "sofa" everywhere replaces the sequence's own labels
     write_labels_folder(tmp_path / "sofa", [np.full(INTR.shape, 10, np.uint8)] * 6)
     out, rgb_out, pts_out = tmp_path / "m.ply", tmp_path / "rgb.ply", tmp_path / "p.ply"
-    m = reconstruct(read_sequence(seq_dir), labels=tmp_path / "sofa", voxel_size=VS, out=out,
-                    rgb_out=rgb_out, points_out=pts_out)
+    vol = fuse(read_sequence(seq_dir), labels=tmp_path / "sofa", voxel_size=VS)
+    m = extract(vol)
+    write_map(out, m)
+    write_map(rgb_out, m, colors="rgb")
+    write_map(pts_out, extract(vol, "points"))
     back = read_map(out)
     assert len(back) == len(m) and back.is_mesh and set(np.unique(back.labels)) <= {0, 10}
     assert (back.labels == 10).mean() > 0.9
@@ -251,6 +254,6 @@ def test_reconstructions_are_byte_deterministic(tmp_path):
     frames = render_frames(scene, orbit_poses(scene, 4, 1.2, 3), DEFAULT_INTRINSICS.scaled(160, 120))
     digests = set()
     for k in range(3):
-        reconstruct(frames, voxel_size=0.05, out=tmp_path / f"m{k}.ply")
+        write_map(tmp_path / f"m{k}.ply", reconstruct(frames, voxel_size=0.05))
         digests.add(hashlib.sha256((tmp_path / f"m{k}.ply").read_bytes()).hexdigest())
     assert len(digests) == 1

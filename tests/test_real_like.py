@@ -18,7 +18,7 @@ from semmatch.experiments.real import (
     select_prior_tolerance,
 )
 from semmatch.geometry import DEFAULT_INTRINSICS
-from semmatch.io import read_tum, write_tum
+from semmatch.io import read_tum, write_map, write_tum
 
 SCENE = "bedroom_0003"
 TOL = (0.1, 10.0)
@@ -163,7 +163,7 @@ def test_misregistration_costs_accuracy(tiny_root, tmp_path):
     with pytest.raises(FileNotFoundError, match="03_reconstruct_upper"):
         misregistration_study(tiny_root, ["3d-neighborhood"], progress=False)
     reconstruct_many(read_sequence(sd / "upper"), [None], 0.05, outs=[layout.upper_map(SCENE, GT)])
-    reconstruct(read_sequence(sd / "lower"), None, 0.05, out=layout.lower_reference(SCENE))
+    write_map(layout.lower_reference(SCENE), reconstruct(read_sequence(sd / "lower"), None, 0.05))
     df = misregistration_study(tiny_root, ["3d-neighborhood"], translations=(0.0, 0.15), rotations_deg=(5.0,),
                                voxel_size=0.05, progress=False)
     assert list(zip(df["translation_m"], df["rotation_deg"], strict=True)) == [(0.0, 0.0), (0.15, 0.0), (0.0, 5.0)]

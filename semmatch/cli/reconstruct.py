@@ -52,7 +52,8 @@ def open_any_sequence(path: str | Path):
 
 def run(args: argparse.Namespace) -> int:
     """Reconstruct and print a one-line JSON summary."""
-    from semmatch.fusion import reconstruct
+    from semmatch.fusion import extract, fuse
+    from semmatch.io import write_map
 
     seq = open_any_sequence(args.seq)
     poses = None
@@ -72,21 +73,23 @@ def run(args: argparse.Namespace) -> int:
             write_tum(args.poses_out, getattr(seq, "timestamps", range(len(poses))), poses)
         if gt is not None and len(gt) == len(poses):
             info.update(trajectory_errors(poses, gt))
-    m = reconstruct(
+    vol = fuse(
         seq,
         labels=args.labels,
         voxel_size=args.voxel_size,
         poses=poses,
-        out=args.out,
-        rgb_out=args.rgb_out,
-        points_out=args.points_out,
-        min_weight=args.min_weight,
         progress=not args.quiet,
         depth_max=args.depth_max,
         trunc_voxels=args.trunc_voxels,
         label_stride=args.label_stride,
         device=args.device,
     )
+    m = extract(vol, "mesh", min_weight=args.min_weight)
+    write_map(args.out, m)
+    if args.rgb_out:
+        write_map(args.rgb_out, m, colors="rgb")
+    if args.points_out:
+        write_map(args.points_out, extract(vol, "points", min_weight=args.min_weight))
     info = {"out": str(args.out), "vertices": len(m), "faces": int(len(m.faces)), **info}
     print(json.dumps(info))
     return 0
