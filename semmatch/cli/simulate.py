@@ -84,6 +84,13 @@ def register(sub) -> None:
     p.add_argument("--save-scene", type=Path, default=None, help="also write the GT semantic mesh here")
     p.add_argument("--fast", action="store_true",
                    help="coarse-to-fine rendering (about 2x faster; thin objects under 2 px can be missed)")
+    p.add_argument("--renderer", choices=("raycast", "raster", "auto"), default="raycast",
+                   help="raycast: Open3D ray casting (the reference); raster: OpenGL rasterising (headless EGL, "
+                        "CPU or GPU); auto: raster where an OpenGL context can be made")
+    p.add_argument("--pair", action="store_true",
+                   help="with --out DIR: write the person's and the robot's sequences DIR/upper (--height) and "
+                        "DIR/lower (--lower-height) of one scene, routes as --routes")
+    p.add_argument("--lower-height", type=float, default=0.2, help="robot camera height for --pair (m)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing sequence at --out")
     add_quiet(p)
     dst = p.add_mutually_exclusive_group(required=True)
@@ -105,7 +112,7 @@ def register(sub) -> None:
                         "of kind KINDS[i %% len(KINDS)]")
     d.add_argument("--routes", choices=("own", "shared"), default="own",
                    help="own: each camera plans its own coverage-matched tour (the paper's setup); shared: "
-                        "the lower camera follows the upper route there and back (ablation)")
+                        "the lower camera follows the upper route there and back (ablation); also for --pair")
     d.add_argument("--route-ablation", action="store_true",
                    help="with --routes own, also write lower_shared/: the robot replaying the person's tour")
     p.set_defaults(func=run)
@@ -125,7 +132,7 @@ def run(args) -> int:
             n_frames_upper=args.frames, n_frames_lower=args.frames_lower or args.frames,
             heights_sweep=sweep, n_frames_sweep=args.frames_sweep, tilt_deg=args.tilt, noise=noise,
             intrinsics=intr, progress=progress, jobs=args.jobs, routes=args.routes,
-            route_ablation=args.route_ablation, val_seeds=args.val_seeds,
+            route_ablation=args.route_ablation, val_seeds=args.val_seeds, renderer=args.renderer,
         )
         print(f"{args.dataset}: wrote {len(res['written'])}, skipped {len(res['skipped'])} complete item(s)")
         return 0
@@ -135,6 +142,20 @@ def run(args) -> int:
         scene = scene_from_ply(args.ply, seed=args.seed)
     else:
         scene = sim.generate_scene(args.kind, args.seed)
+    if args.pair:
+        if args.save_scene is not None:
+            scene.save(args.save_scene)
+        try:
+            up, low = sim.simulate_pair(scene, args.out, n_frames=args.frames, upper_height=args.height,
+                                        lower_height=args.lower_height, routes=args.routes, tilt_deg=args.tilt,
+                                        seed=args.seed, intrinsics=intr, noise=noise, overwrite=args.overwrite,
+                                        progress=progress, backend=args.renderer)
+        except ValueError as e:
+            where = args.ply if args.ply is not None else f"{args.kind} seed {args.seed}"
+            raise ValueError(f"{where}: {e}") from None
+        print(f"{up}, {low}: {args.frames} frames each of {scene.name} at {args.height:.2f} / "
+              f"{args.lower_height:.2f} m ({args.routes} routes)")
+        return 0
     kind = args.trajectory or ("upper" if args.height > 1.0 else "lower")
     try:
         poses = sim.make_trajectory(scene, args.height, args.frames, tilt_deg=args.tilt, seed=args.seed,
@@ -145,7 +166,7 @@ def run(args) -> int:
     if args.save_scene is not None:
         scene.save(args.save_scene)
     out = sim.simulate_sequence(scene, poses, args.out, intrinsics=intr, noise=noise, overwrite=args.overwrite,
-                                progress=progress, fast=args.fast,
+                                progress=progress, fast=args.fast, backend=args.renderer,
                                 meta={"trajectory": kind, "seed": args.seed, "tilt_deg": args.tilt,
                                       "height": args.height, "fast_render": args.fast})
     print(f"{out}: {len(poses)} frames of {scene.name} at {args.height:.2f} m")

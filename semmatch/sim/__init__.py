@@ -1,5 +1,6 @@
-"""The simulator: scenes (procedural or from a semantic PLY mesh), trajectories, a renderer on
-Open3D's ``RaycastingScene`` and sensor noise. The optional habitat-sim backend lives in
+"""The simulator: scenes (procedural or from a semantic PLY mesh), trajectories, two renderers
+(ray casting on Open3D's ``RaycastingScene``, the reference; rasterising with OpenGL,
+:mod:`semmatch.sim.raster`) and sensor noise. The optional habitat-sim backend lives in
 :mod:`semmatch.sim.habitat` (imported on demand).
 
 >>> from semmatch.sim import generate_scene, make_trajectory, simulate_sequence
@@ -12,12 +13,15 @@ from .figures import frame_figure
 from .noise import NoiseConfig
 from .plyscene import scene_from_ply
 from .procedural import SCENE_KINDS, box_room, generate_scene
+from .raster import RasterRenderer, gl_available, make_renderer
 from .render import Renderer, RenderResult
 from .scene import Scene
 from .sequence import (
     DEFAULT_SWEEP,
+    carrier_poses,
     check_seed_splits,
     generate_dataset,
+    simulate_pair,
     simulate_sequence,
     simulate_sequences,
     sweep_name,
@@ -37,6 +41,9 @@ from .trajectory import (
 __all__ = [
     "Scene",
     "Renderer",
+    "RasterRenderer",
+    "make_renderer",
+    "gl_available",
     "RenderResult",
     "SCENE_KINDS",
     "generate_scene",
@@ -55,6 +62,8 @@ __all__ = [
     "NoiseConfig",
     "simulate_sequence",
     "simulate_sequences",
+    "simulate_pair",
+    "carrier_poses",
     "generate_dataset",
     "check_seed_splits",
     "sweep_name",

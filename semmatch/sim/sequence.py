@@ -20,6 +20,7 @@ import json
 import os
 import shutil
 import tempfile
+import warnings
 import zlib
 from collections.abc import Sequence
 from contextlib import ExitStack
@@ -32,12 +33,13 @@ from ..io import SequenceWriter, is_sequence, read_intrinsics, write_json, write
 from ..progress import tqdm
 from .noise import NoiseConfig, estimated_poses, exposure_gains, noisy_depth, noisy_rgb
 from .procedural import SCENE_KINDS, generate_scene
+from .raster import make_renderer
 from .render import Renderer
 from .scene import Scene
 from .trajectory import make_sweep_trajectories, make_trajectory, route_waypoints
 
-__all__ = ["simulate_sequence", "simulate_sequences", "generate_dataset", "sweep_name", "DEFAULT_SWEEP",
-           "check_seed_splits"]
+__all__ = ["simulate_sequence", "simulate_sequences", "simulate_pair", "carrier_poses", "generate_dataset",
+           "sweep_name", "DEFAULT_SWEEP", "check_seed_splits"]
 
 DEFAULT_SWEEP = (0.2, 0.4, 0.6, 0.8, 1.0, 1.2, 1.4, 1.6)
 
@@ -59,6 +61,7 @@ def simulate_sequence(
     renderer: Renderer | None = None,
     meta: dict | None = None,
     fast: bool = False,
+    backend: str = "raycast",
 ) -> Path:
     """Render ``poses`` of ``scene`` and stream the frames into a sequence folder.
 
@@ -88,6 +91,10 @@ def simulate_sequence(
     fast : bool
         Build the renderer in its coarse-to-fine mode (see :class:`Renderer`); ignored when
         ``renderer`` is given.
+    backend : {"raycast", "raster", "auto"}
+        Renderer backend when ``renderer`` is not given (:func:`semmatch.sim.raster.make_renderer`):
+        the ray caster (the reference), the OpenGL rasteriser, or the rasteriser where a context
+        can be made.
 
     Returns
     -------
@@ -102,7 +109,8 @@ def simulate_sequence(
         Poses that are not (N,4,4) rigid transforms, or a renderer with other intrinsics.
     """
     return simulate_sequences(scene, poses, [(out_dir, noise, meta)], intrinsics=intrinsics,
-                              overwrite=overwrite, progress=progress, renderer=renderer, fast=fast)[0]
+                              overwrite=overwrite, progress=progress, renderer=renderer, fast=fast,
+                              backend=backend)[0]
 
 
 def simulate_sequences(
@@ -115,6 +123,7 @@ def simulate_sequences(
     progress: bool = True,
     renderer: Renderer | None = None,
     fast: bool = False,
+    backend: str = "raycast",
 ) -> list[Path]:
     """Render ``poses`` once and write several sequence folders from the same frames.
 
@@ -130,7 +139,7 @@ def simulate_sequences(
     targets : sequence of (out_dir, noise, meta)
         The folders to create, each with its :class:`NoiseConfig` (None: clean) and extra
         ``meta.json`` entries (None: none).
-    intrinsics, overwrite, progress, renderer, fast
+    intrinsics, overwrite, progress, renderer, fast, backend
         As in :func:`simulate_sequence`.
 
     Returns
@@ -153,7 +162,7 @@ def simulate_sequences(
     if poses.ndim != 3 or poses.shape[1:] != (4, 4) or len(poses) == 0:
         raise ValueError(f"{where}: poses must have shape (N, 4, 4) with N >= 1, got {poses.shape}")
     if renderer is None:
-        renderer = Renderer(scene, intrinsics, fast=fast)
+        renderer = make_renderer(scene, intrinsics, backend=backend, fast=fast)
     elif renderer.intrinsics != intrinsics:
         raise ValueError(f"{where}: the renderer's intrinsics differ from the requested ones")
     streams = []  # per target: (noise config, its random stream, estimated poses, exposure gains)
@@ -166,11 +175,13 @@ def simulate_sequences(
     with ExitStack() as stack:
         writers = [stack.enter_context(SequenceWriter(o, intrinsics, overwrite=overwrite)) for o in outs]
         desc = outs[0].name if len(outs) == 1 else "+".join(o.name for o in outs)
+        empty = 0  # frames in which less than half of the pixels see the scene
         for i in tqdm(range(len(poses)), desc=desc, disable=not progress, leave=False):
             try:
                 r = renderer.render(poses[i])
             except ValueError as e:
                 raise ValueError(f"{where}: frame {i}: {e}") from None
+            empty += int(np.count_nonzero(r.depth > 0) * 2 < r.depth.size)
             inst = np.clip(r.instances, 0, 65535).astype(np.uint16)
             for w, (cfg, rng, est, gains) in zip(writers, streams, strict=True):
                 depth, rgb = r.depth, r.rgb
@@ -189,7 +200,101 @@ def simulate_sequences(
             }
             w.write_extra("poses_gt.txt", _tum_text(poses))
             w.write_extra("meta.json", json.dumps(info, indent=2) + "\n")
+    if empty * 4 > len(poses):
+        warnings.warn(f"{where}: {empty} of {len(poses)} frames are mostly empty (less than half of the pixels "
+                      f"see the scene of {scene.name!r}): a partial scan seen from a height it was not "
+                      "recorded at, or a camera outside the mesh?", UserWarning, stacklevel=2)
     return outs
+
+
+def carrier_poses(scene: Scene, height: float, n: int, *, carrier: str = "upper", routes: str = "own",
+                  route: np.ndarray | None = None, tilt_deg: float = 20.0, seed: int = 0) -> np.ndarray:
+    """The poses of one carrier (person or robot) through a scene, as the protocol plans them.
+
+    Parameters
+    ----------
+    scene : Scene
+    height : float
+        Camera height above the floor (m).
+    n : int
+        Frames.
+    carrier : {"upper", "lower"}
+        Whose tour (sets the trajectory's style: speed, tilt, turn rate).
+    routes : {"own", "shared"}
+        ``own``: a coverage-matched tour of the carrier's own free space (the paper's setup);
+        ``shared``: a tour visiting the carrier's route waypoints there and back.
+    route : ndarray (K, 2), optional
+        Waypoints to follow instead (the robot replaying the person's route).
+    tilt_deg : float
+    seed : int
+
+    Returns
+    -------
+    ndarray (n, 4, 4)
+    """
+    if routes not in ("own", "shared"):
+        raise ValueError(f"routes must be 'own' or 'shared', got {routes!r}")
+    if route is not None:
+        return make_trajectory(scene, height, n, tilt_deg=tilt_deg, seed=seed, kind="lower", waypoints=route)
+    if routes == "shared":
+        return make_trajectory(scene, height, n, tilt_deg=tilt_deg, seed=seed, kind=carrier)
+    return make_trajectory(scene, height, n, tilt_deg=tilt_deg, seed=seed, kind=carrier, cover=True,
+                           there_and_back=False)
+
+
+def simulate_pair(
+    scene: Scene,
+    out_dir: str | os.PathLike,
+    *,
+    n_frames: int,
+    upper_height: float = 1.6,
+    lower_height: float = 0.2,
+    routes: str = "own",
+    tilt_deg: float = 20.0,
+    seed: int = 0,
+    intrinsics: Intrinsics = DEFAULT_INTRINSICS,
+    noise: NoiseConfig | None = None,
+    overwrite: bool = False,
+    progress: bool = True,
+    backend: str = "raycast",
+) -> tuple[Path, Path]:
+    """The person's and the robot's sequences of one scene: ``<out_dir>/upper`` and ``/lower``.
+
+    Parameters
+    ----------
+    scene : Scene
+        E.g. :func:`semmatch.sim.scene_from_ply` of a scanned room.
+    out_dir : path
+    n_frames : int
+        Frames of each sequence.
+    upper_height, lower_height : float
+        Camera heights above the floor (m).
+    routes : {"own", "shared"}
+        ``own``: each carrier tours its own free space (the paper's setup); ``shared``: the robot
+        visits the person's route waypoints, there and back.
+    tilt_deg, seed, intrinsics, noise, overwrite, progress, backend
+        As :func:`simulate_sequence`.
+
+    Returns
+    -------
+    (Path, Path)
+        The upper and the lower sequence folders.
+    """
+    out_dir = Path(out_dir)
+    kw = dict(tilt_deg=tilt_deg, seed=seed)
+    up = carrier_poses(scene, upper_height, n_frames, carrier="upper", routes=routes, **kw)
+    route = route_waypoints(scene, upper_height, seed=seed, kind="upper") if routes == "shared" else None
+    low = carrier_poses(scene, lower_height, n_frames, carrier="lower", routes=routes, route=route, **kw)
+    renderer = make_renderer(scene, intrinsics, backend=backend)
+    label = {"own": "own coverage-matched tour", "shared": "the person's route, there and back"}[routes]
+    outs = []
+    for name, poses, height, what in (("upper", up, upper_height, "own coverage-matched tour" if routes == "own"
+                                       else "own tour"), ("lower", low, lower_height, label)):
+        outs.append(simulate_sequence(scene, poses, out_dir / name, intrinsics=intrinsics, noise=noise,
+                                      overwrite=overwrite, progress=progress, renderer=renderer,
+                                      meta={"trajectory": name, "seed": seed, "tilt_deg": tilt_deg, "height": height,
+                                            "route": what}))
+    return outs[0], outs[1]
 
 
 def _tum_text(poses: np.ndarray) -> str:
@@ -315,7 +420,7 @@ def _write_scene(root: Path, o: dict, split: str, seed: int, kind: str,
             sweep = {n: traj[names[n]] for n in missing}
     if not pending and not sweep:
         return written, skipped
-    renderer = Renderer(scene, intrinsics)
+    renderer = make_renderer(scene, intrinsics, backend=o["renderer"])
     shared = o["routes"] == "shared"
     # "shared": the robot (lower) follows the person's (upper) route, walked there and back (the
     # ablation); "own": each carrier plans its own coverage-matched tour (the paper's setup)
@@ -334,13 +439,8 @@ def _write_scene(root: Path, o: dict, split: str, seed: int, kind: str,
         for name, _ in outs:
             _drop_partials(sdir, name)
         follow = tkind == "lower_shared" or (shared and tkind == "lower")
-        if follow:
-            poses = make_trajectory(scene, height, n, tilt_deg=tilt_deg, seed=seed, kind="lower", waypoints=route)
-        elif shared:
-            poses = make_trajectory(scene, height, n, tilt_deg=tilt_deg, seed=seed, kind=tkind)
-        else:
-            poses = make_trajectory(scene, height, n, tilt_deg=tilt_deg, seed=seed, kind=tkind,
-                                    cover=True, there_and_back=False)
+        poses = carrier_poses(scene, height, n, carrier=tkind, routes=o["routes"], route=route if follow else None,
+                              tilt_deg=tilt_deg, seed=seed)
         route_meta = {"route": "upper route, there and back" if follow else
                       ("own tour" if shared else "own coverage-matched tour")}
         simulate_sequences(scene, poses, [(sdir / name, cfg, {"trajectory": name, "seed": seed, "tilt_deg": tilt_deg,
@@ -380,6 +480,7 @@ def generate_dataset(
     route_ablation: bool = False,
     val_seeds: Sequence[int] = (),
     dev_seeds: Sequence[int] = (),
+    renderer: str = "raycast",
 ) -> dict:
     """Write the generated data layout of docs/data.md (resumable).
 
@@ -436,6 +537,8 @@ def generate_dataset(
     route_ablation : bool
         With ``routes="own"``, also write ``lower_shared/`` in evaluation and validation scenes:
         the robot replaying the person's actual tour, there and back (the shared-route ablation).
+    renderer : {"raycast", "raster", "auto"}
+        Renderer backend (:func:`semmatch.sim.raster.make_renderer`).
 
     Returns
     -------
@@ -474,7 +577,7 @@ def generate_dataset(
     opts = dict(n_train=n_train, n_frames_upper=int(n_frames_upper), n_frames_lower=int(n_frames_lower),
                 heights_sweep=tuple(heights_sweep or ()), n_frames_sweep=int(n_frames_sweep),
                 upper_height=upper_height, lower_height=lower_height, tilt_deg=tilt_deg, noise=noise,
-                intrinsics=intrinsics, routes=routes, route_ablation=bool(route_ablation))
+                intrinsics=intrinsics, routes=routes, route_ablation=bool(route_ablation), renderer=str(renderer))
     jobs = max(1, min(int(jobs), len(todo)))
     if jobs == 1:
         results = (_write_scene(root, opts, *job, progress=progress) for job in todo)
