@@ -25,6 +25,14 @@ if ! command -v chromium >/dev/null && [ "$(id -u)" = 0 ] && command -v apt-get 
     || echo "setup: warning: could not install chromium; the browser test will be skipped" >&2
 fi
 
+# Mesa's EGL and software OpenGL: the rasterising renderer (semmatch.sim.raster) draws headless
+# through them; without them it falls back to ray casting and its tests are skipped
+if ! /sbin/ldconfig -p 2>/dev/null | grep -q 'libEGL_mesa.so.0' && [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
+  echo "setup: installing Debian's Mesa EGL / software OpenGL (headless rasteriser)"
+  { apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends libegl1 libegl-mesa0 libgl1-mesa-dri >/dev/null; } \
+    || echo "setup: warning: could not install Mesa EGL; rendering falls back to ray casting" >&2
+fi
+
 if [ ! -x "$VENV/bin/python" ]; then
   echo "setup: creating $VENV"
   "$PYTHON" -m venv "$VENV"
