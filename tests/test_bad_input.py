@@ -170,6 +170,8 @@ CASES = [
     ("map-off-palette", transfer_with(lambda b, w: _map_variant(
         b, w, "o.ply", lambda m: setattr(m, "vertex_colors", __import__("open3d").utility.Vector3dVector(
             np.random.default_rng(0).random((len(m.vertices), 3)))))), r"not colours of the category palette"),
+    ("transfer-map-in-mm", transfer_with(lambda b, w: _scaled_map(b, w, "mm.ply", 1000.0)),
+     r"mm\.ply: sampling the mesh every .* is the map in metres \(not millimetres\)"),
     ("transfer-unknown-method", transfer_with("{base}/map.ply", method="bogus"), r"invalid choice: 'bogus'"),
     ("transfer-out-is-input", lambda b, w: ["transfer", str(b / "low"), "--map", str(b / "map.ply"), "--method",
                                             "3d-neighborhood", "--out", str(b / "low")], r"outside the inputs"),

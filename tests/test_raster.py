@@ -6,8 +6,7 @@ import numpy as np
 import pytest
 
 from semmatch.geometry import DEFAULT_INTRINSICS
-from semmatch.sim import Renderer, generate_scene, make_trajectory
-from semmatch.sim import raster
+from semmatch.sim import Renderer, generate_scene, make_trajectory, raster
 from semmatch.sim.raster import RasterRenderer, gl_available, make_renderer
 
 GL, WHY = gl_available()

@@ -46,6 +46,10 @@ _MIXED = 0x40  # build-time flag (same bit, used before _SHELL is set)
 _LABEL_BITS = 0x3F
 
 
+#: most samples :func:`sample_mesh` may make (a map in millimetres would ask for billions)
+MAX_MESH_SAMPLES = 60_000_000
+
+
 def sample_mesh(
     points: np.ndarray, faces: np.ndarray, labels: np.ndarray, spacing: float
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -75,6 +79,12 @@ def sample_mesh(
     edges = np.stack([v[:, 1] - v[:, 0], v[:, 2] - v[:, 1], v[:, 0] - v[:, 2]], axis=1)
     longest = np.linalg.norm(edges, axis=2).max(axis=1)
     n_sub = np.maximum(1, np.ceil(longest / spacing)).astype(np.int64)
+    total = int(((n_sub + 1) * (n_sub + 2) // 2).sum())
+    if total > MAX_MESH_SAMPLES:  # refuse before allocating (about 26 bytes a sample while built)
+        raise ValueError(
+            f"sampling the mesh every {spacing:g} m would make {total:,} points (limit {MAX_MESH_SAMPLES:,}, "
+            f"about {total * 26 / 2**30:.0f} GiB); its longest edge is {longest.max():.3g}: is the map in "
+            "metres (not millimetres)? is the voxel size too small?")
     out_p, out_l = [], []
     flab = np.asarray(labels)[faces]
     for n in np.unique(n_sub):
@@ -149,9 +159,12 @@ class MapIndex:
         self.workers = int(workers)
         self.is_mesh = semantic_map.is_mesh
         if self.is_mesh:
-            self.samples, self.sample_labels = sample_mesh(
-                semantic_map.points, semantic_map.faces, semantic_map.labels, 0.7 * voxel_size
-            )
+            try:
+                self.samples, self.sample_labels = sample_mesh(
+                    semantic_map.points, semantic_map.faces, semantic_map.labels, 0.7 * voxel_size
+                )
+            except ValueError as e:
+                raise ValueError(f"{semantic_map.source}: {e}") from None
         else:
             self.samples, self.sample_labels = semantic_map.points, semantic_map.labels
         self._tree = None if self.is_mesh else cKDTree(self.samples)
