@@ -44,7 +44,7 @@ stages = {
     figs=["training_curves.png", *tbl("segmentation_validation", "validation_flip", "validation_flip_summary")]),
  "reconstruct_upper": dict(
     nb="03_reconstruct_upper", deps=[f"data/{P}/scenes", f"data/{P}/models"],
-    params=["profile", *common("networks", "voxel_size", "eval_voxel_size"), f"profiles.{P}.reconstruct_upper"],
+    params=["profile", *common("networks", "voxel_size", "eval_voxel_size", "jobs"), f"profiles.{P}.reconstruct_upper"],
     outs=[f"data/{P}/upper"], figs=tbl("upper_maps")),
  "label_transfer": dict(
     nb="04_label_transfer", deps=[f"data/{P}/scenes", f"data/{P}/models", f"data/{P}/upper"],
@@ -54,7 +54,7 @@ stages = {
           "fig_transferred_frames.png"]),
  "evaluate_synthetic": dict(
     nb="05_evaluate_synthetic", deps=[f"data/{P}/scenes", f"data/{P}/upper", f"data/{P}/lower_labels"],
-    params=["profile", *common("methods", "networks", "voxel_size", "eval_voxel_size", "fused_base"), f"profiles.{P}.evaluate_synthetic"],
+    params=["profile", *common("methods", "networks", "voxel_size", "eval_voxel_size", "fused_base", "jobs"), f"profiles.{P}.evaluate_synthetic"],
     outs=[f"data/{P}/lower_maps"],
     figs=[*tbl("table2_per_scene", "table2_synthetic", "table2_mesh_reference", "table2_route_ablation", "claims_synthetic", "table2_training_seeds"),
           "table2_synthetic.png", "table2_mesh_reference.png", "findings_synthetic.md"]),

@@ -361,3 +361,20 @@ def test_snapshot_shrinks_figures_and_drops_interactive_outputs(tmp_path):
     (tmp_path / "bad.ipynb").write_text("{not json")
     with pytest.raises(ValueError, match="bad.ipynb: not a readable notebook"):
         snapshot_notebook(tmp_path / "bad.ipynb", tmp_path / "o.ipynb")
+
+
+def test_a_notebook_run_with_another_parameter_file_reads_that_file(tmp_path):
+    nb = nbformat.v4.new_notebook()
+    nb.metadata["kernelspec"] = {"name": "python3", "display_name": "Python 3", "language": "python"}
+    params = nbformat.v4.new_code_cell("profile = None\nseed = None")
+    params.metadata["tags"] = ["parameters"]
+    setup = nbformat.v4.new_code_cell("from semmatch.experiments import notebook_setup\n"
+                                      "globals().update(notebook_setup('01_simulate', globals()))\n"
+                                      "assert seed == 41, seed")
+    nb.cells = [params, setup]
+    (tmp_path / "nb").mkdir()
+    nbformat.write(nb, tmp_path / "nb" / "01_simulate.ipynb")
+    # a profile that only this file has (the repository's params.yaml does not know it)
+    (tmp_path / "params.yaml").write_text("profile: mine\nprofiles:\n  mine:\n    common: {seed: 41}\n    simulate: {}\n")
+    pipeline.run_notebook("01_simulate", "mine", notebooks_dir=tmp_path / "nb", params_file=tmp_path / "params.yaml",
+                          reports_dir=tmp_path / "rep", cwd=tmp_path)

@@ -106,7 +106,10 @@ def register(sub) -> None:
     d.add_argument("--frames-sweep", type=int, default=100, help="frames of each height-sweep sequence (default %(default)s)")
     d.add_argument("--sweep", type=float, nargs="*", default=None,
                    help="height-sweep heights (m); default 0.2 .. 1.6; give none to skip")
-    d.add_argument("--jobs", type=int, default=1, help="scenes written in parallel (worker processes)")
+    d.add_argument("--jobs", type=int, default=1, help="scenes written in parallel (local worker processes)")
+    d.add_argument("--scheduler", default=None,
+                   help="Dask scheduler address (tcp://host:8786) to write the scenes on; default "
+                        "SEMMATCH_SCHEDULER, else --jobs local processes")
     d.add_argument("--val-seeds", type=int, nargs="*", default=[],
                    help="validation scenes (laid out as evaluation scenes): the i-th seed gives one scene "
                         "of kind KINDS[i %% len(KINDS)]")
@@ -133,6 +136,7 @@ def run(args) -> int:
             heights_sweep=sweep, n_frames_sweep=args.frames_sweep, tilt_deg=args.tilt, noise=noise,
             intrinsics=intr, progress=progress, jobs=args.jobs, routes=args.routes,
             route_ablation=args.route_ablation, val_seeds=args.val_seeds, renderer=args.renderer,
+            scheduler=args.scheduler,
         )
         print(f"{args.dataset}: wrote {len(res['written'])}, skipped {len(res['skipped'])} complete item(s)")
         return 0

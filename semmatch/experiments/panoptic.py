@@ -187,6 +187,7 @@ def panoptic_study(
     eval_voxel_size: float = 0.05,
     link_radius: float = 0.08,
     jobs: int = 1,
+    scheduler: str | None = None,
     progress: bool = True,
 ) -> pd.DataFrame:
     """Panoptic quality of every (scene, upper-map source, method) on the evaluation scenes.
@@ -195,8 +196,9 @@ def panoptic_study(
     layer from the transferred instances of every ``frame_step``-th robot frame; the reference
     is 05's ``reference.ply`` with instances from the robot's ground-truth instance images. The
     panoptic maps are written under ``panoptic/<scene>/`` (the upper maps with their instance
-    layers as ``upper_<source>.ply``). Scenes run in ``jobs`` processes; the
-    result does not depend on ``jobs``.
+    layers as ``upper_<source>.ply``). Scenes are tasks of :func:`semmatch.engine.map_tasks`
+    (``jobs`` local worker processes, or the cluster at ``scheduler``); the result does not
+    depend on where they run.
 
     Returns
     -------
@@ -204,26 +206,23 @@ def panoptic_study(
         ``scene``, ``source``, ``method`` and :data:`PANOPTIC_MEASURES`, plus the per-class PQ of
         the thing classes as ``pq_<class>`` (NaN where the class is absent from both maps).
     """
-    from ..workers import process_pool
+    from functools import partial
+
+    from ..engine import map_tasks
 
     layout = Layout(data_root)
     scenes = [sd.name for sd in layout.scene_dirs("eval")]
     kw = dict(eps=eps, min_vertices=min_vertices, frame_step=frame_step, tolerance=tolerance,
               eval_voxel_size=eval_voxel_size, link_radius=link_radius)
-    bar = tqdm(total=len(scenes), desc="panoptic", disable=not progress)
-    rows: list[dict] = []
-    if int(jobs) <= 1:
-        for sid in scenes:
-            rows += panoptic_scene(data_root, sid, methods, networks, **kw)
-            bar.update()
-    else:
-        with process_pool(int(jobs)) as pool:
-            futures = [pool.submit(panoptic_scene, data_root, sid, methods, networks, **kw) for sid in scenes]
-            for fut in futures:
-                rows += fut.result()
-                bar.update()
-    bar.close()
+    per_scene = map_tasks(partial(_panoptic_task, str(Path(data_root).resolve()), methods, networks, kw), scenes, jobs=jobs,
+                          scheduler=scheduler, desc="panoptic", progress=progress)
+    rows: list[dict] = [row for rows in per_scene for row in rows]
     return pd.DataFrame(rows)
+
+
+def _panoptic_task(data_root, methods, networks, kw: dict, sid: str) -> list[dict]:
+    """One scene of :func:`panoptic_study` as an engine task."""
+    return panoptic_scene(data_root, sid, methods, networks, **kw)
 
 
 def panoptic_summary(per_scene: pd.DataFrame, *, seed: int = 0) -> pd.DataFrame:

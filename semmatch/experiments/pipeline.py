@@ -144,7 +144,8 @@ def notebook_setup(notebook: str, namespace: dict) -> dict:
     whatever folder Jupyter started in; under :func:`run_notebook`, which sets
     ``SEMMATCH_PIPELINE``, papermill's ``cwd`` is kept), and every parameter the notebook left at ``None``
     takes the active profile's value: the profile named by ``profile`` (when set), else by the
-    ``SEMMATCH_PROFILE`` environment variable, else ``params.yaml``'s ``profile``. Under
+    ``SEMMATCH_PROFILE`` environment variable, else ``params.yaml``'s ``profile`` (the parameter
+    file is ``SEMMATCH_PARAMS`` when set: :func:`run_notebook` passes its own). Under
     papermill the injected parameters are not ``None`` and stay as they are.
 
     Parameters
@@ -165,7 +166,8 @@ def notebook_setup(notebook: str, namespace: dict) -> dict:
 
     record_loaded_modules(notebook)  # only with SEMMATCH_RECORD_MODULES set (the DVC deps test)
     profile = namespace.get("profile") or os.environ.get("SEMMATCH_PROFILE") or None
-    params = notebook_parameters(notebook, profile)
+    params_file = os.environ.get("SEMMATCH_PARAMS") or ROOT / "params.yaml"  # run_notebook's file
+    params = notebook_parameters(notebook, profile, params_file)
     return {k: v for k, v in params.items() if k in namespace and namespace[k] is None}
 
 
@@ -192,6 +194,7 @@ def run_notebook(
     cwd: str | os.PathLike = ROOT,
     progress: bool = False,
     log_output: bool = False,
+    scheduler: str | None = None,
     **overrides,
 ) -> Path:
     """Execute one notebook with papermill; return the executed copy.
@@ -199,7 +202,9 @@ def run_notebook(
     The executed copy goes to ``reports/<profile>/<notebook>.ipynb`` (or ``reports_dir``).
     With ``log_output`` the cells' output (progress lines, tables) is also streamed to this
     process's log while the notebook runs (papermill's ``--log-output``), so a long stage run by
-    ``dvc repro`` shows its progress on the console.
+    ``dvc repro`` shows its progress on the console. ``scheduler`` (else the profile's
+    ``common.scheduler``) is the address of a Dask scheduler the notebook's per-scene tasks run
+    on (:mod:`semmatch.engine`; passed to the kernel as ``SEMMATCH_SCHEDULER``).
 
     Raises
     ------
@@ -223,7 +228,13 @@ def run_notebook(
     # the kernel inherits the environment: plain-text progress lines instead of widgets that an
     # executed notebook would keep frozen at 0 % (semmatch.progress); papermill sets the working
     # directory itself (notebook_setup leaves it)
-    kernel_env = {"SEMMATCH_PROGRESS": "text", "SEMMATCH_PIPELINE": "1"}
+    kernel_env = {"SEMMATCH_PROGRESS": "text", "SEMMATCH_PIPELINE": "1",
+                  "SEMMATCH_PARAMS": str(Path(params_file).resolve())}
+    address = scheduler or (load_params(params_file, params["profile"]).get("common") or {}).get("scheduler")
+    if address:
+        from ..engine import SCHEDULER_ENV
+
+        kernel_env[SCHEDULER_ENV] = str(address)
     saved = {k: os.environ.get(k) for k in kernel_env}
     os.environ.update(kernel_env)
     try:
@@ -293,6 +304,8 @@ def main(argv: list[str] | None = None) -> int:
         p.add_argument("--reports-dir", help="where executed notebooks go (default reports/<profile>)")
         p.add_argument("--quiet", action="store_true",
                        help="do not stream the cells' output (progress lines, tables) to the console")
+        p.add_argument("--scheduler", help="Dask scheduler address (tcp://host:8786) to run the per-scene tasks on "
+                                           "(default: the profile's common.scheduler, else local processes)")
     sub.add_parser("profiles", help="list the profiles of params.yaml")
     sp = sub.add_parser("set-profile", help="select the profile dvc repro runs")
     sp.add_argument("name")
@@ -325,7 +338,7 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"{p.relative_to(ROOT)}: {p.stat().st_size / 1024:.0f} KB")
             return 0
         kw = dict(params_file=args.params, reports_dir=args.reports_dir, data_root=args.data_root,
-                  figures_dir=args.figures_dir, log_output=not args.quiet)
+                  figures_dir=args.figures_dir, log_output=not args.quiet, scheduler=args.scheduler)
         if not args.quiet:
             import logging
 

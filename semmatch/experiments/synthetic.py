@@ -14,7 +14,6 @@ import pandas as pd
 
 from ..io import read_map, read_sequence
 from ..metrics import MEASURES
-from ..progress import tqdm
 from .layout import GT, ROUTES, Layout, model_name
 
 __all__ = [
@@ -57,12 +56,16 @@ def reconstruct_upper_maps(
     *,
     voxel_size: float = 0.04,
     eval_voxel_size: float = 0.05,
+    jobs: int = 1,
+    scheduler: str | None = None,
     progress: bool = True,
 ) -> pd.DataFrame:
     """Upper-view semantic maps of every evaluation scene: from ground truth and each network.
 
     For each scene the upper sequence is fused with its ground-truth labels (``upper/<id>/gt.ply``)
     and with the labels each network predicts on the upper frames (``upper/<id>/<net>.ply``).
+    Scenes are tasks of :func:`semmatch.engine.map_tasks` (``jobs`` local processes or the
+    cluster at ``scheduler``).
 
     Returns
     -------
@@ -70,31 +73,43 @@ def reconstruct_upper_maps(
         One row per (scene, network): the network's upper map scored against the ground-truth
         upper map (the paper's "Upper" rows), plus the 2D pixel accuracy / mIoU on the frames.
     """
+    from functools import partial
+
+    from ..engine import map_tasks
+
+    scenes = [sd.name for sd in Layout(data_root).scene_dirs("eval")]
+    task = partial(_upper_maps_scene, str(Path(data_root).resolve()), tuple(networks), float(voxel_size), float(eval_voxel_size))
+    rows = map_tasks(task, scenes, jobs=jobs, scheduler=scheduler, desc="upper maps", progress=progress)
+    return pd.DataFrame([row for scene_rows in rows for row in scene_rows])
+
+
+def _upper_maps_scene(data_root: str, networks: tuple[str, ...], voxel_size: float, eval_voxel_size: float,
+                      sid: str) -> list[dict]:
+    """The upper maps of one scene and their scores (a task of :func:`reconstruct_upper_maps`)."""
     from ..fusion import reconstruct_many
     from ..metrics import pixel_metrics
     from ..segment import predict_sequence
 
     layout = Layout(data_root)
     models = {net: layout.load_network(net) for net in networks}
+    sd = layout.scenes / "eval" / sid
     rows = []
-    for sd in tqdm(layout.scene_dirs("eval"), desc="upper maps", disable=not progress):
-        sid = sd.name
-        upper = read_sequence(sd / "upper").load()  # predicted 2x: decode once
-        lab_dirs = [layout.upper_labels(sid, net) for net in networks]
-        for net, lab_dir in zip(networks, lab_dirs, strict=True):
-            predict_sequence(models[net], upper, lab_dir, progress=False)
-        # one fusion, the ground-truth labels and each network's as labelings
-        gt_map, *net_maps = reconstruct_many(upper, [None, *lab_dirs], voxel_size,
-                                             outs=[layout.upper_map(sid, s) for s in (GT, *networks)])
-        for net, lab_dir, net_map in zip(networks, lab_dirs, net_maps, strict=True):
-            pred = read_sequence(sd / "upper", labels=lab_dir)
-            pix = pixel_metrics((upper.read_labels(i) for i in range(len(upper))),
-                                (pred.read_labels(i) for i in range(len(pred))))
-            rows.append(
-                dict(scene=sid, model=net, method="upper", **_scores(gt_map, net_map, eval_voxel_size),
-                     pixel_acc=float(pix["pixel_acc"]), miou=float(pix["miou"]))
-            )
-    return pd.DataFrame(rows)
+    upper = read_sequence(sd / "upper").load()  # predicted 2x: decode once
+    lab_dirs = [layout.upper_labels(sid, net) for net in networks]
+    for net, lab_dir in zip(networks, lab_dirs, strict=True):
+        predict_sequence(models[net], upper, lab_dir, progress=False)
+    # one fusion, the ground-truth labels and each network's as labelings
+    gt_map, *net_maps = reconstruct_many(upper, [None, *lab_dirs], voxel_size,
+                                         outs=[layout.upper_map(sid, s) for s in (GT, *networks)])
+    for net, lab_dir, net_map in zip(networks, lab_dirs, net_maps, strict=True):
+        pred = read_sequence(sd / "upper", labels=lab_dir)
+        pix = pixel_metrics((upper.read_labels(i) for i in range(len(upper))),
+                            (pred.read_labels(i) for i in range(len(pred))))
+        rows.append(
+            dict(scene=sid, model=net, method="upper", **_scores(gt_map, net_map, eval_voxel_size),
+                 pixel_acc=float(pix["pixel_acc"]), miou=float(pix["miou"]))
+        )
+    return rows
 
 
 def _routes(layout: Layout, sd: Path) -> list[str]:
@@ -114,6 +129,7 @@ def transfer_lower_labels(
     *,
     fused_base: str = "3d-neighborhood",
     jobs: int = 1,
+    scheduler: str | None = None,
     progress: bool = True,
 ) -> pd.DataFrame:
     """Labels for every lower frame: each method from each upper map, each network directly, fused.
@@ -123,6 +139,8 @@ def transfer_lower_labels(
     baseline) and ``lower_labels/<scene>/<network>/fused/`` (``fused_base`` from the network's
     own upper map where it supports a pixel, the network elsewhere). Where the scene has the
     route ablation (``lower_shared/``), the same for ``fused_base`` under ``shared_route/``.
+    Scenes are tasks of :func:`semmatch.engine.map_tasks` (``jobs`` local worker processes, or
+    the cluster at ``scheduler``); the labels do not depend on where they ran.
 
     Returns
     -------
@@ -131,32 +149,44 @@ def transfer_lower_labels(
         for the ground-truth map and ``fused_base``: the share of the robot's view the person's
         map supports), fps.
     """
-    from ..segment import predict_sequence
-    from ..transfer import prepare, transfer_sequence, write_fused_labels
+    from functools import partial
+
+    from ..engine import map_tasks
 
     if fused_base not in methods:
         raise ValueError(f"fused_base {fused_base!r} is not among the methods {list(methods)}")
+    scenes = [sd.name for sd in Layout(data_root).scene_dirs("eval")]
+    # scenes are engine tasks; with one local job the frames of a scene are not split either
+    task = partial(_transfer_scene, str(Path(data_root).resolve()), tuple(methods), tuple(networks), fused_base)
+    rows = map_tasks(task, scenes, jobs=jobs, scheduler=scheduler, desc="transfer (scenes)", progress=progress)
+    return pd.DataFrame([row for scene_rows in rows for row in scene_rows])
+
+
+def _transfer_scene(data_root: str, methods: tuple[str, ...], networks: tuple[str, ...], fused_base: str,
+                    sid: str) -> list[dict]:
+    """The labels of one scene's robot frames (a task of :func:`transfer_lower_labels`)."""
+    from ..segment import predict_sequence
+    from ..transfer import prepare, transfer_sequence, write_fused_labels
+
     layout = Layout(data_root)
+    sd = layout.scenes / "eval" / sid
     models = {net: layout.load_network(net) for net in networks}
     rows = []
-    scene_dirs = layout.scene_dirs("eval")
-    for sd in tqdm(scene_dirs, desc="transfer (scenes)", disable=not progress):
-        sid = sd.name
-        indexes = {source: prepare(read_map(layout.upper_map(sid, source))) for source in (GT, *networks)}
-        for route in _routes(layout, sd):
-            lower = read_sequence(layout.lower_sequence(sd, route)).load()  # read by every method
-            for source in (GT, *networks):
-                for method in _route_methods(route, methods, fused_base):
-                    st = transfer_sequence(method, lower, indexes[source],
-                                           layout.lower_labels(sid, source, method, route), jobs=jobs, progress=False)
-                    rows.append(dict(scene=sid, route=route, model=model_name(source), method=method,
-                                     coverage=float(st["coverage"]), fps=float(st["fps"])))
-            for net in networks:
-                low = predict_sequence(models[net], lower, layout.lower_labels(sid, net, "lower", route),
-                                       progress=False)
-                write_fused_labels(layout.lower_labels(sid, net, fused_base, route), low,
-                              layout.lower_labels(sid, net, "fused", route))
-    return pd.DataFrame(rows)
+    indexes = {source: prepare(read_map(layout.upper_map(sid, source))) for source in (GT, *networks)}
+    for route in _routes(layout, sd):
+        lower = read_sequence(layout.lower_sequence(sd, route)).load()  # read by every method
+        for source in (GT, *networks):
+            for method in _route_methods(route, methods, fused_base):
+                st = transfer_sequence(method, lower, indexes[source],
+                                       layout.lower_labels(sid, source, method, route), progress=False)
+                rows.append(dict(scene=sid, route=route, model=model_name(source), method=method,
+                                 coverage=float(st["coverage"]), fps=float(st["fps"])))
+        for net in networks:
+            low = predict_sequence(models[net], lower, layout.lower_labels(sid, net, "lower", route),
+                                   progress=False)
+            write_fused_labels(layout.lower_labels(sid, net, fused_base, route), low,
+                               layout.lower_labels(sid, net, "fused", route))
+    return rows
 
 
 def support_table(coverage: pd.DataFrame, fused_base: str = "3d-neighborhood") -> pd.DataFrame:
@@ -182,6 +212,8 @@ def reconstruct_lower_maps(
     voxel_size: float = 0.04,
     fused_base: str = "3d-neighborhood",
     mesh_spacing: float = 0.01,
+    jobs: int = 1,
+    scheduler: str | None = None,
     progress: bool = True,
 ) -> None:
     """Fuse the lower sequence of every scene with each labels folder of 04, and build references.
@@ -191,27 +223,40 @@ def reconstruct_lower_maps(
     ``mesh_reference.ply`` / ``upper_mesh_reference.ply``: the ground-truth scene mesh sampled
     every ``mesh_spacing`` metres and kept where the lower / upper camera observed it
     (:func:`semmatch.reference.observed_reference`), which shares no geometry with any fusion.
-    The same under ``shared_route/`` for the route ablation.
+    The same under ``shared_route/`` for the route ablation. Scenes are tasks of
+    :func:`semmatch.engine.map_tasks` (``jobs`` local processes or the cluster at ``scheduler``).
     """
+    from functools import partial
+
+    from ..engine import map_tasks
+
+    scenes = [sd.name for sd in Layout(data_root).scene_dirs("eval")]
+    task = partial(_lower_maps_scene, str(Path(data_root).resolve()), tuple(methods), tuple(networks), float(voxel_size),
+                   fused_base, float(mesh_spacing))
+    map_tasks(task, scenes, jobs=jobs, scheduler=scheduler, desc="lower maps", progress=progress)
+
+
+def _lower_maps_scene(data_root: str, methods: tuple[str, ...], networks: tuple[str, ...], voxel_size: float,
+                      fused_base: str, mesh_spacing: float, sid: str) -> None:
+    """The lower maps and references of one scene (a task of :func:`reconstruct_lower_maps`)."""
     from ..fusion import reconstruct_many
     from ..io import write_map
     from ..reference import observed_reference
 
     layout = Layout(data_root)
-    for sd in tqdm(layout.scene_dirs("eval"), desc="lower maps", disable=not progress):
-        sid = sd.name
-        mesh = read_map(sd / "scene.ply")
-        write_map(layout.mesh_reference(sid, "upper"),
-                  observed_reference(mesh, read_sequence(sd / "upper"), spacing=mesh_spacing))
-        for route in _routes(layout, sd):
-            lower = read_sequence(layout.lower_sequence(sd, route)).load()
-            jobs = _labelings(route, methods, networks, fused_base)
-            # one fusion of the lower frames; the reference (ground-truth labels) and every
-            # labels folder as labelings of it
-            reconstruct_many(lower, [None, *(layout.lower_labels(sid, s, m, route) for s, m in jobs)], voxel_size,
-                             outs=[layout.lower_reference(sid, route),
-                                   *(layout.lower_map(sid, s, m, route) for s, m in jobs)])
-            write_map(layout.mesh_reference(sid, "lower", route), observed_reference(mesh, lower, spacing=mesh_spacing))
+    sd = layout.scenes / "eval" / sid
+    mesh = read_map(sd / "scene.ply")
+    write_map(layout.mesh_reference(sid, "upper"),
+              observed_reference(mesh, read_sequence(sd / "upper"), spacing=mesh_spacing))
+    for route in _routes(layout, sd):
+        lower = read_sequence(layout.lower_sequence(sd, route)).load()
+        labelings = _labelings(route, methods, networks, fused_base)
+        # one fusion of the lower frames; the reference (ground-truth labels) and every
+        # labels folder as labelings of it
+        reconstruct_many(lower, [None, *(layout.lower_labels(sid, s, m, route) for s, m in labelings)], voxel_size,
+                         outs=[layout.lower_reference(sid, route),
+                               *(layout.lower_map(sid, s, m, route) for s, m in labelings)])
+        write_map(layout.mesh_reference(sid, "lower", route), observed_reference(mesh, lower, spacing=mesh_spacing))
 
 
 def evaluate_synthetic(

@@ -376,6 +376,11 @@ def _noise_for(noise: NoiseConfig, seed: int, kind: str, name: str) -> NoiseConf
     return replace(noise, seed=int(ss.generate_state(1)[0]))
 
 
+def _scene_task(root: Path, o: dict, progress: bool, job: tuple[str, int, str]) -> tuple[list[str], list[str]]:
+    """One scene of :func:`generate_dataset` as an engine task (``job``: split, seed, kind)."""
+    return _write_scene(root, o, *job, progress=progress)
+
+
 def _write_scene(root: Path, o: dict, split: str, seed: int, kind: str,
                  progress: bool = False) -> tuple[list[str], list[str]]:
     """Write one scene of :func:`generate_dataset` (its mesh and sequences); return (written, skipped)."""
@@ -481,6 +486,7 @@ def generate_dataset(
     val_seeds: Sequence[int] = (),
     dev_seeds: Sequence[int] = (),
     renderer: str = "raycast",
+    scheduler: str | None = None,
 ) -> dict:
     """Write the generated data layout of docs/data.md (resumable).
 
@@ -539,6 +545,9 @@ def generate_dataset(
         the robot replaying the person's actual tour, there and back (the shared-route ablation).
     renderer : {"raycast", "raster", "auto"}
         Renderer backend (:func:`semmatch.sim.raster.make_renderer`).
+    scheduler : str, optional
+        Dask scheduler address to run the scenes on (default ``SEMMATCH_SCHEDULER``; none: ``jobs``
+        local worker processes, see :func:`semmatch.engine.map_tasks`).
 
     Returns
     -------
@@ -578,24 +587,18 @@ def generate_dataset(
                 heights_sweep=tuple(heights_sweep or ()), n_frames_sweep=int(n_frames_sweep),
                 upper_height=upper_height, lower_height=lower_height, tilt_deg=tilt_deg, noise=noise,
                 intrinsics=intrinsics, routes=routes, route_ablation=bool(route_ablation), renderer=str(renderer))
-    jobs = max(1, min(int(jobs), len(todo)))
-    if jobs == 1:
-        results = (_write_scene(root, opts, *job, progress=progress) for job in todo)
-    else:
-        from functools import partial
+    from functools import partial
 
-        from ..workers import process_pool
+    from ..engine import map_tasks, resolve_scheduler
 
-        # spawn: Open3D and BLAS thread pools do not survive a fork safely
-        pool = process_pool(jobs, spawn=True)
-        results = pool.map(partial(_write_scene, root, opts), *zip(*todo))
-    try:
-        for w, sk in tqdm(results, total=len(todo), desc="scenes", disable=not progress):
-            written += w
-            skipped += sk
-    finally:
-        if jobs > 1:
-            pool.shutdown(cancel_futures=True)
+    # scenes are independent tasks (own seeds, atomic writes): serial, a local cluster or a
+    # scheduler's workers give the same files
+    inner = progress and int(jobs) == 1 and resolve_scheduler(scheduler) is None
+    results = map_tasks(partial(_scene_task, root.resolve(), opts, inner), todo, jobs=jobs, scheduler=scheduler,
+                        desc="scenes", progress=progress)
+    for w, sk in results:
+        written += w
+        skipped += sk
     manifest = {"written": written, "skipped": skipped}
     write_json(root / "manifest.json", {
         "train": sorted({f"{k}_{s:04d}" for s, k in train}),

@@ -1,0 +1,139 @@
+"""Per-scene work on Dask (semmatch.engine): the same files serially, on a local cluster and on a
+scheduler + worker processes started separately on localhost; clear errors; no orphans; a killed
+worker's task reruns elsewhere."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+from semmatch import engine
+from semmatch.geometry import DEFAULT_INTRINSICS
+from semmatch.sim import generate_dataset
+
+pytestmark = pytest.mark.slow
+
+TINY = dict(train_seeds=[1, 2], eval_seeds=[9001], kinds=["living_room", "bedroom"], n_frames_upper=3,
+            n_frames_lower=3, heights_sweep=None, intrinsics=DEFAULT_INTRINSICS.scaled(48, 36), progress=False)
+
+
+def digests(root: Path) -> dict[str, str]:
+    return {p.relative_to(root).as_posix(): hashlib.sha256(p.read_bytes()).hexdigest()
+            for p in sorted(root.rglob("*")) if p.is_file()}
+
+
+@pytest.fixture(scope="module")
+def serial(tmp_path_factory) -> dict[str, str]:
+    root = tmp_path_factory.mktemp("serial")
+    generate_dataset(root, jobs=1, **TINY)
+    return digests(root)
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    try:  # a zombie is dead
+        return Path(f"/proc/{pid}/status").read_text().split("State:")[1].split()[0] != "Z"
+    except (OSError, IndexError):
+        return False
+
+
+def test_local_cluster_writes_the_same_files_as_a_serial_run(serial, tmp_path):
+    generate_dataset(tmp_path, jobs=2, **TINY)
+    assert digests(tmp_path) == serial
+    assert engine.map_tasks(abs, [-3, 4, -5], jobs=2, progress=False) == [3, 4, 5]  # input order
+
+
+def test_a_scheduler_and_workers_started_separately_give_the_same_files(serial, tmp_path):
+    sched_file = tmp_path / "scheduler.json"
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    procs = [subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1",
+                               "--port", "0", "--no-dashboard", "--scheduler-file", str(sched_file)],
+                              env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)]
+    try:
+        deadline = time.time() + 60
+        while not sched_file.is_file() and time.time() < deadline:
+            time.sleep(0.2)
+        address = json.loads(sched_file.read_text())["address"]
+        assert address.startswith("tcp://127.0.0.1:")
+        for _ in range(2):  # two worker processes, each its own `dask worker`
+            procs.append(subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_worker", address,
+                                           "--nthreads", "1", "--no-dashboard", "--host", "127.0.0.1"],
+                                          env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                                          start_new_session=True))
+        from distributed import Client
+
+        with Client(address, timeout="30s") as c:
+            c.wait_for_workers(2, timeout=60)
+        out = tmp_path / "data"
+        generate_dataset(out, scheduler=address, **TINY)
+        assert digests(out) == serial
+    finally:
+        for p in procs:
+            try:
+                os.killpg(p.pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+            p.wait(timeout=30)
+
+
+def test_an_unreachable_scheduler_is_a_clear_error_before_anything_is_written(tmp_path, monkeypatch):
+    monkeypatch.setenv(engine.SCHEDULER_ENV, "tcp://127.0.0.1:9")  # the discard port: nothing listens
+    t = time.perf_counter()
+    with pytest.raises(ValueError, match=r"cannot reach the Dask scheduler at 'tcp://127.0.0.1:9' within 8 s"):
+        generate_dataset(tmp_path / "data", **TINY)
+    assert time.perf_counter() - t < 10
+    assert not (tmp_path / "data").exists() or not any((tmp_path / "data").rglob("*.png"))
+
+
+def test_a_killed_worker_s_task_reruns_and_the_output_is_complete(serial, tmp_path):
+    client = engine._local_client(2)
+    pids = list(client.run(os.getpid).values())
+    out = tmp_path / "data"
+    done: dict = {}
+    th = threading.Thread(target=lambda: done.update(r=generate_dataset(out, jobs=2, **TINY)))
+    th.start()
+    deadline = time.time() + 60
+    while not list(out.glob("**/.*.partial")) and time.time() < deadline and th.is_alive():
+        time.sleep(0.05)  # wait until a worker is writing a scene
+    os.kill(pids[0], signal.SIGKILL)
+    th.join(timeout=300)
+    assert "r" in done, "the run did not finish after a worker was killed"
+    assert digests(out) == serial
+    engine.close_local_cluster()
+
+
+def test_local_workers_die_with_a_killed_parent(tmp_path):
+    script = tmp_path / "parent.py"
+    script.write_text(
+        "import os, sys, time\n"
+        "from semmatch import engine\n"
+        "if __name__ == '__main__':\n"
+        "    c = engine._local_client(2)\n"
+        "    print(' '.join(str(p) for p in c.run(os.getpid).values()), flush=True)\n"
+        "    engine.map_tasks(time.sleep, [60, 60], jobs=2, progress=False)\n")
+    p = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    try:
+        pids = [int(x) for x in p.stdout.readline().split()]
+        assert len(pids) == 2 and all(_alive(x) for x in pids)
+        time.sleep(1.0)
+        p.send_signal(signal.SIGKILL)
+        p.wait(timeout=30)
+        deadline = time.time() + 20
+        while any(_alive(x) for x in pids) and time.time() < deadline:
+            time.sleep(0.2)
+        assert not any(_alive(x) for x in pids), "Dask workers outlived their killed parent"
+    finally:
+        if p.poll() is None:
+            p.kill()
