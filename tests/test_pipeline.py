@@ -158,6 +158,10 @@ def test_full_profile_follows_the_protocol():
     assert len(full["eval_seeds"]) * len(full["kinds"]) >= 12
     assert min(validation_kinds(full["kinds"], full["val_seeds"]).values()) >= 2
     assert not set(full["eval_seeds"]) & set(full["dev_seeds"])
+    large = pipeline.load_params(ROOT / "params.yaml", "large")["common"]
+    check_protocol(large)
+    assert len(large["eval_seeds"]) * len(large["kinds"]) >= 64
+    assert not set(large["eval_seeds"]) & set(full["eval_seeds"])  # its own untouched scenes
 
 
 def test_dvc_yaml_is_the_generators_output(tmp_path):
