@@ -246,9 +246,12 @@ def test_reconstructions_are_byte_deterministic(tmp_path):
     """Open3D's hash map orders blocks differently on every run; the maps come out canonical."""
     import hashlib
 
+    from scenes import furnished_room as box_room
+    from scenes import orbit_poses
+
     from semmatch.fusion import reconstruct
     from semmatch.geometry import DEFAULT_INTRINSICS
-    from semmatch.transfer.demo import box_room, orbit_poses, render_frames
+    from semmatch.sim import render_frames
 
     scene = box_room(0)
     frames = render_frames(scene, orbit_poses(scene, 4, 1.2, 3), DEFAULT_INTRINSICS.scaled(160, 120))

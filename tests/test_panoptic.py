@@ -128,9 +128,11 @@ def test_segment_instances_separates_two_chairs_and_leaves_stuff():
 # ----------------------------------------------------------------------------- a two-chair room
 @pytest.fixture(scope="module")
 def two_chair_room():
+    from scenes import furnished_room as box_room
+    from scenes import orbit_poses
+
     from semmatch.fusion import reconstruct
     from semmatch.sim import Renderer
-    from semmatch.transfer.demo import box_room, orbit_poses
 
     intr = Intrinsics(160, 120, 67.1, 67.1, 80.0, 60.0)
     scene = box_room(0)  # two chairs: instances 2 and 3

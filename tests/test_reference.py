@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scenes import box
 from scipy.spatial import cKDTree
 
 from semmatch.fusion import reconstruct
@@ -11,8 +12,7 @@ from semmatch.geometry import DEFAULT_INTRINSICS, backproject, look_at, project
 from semmatch.io import Frame, SemanticMap, SequenceWriter, read_map, read_sequence
 from semmatch.metrics import compare
 from semmatch.reference import observed_reference, sample_surface, triangle_labels
-from semmatch.sim import Scene
-from semmatch.transfer.demo import box, render_frames
+from semmatch.sim import Scene, render_frames
 
 INTR = DEFAULT_INTRINSICS.scaled(160, 120)
 X, Y, Z = 4.0, 3.0, 2.5

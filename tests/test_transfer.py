@@ -7,9 +7,12 @@ import dataclasses
 
 import numpy as np
 import pytest
+from scenes import furnished_room as box_room
+from scenes import orbit_poses
 
 from semmatch.geometry import DEFAULT_INTRINSICS
 from semmatch.io import SemanticMap, SequenceWriter, read_label_image, read_sequence, write_map
+from semmatch.sim import render_frames
 from semmatch.transfer import (
     METHODS,
     MapIndex,
@@ -21,7 +24,6 @@ from semmatch.transfer import (
     transfer_sequence,
     vote,
 )
-from semmatch.transfer.demo import box_room, orbit_poses, render_frames
 from semmatch.transfer.index import sample_mesh
 
 INTR = DEFAULT_INTRINSICS.scaled(160, 120)

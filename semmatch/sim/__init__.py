@@ -14,7 +14,7 @@ from .noise import NoiseConfig
 from .plyscene import scene_from_ply
 from .procedural import SCENE_KINDS, box_room, generate_scene
 from .raster import RasterRenderer, gl_available, make_renderer
-from .render import Renderer, RenderResult
+from .render import Renderer, RenderResult, render_frames
 from .scene import Scene
 from .sequence import (
     DEFAULT_SWEEP,
@@ -45,6 +45,7 @@ __all__ = [
     "make_renderer",
     "gl_available",
     "RenderResult",
+    "render_frames",
     "SCENE_KINDS",
     "generate_scene",
     "box_room",

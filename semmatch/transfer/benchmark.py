@@ -13,7 +13,7 @@ from ..io import Frame
 from .index import MapIndex
 from .registry import METHODS, available_methods, method_info, transfer_frame
 
-__all__ = ["time_method", "time_methods"]
+__all__ = ["time_method", "time_methods", "bench_scene"]
 
 
 def time_method(name: str, frames: Sequence[Frame], index: MapIndex, **params) -> dict:
@@ -77,3 +77,11 @@ def time_methods(
             r["agreement_with_reference"] = float((labels == ref_labels).mean())
         out["methods"][key] = r
     return out
+
+
+def bench_scene(seed: int = 0, n_frames: int = 10, height: float = 0.25):
+    """A generated living room and the robot's poses on its own tour, for benchmarks."""
+    from ..sim import generate_scene, make_trajectory
+
+    scene = generate_scene("living_room", seed)
+    return scene, make_trajectory(scene, height, n_frames, seed=seed, kind="lower")

@@ -48,18 +48,13 @@ def render_frames(
     """The first ``n`` frames (semmatch.io.Frame) of a ``path_frames``-frame trajectory through a
     seeded procedural scene (consecutive frames a few centimetres apart, as a video stream)."""
     from semmatch.geometry import DEFAULT_INTRINSICS
-    from semmatch.io import Frame
-    from semmatch.sim import Renderer, generate_scene, make_trajectory
+    from semmatch.sim import generate_scene, make_trajectory
+    from semmatch.sim import render_frames as render
 
     intr = DEFAULT_INTRINSICS.scaled(width, height)
     scene = generate_scene(scene_kind, seed)
     poses = make_trajectory(scene, camera_height, max(n, path_frames), seed=seed, kind="bench")[:n]
-    r = Renderer(scene, intr)
-    out = []
-    for i, pose in enumerate(poses):
-        res = r.render(pose)
-        out.append(Frame(res.rgb, res.depth, res.labels, pose, intr, index=i))
-    return out
+    return render(scene, poses, intr)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -26,9 +26,9 @@ def register(sub) -> None:
 
 def run(args) -> int:
     """Run the benchmark."""
+    from semmatch.sim import render_frames
     from semmatch.transfer import METHODS, available_methods, prepare
-    from semmatch.transfer.benchmark import time_methods
-    from semmatch.transfer.demo import bench_scene, render_frames
+    from semmatch.transfer.benchmark import bench_scene, time_methods
 
     if args.frames < 1:
         raise ValueError("--frames must be >= 1")

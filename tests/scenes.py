@@ -1,18 +1,16 @@
-"""Small analytic scenes and posed frames for tests and benchmarks of the transfer methods.
+"""Small analytic scenes and camera poses for the tests (not part of the package).
 
-:func:`bench_scene` is a generated living room with the robot's tour (benchmarks); the box room
-of :func:`box_room` is a small analytic scene (tests).
+:func:`box` is an axis-aligned box as a :class:`Scene`; :func:`furnished_room` a closed room with
+a few pieces of furniture (instances) on known footprints; :func:`orbit_poses` cameras inside a
+room looking across it.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from ..geometry import DEFAULT_INTRINSICS, Intrinsics, look_at
-from ..io import Frame
-from ..sim import Renderer, Scene
-
-__all__ = ["box", "box_room", "bench_scene", "render_frames", "orbit_poses"]
+from semmatch.geometry import look_at
+from semmatch.sim import Scene
 
 _FACES = np.array(
     [
@@ -42,7 +40,7 @@ def box(lo, hi, label: int, albedo, instance: int = 0, *, faces: slice | list | 
     return Scene(v, tri, np.full(n, label), np.full(n, instance), np.tile(albedo, (n, 1)))
 
 
-def box_room(seed: int = 0, size: tuple[float, float, float] = (5.0, 4.0, 2.6)) -> Scene:
+def furnished_room(seed: int = 0, size: tuple[float, float, float] = (5.0, 4.0, 2.6)) -> Scene:
     """A closed room (floor, ceiling, walls) with a few pieces of furniture.
 
     Parameters
@@ -80,14 +78,6 @@ def box_room(seed: int = 0, size: tuple[float, float, float] = (5.0, 4.0, 2.6)) 
     return Scene.merge(parts, name=f"box_room_{seed}", meta={"size": list(size), "obstacles": obstacles})
 
 
-def bench_scene(seed: int = 0, n_frames: int = 10, height: float = 0.25) -> tuple[Scene, np.ndarray]:
-    """A generated living room and the robot's poses on its own tour, for benchmarks."""
-    from ..sim import generate_scene, make_trajectory
-
-    scene = generate_scene("living_room", seed)
-    return scene, make_trajectory(scene, height, n_frames, seed=seed, kind="lower")
-
-
 def orbit_poses(scene: Scene, n: int, height: float, seed: int = 0, *, margin: float = 0.6) -> np.ndarray:
     """``n`` camera poses at ``height`` inside the scene bounds, each looking across the room."""
     rng = np.random.default_rng(seed)
@@ -108,15 +98,3 @@ def orbit_poses(scene: Scene, n: int, height: float, seed: int = 0, *, margin: f
                            2 * centre[1] - eye[1] + rng.normal(0, 0.3), rng.uniform(0.0, 1.0)])
         poses.append(look_at(eye, target))
     return np.asarray(poses)
-
-
-def render_frames(
-    scene: Scene, poses: np.ndarray, intrinsics: Intrinsics = DEFAULT_INTRINSICS
-) -> list[Frame]:
-    """Render posed frames (RGB, depth, ground-truth labels) of ``scene``."""
-    r = Renderer(scene, intrinsics)
-    out = []
-    for i, T in enumerate(poses):
-        res = r.render(T)
-        out.append(Frame(res.rgb, res.depth, res.labels, np.asarray(T), intrinsics, index=i))
-    return out
