@@ -36,7 +36,8 @@ from .fusion import check_depth_units, default_device
 from .geometry import check_pose
 from .io import Frame
 
-__all__ = ["estimate_poses", "refine_pose_graph", "shrink_frame", "align_trajectory", "ate", "rpe", "trajectory_errors", "real_like_chain"]
+__all__ = ["estimate_poses", "refine_pose_graph", "shrink_frame", "align_trajectory", "ate", "rpe", "trajectory_errors",
+           "ground_truth_poses", "real_like_chain"]
 
 METHODS = ("frame-to-frame",)
 
@@ -592,6 +593,34 @@ def trajectory_errors(est: np.ndarray, gt: np.ndarray, *, delta: int = 1) -> dic
     }
 
 
+def ground_truth_poses(seq) -> np.ndarray | None:
+    """The true poses of a recording, where it has them (for reports, never for estimates).
+
+    A simulated sequence folder keeps them in ``poses_gt.txt`` (its ``poses.txt`` may hold a
+    noisy estimate); a TUM RGB-D folder in ``groundtruth.txt`` (its ``poses``). Anything else
+    has none.
+
+    Parameters
+    ----------
+    seq : sequence of Frame
+        A :class:`~semmatch.io.SequenceReader` (or its in-memory copy) or a TUM RGB-D sequence.
+
+    Returns
+    -------
+    ndarray (N, 4, 4) or None
+    """
+    from pathlib import Path
+
+    from .io import read_tum
+
+    path = getattr(seq, "path", None)
+    if path is not None and (Path(path) / "poses_gt.txt").is_file():
+        return read_tum(Path(path) / "poses_gt.txt")[1]
+    if getattr(seq, "poses", None) is not None and type(seq).__name__ == "TumRgbdSequence":
+        return np.asarray(seq.poses, dtype=np.float64)
+    return None
+
+
 def real_like_chain(
     seq,
     *,
@@ -647,18 +676,11 @@ def real_like_chain(
         :func:`semmatch.metrics.compare`, or None without reference and ground truth),
         ``alignment`` (4x4 applied to the map for the comparison).
     """
-    from pathlib import Path
-
     from .fusion import reconstruct
-    from .io import read_tum
     from .metrics import compare
 
     if gt_poses is None:
-        p = Path(str(getattr(seq, "path", ""))) / "poses_gt.txt"
-        if getattr(seq, "path", None) is not None and p.is_file():
-            gt_poses = read_tum(p)[1]
-        elif getattr(seq, "poses", None) is not None and type(seq).__name__ == "TumRgbdSequence":
-            gt_poses = seq.poses
+        gt_poses = ground_truth_poses(seq)
     if gt_poses is not None:
         gt_poses = np.asarray(gt_poses, dtype=np.float64)
         if len(gt_poses) != len(seq):

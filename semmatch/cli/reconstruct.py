@@ -61,11 +61,12 @@ def run(args: argparse.Namespace) -> int:
     if args.estimate_poses:
         import numpy as np
 
-        from semmatch.io import read_tum, write_tum
-        from semmatch.odometry import estimate_poses, trajectory_errors
+        from semmatch.io import write_tum
+        from semmatch.odometry import estimate_poses, ground_truth_poses, trajectory_errors
 
-        gt_file = Path(args.seq) / "poses_gt.txt"  # simulated real-like sequences
-        gt = read_tum(gt_file)[1] if gt_file.is_file() else getattr(seq, "poses", None)
+        gt = ground_truth_poses(seq)  # for the start pose and the report only
+        if gt is None:  # a sequence folder without poses_gt.txt: its poses.txt are the true poses
+            gt = getattr(seq, "poses", None)
         init = gt[0] if gt is not None and np.isfinite(gt[0]).all() else None
         prior = seq.poses if args.prior and getattr(seq, "poses", None) is not None else None
         poses = estimate_poses(seq, init_pose=init, prior=prior, progress=not args.quiet)
