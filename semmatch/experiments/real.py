@@ -357,6 +357,7 @@ def evaluate_real_like(
     registration_seed: int = 0,
     registration_restarts: int = 3,
     jobs: int = 1,
+    scheduler: str | None = None,
     progress: bool = True,
 ) -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame]:
     """Run the real-like chain (module documentation) for every evaluation scene and score it.
@@ -391,7 +392,10 @@ def evaluate_real_like(
     registration_voxel, registration_seed, registration_restarts
         ``voxel_size``, ``seed`` and ``restarts`` of :func:`semmatch.registration.register_maps`.
     jobs : int
-        Worker processes for the label transfer.
+        Scenes run as tasks of :func:`semmatch.engine.map_tasks` on ``jobs`` local worker
+        processes (with one scene: its label transfer in ``jobs`` processes).
+    scheduler : str, optional
+        Dask scheduler address instead (default ``SEMMATCH_SCHEDULER``).
     progress : bool
 
     Returns
@@ -424,6 +428,35 @@ def evaluate_real_like(
     ValueError
         ``fused_base`` not among ``methods`` (with networks), a bad ``prior_tolerance``.
     """
+    tol = _check_tolerance(prior_tolerance)
+    if fused_base is not None and networks and fused_base not in methods:
+        raise ValueError(f"fused_base {fused_base!r} is not among the methods {list(methods)}")
+    layout = Layout(data_root)
+    sources = ([GT] if include_ground_truth else []) + list(networks)
+    if not sources:
+        raise ValueError("nothing to evaluate: no networks and include_ground_truth=False")
+    from functools import partial
+
+    from ..engine import map_tasks, resolve_scheduler
+
+    scenes = [sd.name for sd in layout.scene_dirs("eval")]
+    task = partial(_real_like_scene, str(Path(data_root).resolve()), tuple(methods), tuple(networks), tuple(sources),
+                   dict(voxel_size=voxel_size, eval_voxel_size=eval_voxel_size, tol=tol, fused_base=fused_base,
+                        registration_voxel=registration_voxel, registration_seed=registration_seed,
+                        registration_restarts=registration_restarts,
+                        frame_jobs=int(jobs) if resolve_scheduler(scheduler) is None and len(scenes) == 1 else 1))
+    # scenes are engine tasks (jobs local processes or a scheduler); one scene: its frames in jobs processes
+    per_scene = map_tasks(task, scenes, jobs=jobs, scheduler=scheduler, desc="real-like scenes", progress=progress)
+    rows = [r for scene_rows, _, _ in per_scene for r in scene_rows]
+    traj_rows = [r for _, scene_traj, _ in per_scene for r in scene_traj]
+    reg_rows = [reg for _, _, reg in per_scene]
+    return pd.DataFrame(rows), pd.DataFrame(traj_rows), pd.DataFrame(reg_rows)
+
+
+def _real_like_scene(data_root: str, methods: tuple[str, ...], networks: tuple[str, ...], sources: tuple[str, ...],
+                     o: dict, sid: str) -> tuple[list[dict], list[dict], dict]:
+    """The real-like chain of one scene (a task of :func:`evaluate_real_like`): its score rows,
+    trajectory rows and registration row."""
     from ..fusion import reconstruct_many
     from ..metrics import compare
     from ..odometry import trajectory_errors
@@ -431,102 +464,97 @@ def evaluate_real_like(
     from ..segment import predict_sequence
     from ..transfer import prepare, transfer_sequence, write_fused_labels
 
-    tol = _check_tolerance(prior_tolerance)
-    if fused_base is not None and networks and fused_base not in methods:
-        raise ValueError(f"fused_base {fused_base!r} is not among the methods {list(methods)}")
     layout = Layout(data_root)
     models = {net: layout.load_network(net) for net in networks}
-    sources = ([GT] if include_ground_truth else []) + list(networks)
-    if not sources:
-        raise ValueError("nothing to evaluate: no networks and include_ground_truth=False")
-    rows, traj_rows, reg_rows = [], [], []
-    for sd in tqdm(layout.scene_dirs("eval"), desc="real-like scenes", disable=not progress):
-        sid = sd.name
-        for need in ("upper_noisy", "lower_noisy"):
-            if not (sd / need).is_dir():
-                raise FileNotFoundError(f"{sd / need}: no noisy sequence; run 01_simulate with noise on")
-        work = layout.real_like / sid
-        work.mkdir(parents=True, exist_ok=True)
-        seqs, est, true = {}, {}, {}
-        for name in ("upper", "lower"):
-            # read once: predicted, transferred and fused from memory
-            noisy = read_sequence(sd / f"{name}_noisy").load()
-            est[name], true[name] = estimate_or_load_poses(sd / f"{name}_noisy", work / pose_cache_name(name, tol),
-                                                           seq=noisy, prior_tolerance=tol, progress=progress)
-            for what, poses in (("recorded (drifting prior)", noisy.poses), ("estimated (RGB-D odometry)", est[name])):
-                ok = _finite(poses, true[name])
-                first = int(np.flatnonzero(ok)[0])
-                # placed at the true pose of the first frame: the unaligned errors are the drift
-                anchored = true[name][first] @ np.linalg.inv(poses[first]) @ poses
-                err = trajectory_errors(anchored, true[name])
-                traj_rows.append(dict(scene=sid, sequence=name, poses=what, **{
-                    k: float(v) for k, v in err.items() if np.isscalar(v)}))
-            seqs[name] = PosedSequence(noisy, est[name])
-        # upper maps: one fusion of the upper frames (own frame), labelled by ground truth and each network
-        upper_labels = {GT: None}
-        for net in networks:
-            upper_labels[net] = work / f"upper_labels_{net}"
-            predict_sequence(models[net], seqs["upper"], upper_labels[net], progress=False)
-        upper_maps = reconstruct_many(seqs["upper"], [upper_labels[s] for s in sources], voxel_size,
-                                      outs=[work / f"upper_{s}.ply" for s in sources])
-        # the lower reference (own frame); its geometry is registered onto the upper map
-        (reference,) = reconstruct_many(seqs["lower"], [None], voxel_size, outs=[work / "reference.ply"])
-        reg = register_maps(reference, upper_maps[0], voxel_size=registration_voxel, seed=registration_seed,
-                            restarts=registration_restarts)
-        # the report (ground truth): each recording placed in the world by its trajectory alignment,
-        # and by its map fitted onto the scene mesh
-        mesh = read_map(sd / "scene.ply") if (sd / "scene.ply").is_file() else None
-        placed = {("traj", n): world_alignment(est[n], true[n]) for n in ("upper", "lower")}
-        if mesh is not None:
-            placed |= {("mesh", n): world_alignment(est[n], true[n], reconstruction=m, scene_mesh=mesh)
-                       for n, m in (("upper", upper_maps[0]), ("lower", reference))}
-        best = "mesh" if mesh is not None else "traj"
-        e_best = registration_errors(reg.transform, placed[best, "upper"], placed[best, "lower"], est["lower"], true["lower"])
-        e_traj = registration_errors(reg.transform, placed["traj", "upper"], placed["traj", "lower"], est["lower"],
-                                     true["lower"])
-        reg_row = dict(scene=sid, fitness=reg.fitness, inlier_rmse=reg.inlier_rmse, global_fitness=reg.global_fitness,
-                       agreement=reg.agreement, restarts=reg.restarts, seconds=reg.seconds,
-                       reg_trans_err_m=e_best["trans_err_m"], reg_rot_err_deg=e_best["rot_err_deg"],
-                       lower_in_upper_rmse_m=e_best["lower_in_upper_rmse_m"],
-                       reg_trans_err_traj_m=e_traj["trans_err_m"], reg_rot_err_traj_deg=e_traj["rot_err_deg"],
-                       truth=best, transform=reg.transform, true_transform=e_best["true_transform"],
-                       lower_to_world=placed[best, "lower"], upper_to_world=placed[best, "upper"],
-                       lower_to_world_traj=placed["traj", "lower"], upper_to_world_traj=placed["traj", "upper"])
-        reg_rows.append(reg_row)
-        write_json(work / "registration.json", {
-            k: (_matrix(v) if isinstance(v, np.ndarray) else v) for k, v in reg_row.items()
-        } | {"prior_tolerance": None if tol is None else list(tol), "registration_voxel": registration_voxel,
-             "registration_seed": registration_seed, "candidates": [
-                 {k: (_matrix(v) if isinstance(v, np.ndarray) else v) for k, v in c.items()} for c in reg.candidates]})
-        # the transfer works in the upper map's bounding-box frame U (a compact index grid): the
-        # map moved by U, the lower frames at U @ T_reg @ est_lower
-        U = _compact_frame(upper_maps[0])
-        lower_in_upper = U @ reg.transform @ est["lower"]
-        # lower labels: each network on the lower frames, each method from each upper map
-        lower = []  # (source, method, labels folder)
-        for source, upper_map in zip(sources, upper_maps, strict=True):
-            if source != GT:
-                low_dir = work / f"lower_labels_{source}" / "lower"
-                predict_sequence(models[source], seqs["lower"], low_dir, progress=False)
-                lower.append((source, "lower", low_dir))
-            index = prepare(_moved(upper_map, U))
-            for method in methods:
-                lab_dir = work / f"lower_labels_{source}" / method
-                transfer_sequence(method, seqs["lower"].seq, index, lab_dir, poses=lower_in_upper,
-                                  jobs=jobs, progress=False)
-                lower.append((source, method, lab_dir))
-            if source != GT and fused_base is not None:
-                fused = write_fused_labels(work / f"lower_labels_{source}" / fused_base, low_dir,
-                                      work / f"lower_labels_{source}" / "fused")
-                lower.append((source, "fused", fused))
-        # one fusion of the lower frames (own frame) for every labeling
-        maps = reconstruct_many(seqs["lower"], [d for *_, d in lower], voxel_size,
-                                outs=[real_like_lower_map(data_root, sid, s, m) for s, m, _ in lower])
-        for (source, method, _), pred in zip(lower, maps, strict=True):
-            s = compare(reference, pred, voxel_size=eval_voxel_size, grid_origin=eval_grid_origin(eval_voxel_size))
-            rows.append(dict(scene=sid, model=model_name(source), method=method,
-                             **{k: float(s[k]) for k in MEASURE_COLUMNS}))
-    return pd.DataFrame(rows), pd.DataFrame(traj_rows), pd.DataFrame(reg_rows)
+    voxel_size, eval_voxel_size, tol, fused_base = o["voxel_size"], o["eval_voxel_size"], o["tol"], o["fused_base"]
+    registration_voxel, registration_seed = o["registration_voxel"], o["registration_seed"]
+    registration_restarts, jobs, progress = o["registration_restarts"], o["frame_jobs"], False
+    sd = layout.scenes / "eval" / sid
+    rows, traj_rows = [], []
+    for need in ("upper_noisy", "lower_noisy"):
+        if not (sd / need).is_dir():
+            raise FileNotFoundError(f"{sd / need}: no noisy sequence; run 01_simulate with noise on")
+    work = layout.real_like / sid
+    work.mkdir(parents=True, exist_ok=True)
+    seqs, est, true = {}, {}, {}
+    for name in ("upper", "lower"):
+        # read once: predicted, transferred and fused from memory
+        noisy = read_sequence(sd / f"{name}_noisy").load()
+        est[name], true[name] = estimate_or_load_poses(sd / f"{name}_noisy", work / pose_cache_name(name, tol),
+                                                       seq=noisy, prior_tolerance=tol, progress=progress)
+        for what, poses in (("recorded (drifting prior)", noisy.poses), ("estimated (RGB-D odometry)", est[name])):
+            ok = _finite(poses, true[name])
+            first = int(np.flatnonzero(ok)[0])
+            # placed at the true pose of the first frame: the unaligned errors are the drift
+            anchored = true[name][first] @ np.linalg.inv(poses[first]) @ poses
+            err = trajectory_errors(anchored, true[name])
+            traj_rows.append(dict(scene=sid, sequence=name, poses=what, **{
+                k: float(v) for k, v in err.items() if np.isscalar(v)}))
+        seqs[name] = PosedSequence(noisy, est[name])
+    # upper maps: one fusion of the upper frames (own frame), labelled by ground truth and each network
+    upper_labels = {GT: None}
+    for net in networks:
+        upper_labels[net] = work / f"upper_labels_{net}"
+        predict_sequence(models[net], seqs["upper"], upper_labels[net], progress=False)
+    upper_maps = reconstruct_many(seqs["upper"], [upper_labels[s] for s in sources], voxel_size,
+                                  outs=[work / f"upper_{s}.ply" for s in sources])
+    # the lower reference (own frame); its geometry is registered onto the upper map
+    (reference,) = reconstruct_many(seqs["lower"], [None], voxel_size, outs=[work / "reference.ply"])
+    reg = register_maps(reference, upper_maps[0], voxel_size=registration_voxel, seed=registration_seed,
+                        restarts=registration_restarts)
+    # the report (ground truth): each recording placed in the world by its trajectory alignment,
+    # and by its map fitted onto the scene mesh
+    mesh = read_map(sd / "scene.ply") if (sd / "scene.ply").is_file() else None
+    placed = {("traj", n): world_alignment(est[n], true[n]) for n in ("upper", "lower")}
+    if mesh is not None:
+        placed |= {("mesh", n): world_alignment(est[n], true[n], reconstruction=m, scene_mesh=mesh)
+                   for n, m in (("upper", upper_maps[0]), ("lower", reference))}
+    best = "mesh" if mesh is not None else "traj"
+    e_best = registration_errors(reg.transform, placed[best, "upper"], placed[best, "lower"], est["lower"], true["lower"])
+    e_traj = registration_errors(reg.transform, placed["traj", "upper"], placed["traj", "lower"], est["lower"],
+                                 true["lower"])
+    reg_row = dict(scene=sid, fitness=reg.fitness, inlier_rmse=reg.inlier_rmse, global_fitness=reg.global_fitness,
+                   agreement=reg.agreement, restarts=reg.restarts, seconds=reg.seconds,
+                   reg_trans_err_m=e_best["trans_err_m"], reg_rot_err_deg=e_best["rot_err_deg"],
+                   lower_in_upper_rmse_m=e_best["lower_in_upper_rmse_m"],
+                   reg_trans_err_traj_m=e_traj["trans_err_m"], reg_rot_err_traj_deg=e_traj["rot_err_deg"],
+                   truth=best, transform=reg.transform, true_transform=e_best["true_transform"],
+                   lower_to_world=placed[best, "lower"], upper_to_world=placed[best, "upper"],
+                   lower_to_world_traj=placed["traj", "lower"], upper_to_world_traj=placed["traj", "upper"])
+    write_json(work / "registration.json", {
+        k: (_matrix(v) if isinstance(v, np.ndarray) else v) for k, v in reg_row.items()
+    } | {"prior_tolerance": None if tol is None else list(tol), "registration_voxel": registration_voxel,
+         "registration_seed": registration_seed, "candidates": [
+             {k: (_matrix(v) if isinstance(v, np.ndarray) else v) for k, v in c.items()} for c in reg.candidates]})
+    # the transfer works in the upper map's bounding-box frame U (a compact index grid): the
+    # map moved by U, the lower frames at U @ T_reg @ est_lower
+    U = _compact_frame(upper_maps[0])
+    lower_in_upper = U @ reg.transform @ est["lower"]
+    # lower labels: each network on the lower frames, each method from each upper map
+    lower = []  # (source, method, labels folder)
+    for source, upper_map in zip(sources, upper_maps, strict=True):
+        if source != GT:
+            low_dir = work / f"lower_labels_{source}" / "lower"
+            predict_sequence(models[source], seqs["lower"], low_dir, progress=False)
+            lower.append((source, "lower", low_dir))
+        index = prepare(_moved(upper_map, U))
+        for method in methods:
+            lab_dir = work / f"lower_labels_{source}" / method
+            transfer_sequence(method, seqs["lower"].seq, index, lab_dir, poses=lower_in_upper,
+                              jobs=jobs, progress=False)
+            lower.append((source, method, lab_dir))
+        if source != GT and fused_base is not None:
+            fused = write_fused_labels(work / f"lower_labels_{source}" / fused_base, low_dir,
+                                  work / f"lower_labels_{source}" / "fused")
+            lower.append((source, "fused", fused))
+    # one fusion of the lower frames (own frame) for every labeling
+    maps = reconstruct_many(seqs["lower"], [d for *_, d in lower], voxel_size,
+                            outs=[real_like_lower_map(data_root, sid, s, m) for s, m, _ in lower])
+    for (source, method, _), pred in zip(lower, maps, strict=True):
+        s = compare(reference, pred, voxel_size=eval_voxel_size, grid_origin=eval_grid_origin(eval_voxel_size))
+        rows.append(dict(scene=sid, model=model_name(source), method=method,
+                         **{k: float(s[k]) for k in MEASURE_COLUMNS}))
+    return rows, traj_rows, reg_row
 
 
 def select_prior_tolerance(
