@@ -14,7 +14,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def test_unknown_profile_is_refused_with_the_valid_ones():
-    with pytest.raises(ValueError, match=r"profile 'nope' does not exist; valid profiles: full, smoke"):
+    with pytest.raises(ValueError, match=r"profile 'nope' does not exist; valid profiles: full, large, smoke"):
         pipeline.load_params(ROOT / "params.yaml", "nope")
 
 
