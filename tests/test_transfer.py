@@ -505,3 +505,49 @@ def test_depth_in_millimetres_is_refused_by_transfer(scene, frames):
     mm = dataclasses.replace(f, depth=f.depth * 1000.0)
     with pytest.raises(ValueError, match="wrong unit"):
         transfer("3d-neighborhood", mm, scene.to_semantic_map())
+
+
+def test_the_index_cache_gives_the_same_lookups_and_survives_bad_files(gt_map, tmp_path, rng, monkeypatch):
+    import os
+    import warnings
+
+    from semmatch.transfer import load_index
+
+    path = tmp_path / "maps" / "upper.ply"
+    write_map(path, gt_map)
+    built = load_index(path, voxel_size=0.04)
+    caches = list(path.parent.glob(".upper.ply.index-*.npz"))
+    assert len(caches) == 1
+    cached = load_index(path, voxel_size=0.04)  # from the cache: no grid build
+    lo, hi = gt_map.points.min(axis=0), gt_map.points.max(axis=0)
+    pts = rng.uniform(lo - 0.2, hi + 0.2, (20000, 3)).astype(np.float32)
+    for exact in (False, True):
+        assert (cached.lookup(pts, exact=exact) == built.lookup(pts, exact=exact)).all()
+    assert (cached.grid == built.grid).all() and cached.voxel_size == built.voxel_size
+    cloud = tmp_path / "maps" / "cloud.ply"  # a point map: its KD-tree comes back too
+    write_map(cloud, SemanticMap(gt_map.points, gt_map.labels))
+    a, b = load_index(cloud, voxel_size=0.04), load_index(cloud, voxel_size=0.04)
+    assert (a.lookup(pts, exact=True) == b.lookup(pts, exact=True)).all()
+    # other parameters or another map: another key
+    load_index(path, voxel_size=0.05)
+    assert len(list(path.parent.glob(".upper.ply.index-*.npz"))) == 2
+    # a damaged cache is rebuilt with one warning
+    caches[0].write_bytes(b"not an npz")
+    with pytest.warns(UserWarning, match="unreadable index cache"):
+        again = load_index(path, voxel_size=0.04)
+    assert (again.lookup(pts) == built.lookup(pts)).all()
+    # switched off: nothing read or written; a read-only folder: no cache, no error
+    for c in path.parent.glob(".upper.ply.index-*.npz"):
+        c.unlink()
+    monkeypatch.setenv("SEMMATCH_NO_INDEX_CACHE", "1")
+    load_index(path, voxel_size=0.04)
+    assert not list(path.parent.glob(".upper.ply.index-*.npz"))
+    monkeypatch.delenv("SEMMATCH_NO_INDEX_CACHE")
+    if os.geteuid() != 0:  # root writes into read-only folders anyway
+        path.parent.chmod(0o555)
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("error")
+                load_index(path, voxel_size=0.04)
+        finally:
+            path.parent.chmod(0o755)

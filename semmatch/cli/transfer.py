@@ -35,6 +35,9 @@ def register(sub) -> None:
     p.add_argument("--json", action="store_true", help="print the statistics as one JSON object")
     p.add_argument("--strict", action="store_true",
                    help="exit with an error when the map supports (almost) no pixel (default: a warning)")
+    p.add_argument("--no-index-cache", action="store_true",
+                   help="neither read nor write the map's index cache (.MAP.index-KEY.npz beside the map; "
+                        "also off with SEMMATCH_NO_INDEX_CACHE)")
     p.set_defaults(func=run)
 
 
@@ -54,8 +57,8 @@ def _parse_params(items: list[str]) -> dict:
 def run(args) -> int:
     """Run ``semmatch transfer``."""
     from semmatch.cli import sequence_arg
-    from semmatch.io import check_output_dir, read_map, read_sequence
-    from semmatch.transfer import MapIndex, transfer_sequence
+    from semmatch.io import check_output_dir, read_sequence
+    from semmatch.transfer import load_index, transfer_sequence
     from semmatch.transfer.registry import check_params
 
     seq_path = sequence_arg(args)
@@ -70,7 +73,8 @@ def run(args) -> int:
         raise ValueError("--method fused needs --probs DIR (per-frame class probabilities)")
     check_params(args.method, params)
     seq = read_sequence(seq_path)
-    index = MapIndex(read_map(args.map), max_distance=args.max_distance, voxel_size=args.voxel_size)
+    index = load_index(args.map, max_distance=args.max_distance, voxel_size=args.voxel_size,
+                       cache=not args.no_index_cache)
     import warnings
 
     from semmatch.transfer.sequence import LOW_SUPPORT, LowSupportWarning

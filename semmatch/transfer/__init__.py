@@ -13,7 +13,7 @@ a method (the CLI, the benchmark and the notebooks pick it up).
 """
 
 from .fused import fuse, fuse_labels, write_fused_labels
-from .index import DEFAULT_MAX_DISTANCE, MapIndex, prepare
+from .index import DEFAULT_MAX_DISTANCE, MapIndex, load_index, prepare
 from .registry import (
     ALL_METHODS,
     METHODS,
@@ -41,6 +41,7 @@ __all__ = [
     "register_method",
     "available_methods",
     "MapIndex",
+    "load_index",
     "prepare",
     "DEFAULT_MAX_DISTANCE",
     "method_params",

@@ -20,7 +20,9 @@ neighbouring class).
 
 from __future__ import annotations
 
+import os
 import warnings
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -31,7 +33,7 @@ from ..geometry import Intrinsics, check_pose, pixel_rays
 from ..io import SemanticMap
 from ..labels import NUM_CLASSES, THING_CLASSES
 
-__all__ = ["MapIndex", "prepare", "sample_mesh", "DEFAULT_MAX_DISTANCE"]
+__all__ = ["MapIndex", "prepare", "load_index", "sample_mesh", "DEFAULT_MAX_DISTANCE", "NO_CACHE_ENV"]
 
 #: Default distance threshold (metres): a lower-view point farther than this from every surface
 #: of the upper map has no support and gets label 0. 10 cm is above the depth noise of an RGB-D
@@ -175,6 +177,36 @@ class MapIndex:
         self.n_samples = len(self.samples)
         if self.is_mesh:  # mesh samples only serve the grid; exact queries use the triangles
             self.samples = self.sample_labels = None
+
+    @classmethod
+    def _from_cache(cls, semantic_map: SemanticMap, path, *, workers: int = 1) -> MapIndex:
+        """An index of ``semantic_map`` from a cache file of :func:`load_index` (no grid build)."""
+        with np.load(path) as z:
+            data = {k: z[k] for k in z.files}
+        self = cls.__new__(cls)
+        self.map = semantic_map
+        self.source = semantic_map.source
+        self.max_distance = float(data["max_distance"])
+        self.workers = int(workers)
+        self.is_mesh = semantic_map.is_mesh
+        self.samples = None if self.is_mesh else data["samples"]
+        self.sample_labels = None if self.is_mesh else data["sample_labels"]
+        if not self.is_mesh and len(self.samples) != len(semantic_map.points):
+            raise ValueError("the cached samples do not match the map")
+        self._tree = None if self.is_mesh else cKDTree(self.samples)
+        self._rc = None
+        self._class_trees = None
+        self._rays = {}
+        self.voxel_size = float(data["voxel_size"])
+        self.origin = data["origin"].astype(np.float64)
+        self.shape = tuple(int(x) for x in data["shape"])
+        self.grid = data["grid"]
+        if self.grid.shape != self.shape or self.grid.dtype != np.uint8:
+            raise ValueError(f"grid of shape {self.grid.shape} / {self.grid.dtype}, expected {self.shape} / uint8")
+        self._flat = self.grid.ravel()
+        self._labels_flat = (self.grid & np.uint8(_LABEL_BITS)).ravel()
+        self.n_samples = int(data["n_samples"])
+        return self
 
     def __getstate__(self) -> dict:
         state = self.__dict__.copy()
@@ -578,4 +610,72 @@ def prepare(
         return _CACHE[0][2]
     index = MapIndex(semantic_map, max_distance=md, **index_params)
     _CACHE[:] = [(key, semantic_map, index)]
+    return index
+
+
+#: version of the index cache files (bump when the grid's meaning changes)
+INDEX_CACHE_VERSION = 1
+#: environment variable that turns the index cache off (any non-empty value)
+NO_CACHE_ENV = "SEMMATCH_NO_INDEX_CACHE"
+_CACHED = ("grid", "origin", "shape", "voxel_size", "max_distance", "n_samples")
+
+
+def _cache_file(path: Path, max_distance: float, voxel_size: float) -> Path:
+    """``.<map>.index-<key>.npz`` beside the map: key = SHA-256 of its bytes and the parameters."""
+    import hashlib
+
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    h.update(f"|{max_distance!r}|{voxel_size!r}|{INDEX_CACHE_VERSION}".encode())
+    return path.with_name(f".{path.name}.index-{h.hexdigest()[:16]}.npz")
+
+
+def load_index(path, *, max_distance: float = DEFAULT_MAX_DISTANCE, voxel_size: float = 0.02,
+               cache: bool = True, **index_params) -> MapIndex:
+    """The :class:`MapIndex` of a map file, built once and cached beside it.
+
+    The label grid (the costly part: seconds and most of the memory for a room) is stored as
+    ``.<map>.index-<key>.npz`` in the map's folder, keyed by the SHA-256 of the map's bytes and
+    the index parameters; a later call with the same map and parameters loads it instead of
+    building (the exact queries are rebuilt from the map, cheaply). A cache that cannot be read
+    is rebuilt with a warning; a folder that cannot be written just gets no cache.
+
+    Parameters
+    ----------
+    path : path
+        A semantic PLY map (:func:`semmatch.io.read_map`).
+    max_distance, voxel_size, **index_params
+        As :class:`MapIndex`.
+    cache : bool
+        Use and write the cache (also off when ``SEMMATCH_NO_INDEX_CACHE`` is set).
+
+    Returns
+    -------
+    MapIndex
+        Lookups identical to ``MapIndex(read_map(path), ...)``.
+    """
+    from ..io import atomic_path, read_map
+
+    path = Path(path)
+    m = read_map(path)
+    if not cache or os.environ.get(NO_CACHE_ENV) or index_params.get("max_voxels") is not None:
+        return MapIndex(m, max_distance=max_distance, voxel_size=voxel_size, **index_params)
+    cf = _cache_file(path, float(max_distance), float(voxel_size))
+    if cf.is_file():
+        try:
+            return MapIndex._from_cache(m, cf, **index_params)
+        except Exception as e:  # a truncated or foreign file: rebuild
+            warnings.warn(f"{cf}: unreadable index cache ({type(e).__name__}: {e}); rebuilding it", UserWarning,
+                          stacklevel=2)
+    index = MapIndex(m, max_distance=max_distance, voxel_size=voxel_size, **index_params)
+    try:
+        with atomic_path(cf) as tmp:
+            np.savez_compressed(tmp, **{k: np.asarray(getattr(index, k)) for k in _CACHED},
+                                samples=index.samples if index.samples is not None else np.zeros((0, 3), np.float32),
+                                sample_labels=(index.sample_labels if index.sample_labels is not None
+                                               else np.zeros(0, np.uint8)))
+    except OSError:  # a read-only folder: no cache
+        pass
     return index
