@@ -182,7 +182,7 @@ CASES = [
      r"holds files semmatch did not write"),
     ("transfer-negative-distance", transfer_with("{base}/map.ply", "--max-distance", "-1"), r"max_distance must be > 0"),
     ("transfer-fused-without-probs", transfer_with("{base}/map.ply", method="fused"), r"--method fused needs --probs"),
-    ("transfer-jobs-zero", transfer_with("{base}/map.ply", "--jobs", "0"), r"jobs must be >= 1"),
+    ("transfer-jobs-zero", transfer_with("{base}/map.ply", "--jobs", "0"), r"--jobs must be >= 1"),
     ("transfer-missing-sequence", argv_of("transfer", "{w}/nope", "--map", "{base}/map.ply", "--method",
                                           "3d-neighborhood", "--out", "{w}/out"), r"nope: no such sequence folder"),
     # evaluate

@@ -72,6 +72,8 @@ def run(args) -> int:
     elif args.method == "fused":
         raise ValueError("--method fused needs --probs DIR (per-frame class probabilities)")
     check_params(args.method, params)
+    if args.jobs < 1:  # before the map is indexed (and its index cached)
+        raise ValueError(f"--jobs must be >= 1, got {args.jobs}")
     seq = read_sequence(seq_path)
     index = load_index(args.map, max_distance=args.max_distance, voxel_size=args.voxel_size,
                        cache=not args.no_index_cache)
