@@ -313,7 +313,7 @@ def test_top_level_overrides_reach_the_profile(tmp_path):
         pipeline.load_params(f)
 
 
-def test_every_override_key_is_in_params_and_reaches_a_stage():
+def test_every_override_key_is_in_params_and_reaches_a_stage(tmp_path):
     import yaml
 
     top = yaml.safe_load((pipeline.ROOT / "params.yaml").read_text())
@@ -324,6 +324,17 @@ def test_every_override_key_is_in_params_and_reaches_a_stage():
         assert key in declared, f"no stage reruns when {key} is overridden"
     for name in top["profiles"]:
         pipeline.load_params(pipeline.ROOT / "params.yaml", name)  # every override key resolves
+    # every key can be set (networks is in common and in the panoptic section: common wins)
+    text = (pipeline.ROOT / "params.yaml").read_text()
+    import re
+
+    for key in pipeline.OVERRIDABLE:
+        f = tmp_path / f"{key}.yaml"
+        f.write_text(re.sub(rf"(?m)^{key}: null", f"{key}: [compact]" if key != "fused_base" else f"{key}: dbscan",
+                            text))
+        p = pipeline.load_params(f, "full")
+        assert any(p[sec].get(key) in (["compact"], "dbscan") for sec in p if isinstance(p[sec], dict)), key
+    assert pipeline.load_params(tmp_path / "networks.yaml", "full")["panoptic"]["networks"] == ["compact"]
 
 
 def test_snapshot_shrinks_figures_and_drops_interactive_outputs(tmp_path):

@@ -69,7 +69,8 @@ def section_of(notebook: str) -> str:
 
 
 #: parameters a researcher varies, settable at the top level of params.yaml (``null`` = the
-#: active profile's value), so that ``dvc exp run -S eval_voxel_size=0.1`` works with a short key
+#: active profile's value), so that ``dvc exp run -S eval_voxel_size=0.1`` works with a short key;
+#: a key of ``common`` overrides it there, any other key the one notebook section that has it
 OVERRIDABLE = ("eval_seeds", "methods", "networks", "fused_base", "voxel_size", "eval_voxel_size",
                "n_frames_upper", "n_frames_lower", "routes", "image_width", "image_height")
 _TOP_LEVEL = ("profile", "profiles", *OVERRIDABLE)
@@ -86,6 +87,8 @@ def _apply_overrides(params_file: Path, data: dict, name: str, profile: dict) ->
         if data.get(key) is None:
             continue
         where = [sec for sec, v in out.items() if isinstance(v, dict) and key in v]
+        if "common" in where:  # a common key; a notebook section's own key of that name stays
+            where = ["common"]
         if len(where) != 1:
             raise ValueError(f"{params_file}: the override {key}={data[key]!r} must match exactly one "
                              f"section of profile {name!r}, found {where or 'none'}")
