@@ -92,6 +92,8 @@ def run(args) -> int:
 
     renderers = [("exact", renderer), ("fast", Renderer(scene, intr, nthreads=args.threads, fast=True))]
     gl_ok, gl_info = gl_available()
+    if args.mode == "raster" and not gl_ok:
+        raise ValueError(f"--mode raster: cannot rasterise here ({gl_info})")
     if gl_ok:
         t0 = time.perf_counter()
         renderers.append(("raster", RasterRenderer(scene, intr, nthreads=args.threads)))
