@@ -52,6 +52,9 @@ def register(sub) -> None:
                       description="Transfer the classes and instances of the upper panoptic map into "
                       "every frame of SEQ, fuse the classes (TSDF) and vote the instances onto the map.")
     tr.add_argument("--map", required=True, help="upper panoptic PLY (with an 'instance' property)")
+    tr.add_argument("--no-index-cache", action="store_true",
+                    help="neither read nor write the map's index cache (.MAP.index-KEY.npz beside the map; "
+                         "also off with SEMMATCH_NO_INDEX_CACHE)")
     add_sequence(tr, "the robot's (lower) sequence folder")
     tr.add_argument("--method", required=True, choices=[m for m in available_methods() if m != "fused"],
                     help="transfer method")
@@ -129,14 +132,14 @@ def run_transfer(args: argparse.Namespace) -> int:
     from semmatch.fusion import reconstruct
     from semmatch.io import read_map, read_sequence, write_map
     from semmatch.panoptic import PanopticFrame, fuse_instances, require_instances, transfer_panoptic
-    from semmatch.transfer import MapIndex
+    from semmatch.transfer import load_index
 
     from ..progress import tqdm
 
     seq_path = sequence_arg(args)
     _refuse_input(args.out, seq_path, args.map)
     upper = require_instances(read_map(args.map), "panoptic transfer")
-    index = MapIndex(upper, max_distance=args.max_distance)
+    index = load_index(args.map, max_distance=args.max_distance, cache=not args.no_index_cache, semantic_map=upper)
     seq = read_sequence(seq_path)
     labels, evidence = [], []
     for i in tqdm(range(len(seq)), desc=f"panoptic {args.method}", disable=args.quiet):

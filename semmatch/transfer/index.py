@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import os
 import warnings
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import cv2
@@ -50,6 +51,39 @@ _LABEL_BITS = 0x3F
 
 #: most samples :func:`sample_mesh` may make (a map in millimetres would ask for billions)
 MAX_MESH_SAMPLES = 60_000_000
+
+
+#: voxels along a block edge of the sparse label grid (blocks of BLOCK**3 voxels)
+BLOCK = 8
+_BSHIFT = 3  # log2(BLOCK)
+_CHUNK = 8  # blocks along a chunk edge: the label grid is computed chunk by chunk (64^3 voxels + halo)
+#: most blocks the block table may cover (int32 each; the bounding box / BLOCK**3)
+MAX_TABLE_BLOCKS = 100_000_000
+_BUILD_SAMPLES = 1_000_000  # mesh samples made (and reduced to voxels) at a time while building
+#: most mesh samples an index build may make (made and reduced a million at a time)
+MAX_INDEX_SAMPLES = 2_000_000_000
+_BUILD_THREADS = 2  # chunks of the label grid computed at once (SciPy releases the GIL)
+
+
+def _mesh_sample_chunks(points: np.ndarray, faces: np.ndarray, labels: np.ndarray, spacing: float,
+                        chunk_samples: int = _BUILD_SAMPLES):
+    """:func:`sample_mesh`'s samples in its order, as a generator of (samples, labels) pieces."""
+    v = np.asarray(points, dtype=np.float64)[faces]
+    edges = np.stack([v[:, 1] - v[:, 0], v[:, 2] - v[:, 1], v[:, 0] - v[:, 2]], axis=1)
+    n_sub = np.maximum(1, np.ceil(np.linalg.norm(edges, axis=2).max(axis=1) / spacing)).astype(np.int64)
+    del edges
+    flab = np.asarray(labels)[faces]
+    for n in np.unique(n_sub):
+        sel = np.nonzero(n_sub == n)[0]
+        i, j = np.mgrid[0 : n + 1, 0 : n + 1]
+        keep = i + j <= n
+        bary = np.stack([i[keep], j[keep], n - i[keep] - j[keep]], axis=1).astype(np.float64) / n
+        nearest = np.argmax(bary, axis=1)
+        chunk = max(1, chunk_samples // len(bary))
+        for s in range(0, len(sel), chunk):
+            f = sel[s : s + chunk]
+            yield (np.einsum("kc,fcd->fkd", bary, v[f]).reshape(-1, 3).astype(np.float32),
+                   flab[f][:, nearest].reshape(-1).astype(np.uint8))
 
 
 def sample_mesh(
@@ -117,8 +151,9 @@ class MapIndex:
         Edge of the label-grid voxels in metres. Smaller voxels flag fewer points as ambiguous
         (faster lookups) at the cost of memory and build time.
     max_voxels : int
-        Upper bound on the grid size; a map too large for ``voxel_size`` gets a coarser grid
-        (with a warning).
+        Memory budget: most voxels the sparse grid may allocate (one byte each, in blocks of
+        ``BLOCK**3`` near the map surface). Checked before the blocks are allocated; a map that
+        needs more is refused with a ValueError (a map in millimetres, a voxel too small).
     workers : int
         Threads for SciPy KD-tree queries and Open3D queries (1 = single thread).
 
@@ -140,7 +175,7 @@ class MapIndex:
         *,
         max_distance: float = DEFAULT_MAX_DISTANCE,
         voxel_size: float = 0.02,
-        max_voxels: int = 32_000_000,
+        max_voxels: int = 1_000_000_000,
         workers: int = 1,
     ) -> None:
         if not isinstance(semantic_map, SemanticMap):
@@ -160,23 +195,13 @@ class MapIndex:
         self.max_distance = float(max_distance)
         self.workers = int(workers)
         self.is_mesh = semantic_map.is_mesh
-        if self.is_mesh:
-            try:
-                self.samples, self.sample_labels = sample_mesh(
-                    semantic_map.points, semantic_map.faces, semantic_map.labels, 0.7 * voxel_size
-                )
-            except ValueError as e:
-                raise ValueError(f"{semantic_map.source}: {e}") from None
-        else:
-            self.samples, self.sample_labels = semantic_map.points, semantic_map.labels
+        self.samples = None if self.is_mesh else semantic_map.points
+        self.sample_labels = None if self.is_mesh else semantic_map.labels
         self._tree = None if self.is_mesh else cKDTree(self.samples)
         self._rc = None
         self._class_trees: dict | None = None  # per-class KD-trees of instance lookups
         self._rays: dict[Intrinsics, tuple[np.ndarray, np.ndarray]] = {}
         self._build_grid(float(voxel_size), int(max_voxels))
-        self.n_samples = len(self.samples)
-        if self.is_mesh:  # mesh samples only serve the grid; exact queries use the triangles
-            self.samples = self.sample_labels = None
 
     @classmethod
     def _from_cache(cls, semantic_map: SemanticMap, path, *, workers: int = 1) -> MapIndex:
@@ -200,11 +225,15 @@ class MapIndex:
         self.voxel_size = float(data["voxel_size"])
         self.origin = data["origin"].astype(np.float64)
         self.shape = tuple(int(x) for x in data["shape"])
-        self.grid = data["grid"]
-        if self.grid.shape != self.shape or self.grid.dtype != np.uint8:
-            raise ValueError(f"grid of shape {self.grid.shape} / {self.grid.dtype}, expected {self.shape} / uint8")
-        self._flat = self.grid.ravel()
-        self._labels_flat = (self.grid & np.uint8(_LABEL_BITS)).ravel()
+        self._table = data["table"]
+        self._blocks = data["blocks"]
+        nb = -(-np.asarray(self.shape) // BLOCK)
+        if (self._table.shape != tuple(nb) or self._table.dtype != np.int32 or self._blocks.dtype != np.uint8
+                or self._blocks.size % BLOCK**3 or not 0 <= self._table.min(initial=0) <= self._table.max(initial=0)
+                < self._blocks.size // BLOCK**3):
+            raise ValueError(f"block table {self._table.shape} / {self._table.dtype} and {self._blocks.size} block "
+                             f"voxels do not fit a grid of {self.shape}")
+        self._set_tables()
         self.n_samples = int(data["n_samples"])
         return self
 
@@ -214,69 +243,186 @@ class MapIndex:
         return state
 
     # ------------------------------------------------------------------ construction
+    def _sample_pieces(self, spacing: float):
+        """The map's samples (mesh: :func:`sample_mesh` order) as (points, labels) pieces."""
+        if self.is_mesh:
+            yield from _mesh_sample_chunks(self.map.points, self.map.faces, self.map.labels, spacing)
+        else:
+            for a in range(0, len(self.samples), _BUILD_SAMPLES):
+                yield self.samples[a : a + _BUILD_SAMPLES], self.sample_labels[a : a + _BUILD_SAMPLES]
+
+    def _bounds(self, spacing: float) -> tuple[np.ndarray, np.ndarray, int]:
+        """Lowest and highest sample and the number of samples, before any sample is made."""
+        if not self.is_mesh:
+            return (self.samples.min(axis=0).astype(np.float64), self.samples.max(axis=0).astype(np.float64),
+                    len(self.samples))
+        used = np.asarray(self.map.points)[np.unique(self.map.faces)].astype(np.float32)  # the corner samples
+        v = np.asarray(self.map.points, dtype=np.float64)[self.map.faces]
+        edges = np.stack([v[:, 1] - v[:, 0], v[:, 2] - v[:, 1], v[:, 0] - v[:, 2]], axis=1)
+        longest = np.linalg.norm(edges, axis=2).max(axis=1)
+        n_sub = np.maximum(1, np.ceil(longest / spacing)).astype(np.int64)
+        total = int(((n_sub + 1) * (n_sub + 2) // 2).sum())
+        if total > MAX_INDEX_SAMPLES:
+            raise ValueError(
+                f"{self.source}: sampling the mesh every {spacing:g} m would make {total:,} points (limit "
+                f"{MAX_INDEX_SAMPLES:,}); its longest edge is {longest.max():.3g}: is the map in metres (not "
+                "millimetres)? is the voxel size too small?")
+        return used.min(axis=0).astype(np.float64), used.max(axis=0).astype(np.float64), total
+
     def _build_grid(self, voxel_size: float, max_voxels: int) -> None:
-        lo = self.samples.min(axis=0).astype(np.float64)
-        hi = self.samples.max(axis=0).astype(np.float64)
-        margin = self.max_distance + 2 * voxel_size
-        extent = hi - lo + 2 * margin
+        """The sparse label grid: only blocks within reach of the map surface are computed and kept.
+
+        Same values as :func:`_dense_grid` (the whole bounding box) in every voxel; budgets are
+        checked before anything proportional to the box or the surface is allocated.
+        """
         s = voxel_size
-        if np.prod(np.ceil(extent / s) + 1) > max_voxels:
-            s = float((np.prod(extent) / max_voxels) ** (1 / 3)) * 1.05
-            warnings.warn(
-                f"{self.source}: map extent {extent.round(2).tolist()} m needs more than {max_voxels} "
-                f"voxels at {voxel_size} m; using {s:.3f} m voxels",
-                UserWarning,
-                stacklevel=3,
-            )
+        lo, hi, n_samples = self._bounds(0.7 * s)
+        margin = self.max_distance + 2 * s
+        extent = hi - lo + 2 * margin
         self.voxel_size = s
         self.origin = lo - margin
         shape = np.ceil(extent / s).astype(np.int64) + 1
         self.shape = tuple(int(x) for x in shape)
-        # label of every occupied voxel: that of its sample nearest to the voxel centre (does
-        # not depend on the label ids); voxels holding samples of several labels are "mixed"
-        k = np.floor((self.samples - self.origin) / s).astype(np.int64)
-        lin = np.ravel_multi_index(k.T, self.shape)
-        off = np.linalg.norm((self.samples - self.origin) / s - k - 0.5, axis=1)  # < 0.87
-        order = np.argsort(lin * 1024 + np.minimum(off * 1024, 1023).astype(np.int64))
-        lin_o, lab_o = lin[order], self.sample_labels[order]
-        first = np.r_[True, lin_o[1:] != lin_o[:-1]]
-        lab_min = np.minimum.reduceat(lab_o, np.flatnonzero(first))
-        lab_max = np.maximum.reduceat(lab_o, np.flatnonzero(first))
-        occ_lin = lin_o[first]
-        label_of = np.zeros(self.shape, dtype=np.uint8)
-        label_of.ravel()[occ_lin] = lab_o[first] | np.where(lab_min != lab_max, _MIXED, 0).astype(np.uint8)
-        # nearest occupied voxel of every voxel (Euclidean distance transform)
-        empty = np.ones(self.shape, dtype=bool)
-        empty.ravel()[occ_lin] = False
-        idx = ndimage.distance_transform_edt(empty, return_distances=False, return_indices=True)
-        del empty
-        near = label_of[tuple(idx)]
-        # squared voxel distance to it, in int32 along broadcast axes (SciPy's own distances
-        # go through three float64 index volumes: twice the time of the transform itself)
-        d2 = np.zeros(self.shape, dtype=np.int32)
-        for a in range(3):
-            ax = np.arange(self.shape[a], dtype=np.int32).reshape([-1 if b == a else 1 for b in range(3)])
-            step = idx[a].astype(np.int32) - ax
-            d2 += step * step
-        del idx, step
-        near[np.sqrt(d2, dtype=np.float64) > self.max_distance / s] = 0
-        del d2
-        mixed = (near & _MIXED) > 0
-        grid = near & ~np.uint8(_MIXED)
-        # ambiguous: a mixed nearest voxel, or the 27-neighbourhood disagrees (label edge or the
-        # max_distance shell): there the exact query decides
-        lo_n, hi_n = ndimage.minimum_filter(grid, size=3), ndimage.maximum_filter(grid, size=3)
-        amb = mixed | (lo_n != hi_n)
-        shell = (lo_n == 0) & (hi_n > 0)
-        grid[amb] |= np.uint8(_AMBIGUOUS)
-        grid[shell] |= np.uint8(_SHELL)
-        # the outer layer stays void so that clipped out-of-range lookups read void
-        grid[[0, -1]] = 0
-        grid[:, [0, -1]] = 0
-        grid[:, :, [0, -1]] = 0
-        self.grid = grid
-        self._flat = grid.ravel()
-        self._labels_flat = (grid & np.uint8(_LABEL_BITS)).ravel()  # voxel-centre answers
+        nb = -(-shape // BLOCK)
+        n_table = int(np.prod(nb.astype(np.float64)))
+        if n_table > MAX_TABLE_BLOCKS:
+            raise ValueError(
+                f"{self.source}: the map spans {extent.round(2).tolist()} (map units) and would need a table of "
+                f"{n_table:,} blocks of {BLOCK}^3 voxels at {s:g} m (limit {MAX_TABLE_BLOCKS:,}): is the map in "
+                "metres (not millimetres)? is the voxel size too small?")
+        # occupied voxels: label of the sample nearest to the voxel centre (ties: the lowest label),
+        # flagged mixed when the voxel holds samples of several labels; made piece by piece
+        best, lmin, lmax = [], [], []
+        self.n_samples = 0
+        for pts, lab in self._sample_pieces(0.7 * s):
+            self.n_samples += len(pts)
+            key = _voxel_keys(pts, lab, self.origin, s, self.shape)
+            key.sort()
+            start = np.flatnonzero(np.r_[True, (key[1:] >> 16) != (key[:-1] >> 16)])
+            labs = (key & _LABEL_BITS).astype(np.uint8)
+            best.append(key[start])
+            lmin.append(np.minimum.reduceat(labs, start))
+            lmax.append(np.maximum.reduceat(labs, start))
+            del key, labs, start
+        best, lmin, lmax = np.concatenate(best), np.concatenate(lmin), np.concatenate(lmax)
+        if len(lmin) > 1:
+            order = np.argsort(best, kind="stable")
+            best, lmin, lmax = best[order], lmin[order], lmax[order]
+            del order
+            start = np.flatnonzero(np.r_[True, (best[1:] >> 16) != (best[:-1] >> 16)])
+            lmin, lmax = np.minimum.reduceat(lmin, start), np.maximum.reduceat(lmax, start)
+            best = best[start]
+        occ_lin = best >> 16
+        occ_val = (best & _LABEL_BITS).astype(np.uint8) | np.where(lmin != lmax, _MIXED, 0).astype(np.uint8)
+        del best, lmin, lmax
+        # blocks within reach: a voxel can be non-void only within floor(max_distance / voxel) + 1
+        # voxels of an occupied one (its nearest surface, or a neighbour's, for the flags)
+        reach = int(np.floor(self.max_distance / s)) + 1
+        occ_k = np.stack(np.unravel_index(occ_lin, self.shape), axis=1).astype(np.int32)
+        occ_blocks = np.zeros(tuple(nb), bool)
+        occ_blocks[tuple((occ_k >> _BSHIFT).T)] = True
+        near_blocks = ndimage.binary_dilation(occ_blocks, np.ones((3, 3, 3), bool),
+                                              iterations=-(-reach // BLOCK))
+        del occ_blocks
+        n_alloc = int(near_blocks.sum())
+        if n_alloc * BLOCK**3 > max_voxels:
+            raise ValueError(
+                f"{self.source}: the map's surface needs {n_alloc:,} blocks ({n_alloc * BLOCK**3:,} voxels of "
+                f"{s:g} m, limit max_voxels={max_voxels:,}): is the map in metres (not millimetres)? is the "
+                "voxel size too small?")
+        # chunk by chunk: EDT over the chunk plus a halo that holds every occupied voxel within
+        # max_distance of the chunk's voxels and of their neighbours
+        pad = reach + 1
+        span = BLOCK * _CHUNK
+        ck = occ_k // span
+        nc = -(-shape // span)
+        ckey = (ck[:, 0].astype(np.int64) * nc[1] + ck[:, 1]) * nc[2] + ck[:, 2]
+        order = np.argsort(ckey, kind="stable")
+        ckey, occ_k, occ_val = ckey[order], occ_k[order], occ_val[order]
+        del order, ck, occ_lin
+        chunk_ids = np.unique(np.stack(np.nonzero(near_blocks), axis=1) // _CHUNK, axis=0)
+
+        def one(c: np.ndarray):
+            c0 = c * span
+            c1 = np.minimum(c0 + span, shape)
+            e0, e1 = np.maximum(c0 - pad, 0), np.minimum(c1 + pad, shape)
+            parts = []
+            for d in np.stack(np.meshgrid(*[np.arange(-1, 2)] * 3, indexing="ij"), -1).reshape(-1, 3):
+                n = c + d
+                if (n < 0).any() or (n >= nc).any():
+                    continue
+                key = (n[0] * nc[1] + n[1]) * nc[2] + n[2]
+                a, b = np.searchsorted(ckey, [key, key + 1])
+                if b > a:
+                    parts.append(np.arange(a, b))
+            if not parts:
+                return c, None
+            sel = np.concatenate(parts)
+            k = occ_k[sel]
+            ok = ((k >= e0) & (k < e1)).all(axis=1)
+            if not ok.any():
+                return c, None
+            return c, _label_grid(k[ok] - e0, occ_val[sel[ok]], tuple(e1 - e0), self.max_distance / s,
+                                  c0 - e0, c1 - e0, e0, shape)
+
+        table = np.zeros(tuple(nb), np.int32)
+        blocks = [np.zeros((1, BLOCK, BLOCK, BLOCK), np.uint8)]
+        n_used = 1
+        threads = max(1, min(_BUILD_THREADS, len(chunk_ids)))
+        results = map(one, chunk_ids) if threads == 1 else ThreadPoolExecutor(threads).map(one, chunk_ids)
+        for c, core in results:
+            if core is None:
+                continue
+            b0 = c * _CHUNK
+            bs = -(-np.asarray(core.shape) // BLOCK)
+            full = np.zeros(tuple(bs * BLOCK), np.uint8)
+            full[: core.shape[0], : core.shape[1], : core.shape[2]] = core
+            cb = full.reshape(bs[0], BLOCK, bs[1], BLOCK, bs[2], BLOCK).transpose(0, 2, 4, 1, 3, 5)
+            keep = cb.reshape(bs[0], bs[1], bs[2], -1).any(axis=-1)
+            idx = np.nonzero(keep)
+            if not len(idx[0]):
+                continue
+            blocks.append(cb[idx])
+            table[b0[0] + idx[0], b0[1] + idx[1], b0[2] + idx[2]] = np.arange(n_used, n_used + len(idx[0]))
+            n_used += len(idx[0])
+        self._table = table
+        self._blocks = np.concatenate(blocks).reshape(-1)
+        self._set_tables()
+
+    def _set_tables(self) -> None:
+        """Derived lookup tables: the voxel-centre labels of every block (flag bits cleared)."""
+        self._blocks_labels = self._blocks & np.uint8(_LABEL_BITS)
+        self._table_flat = self._table.reshape(-1)
+
+    @property
+    def n_blocks(self) -> int:
+        """Allocated blocks of ``BLOCK**3`` voxels (the all-void block not counted)."""
+        return len(self._blocks) // BLOCK**3 - 1
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes held by the label grid (block table and blocks)."""
+        return self._table.nbytes + self._blocks.nbytes + self._blocks_labels.nbytes
+
+    @property
+    def grid(self) -> np.ndarray:
+        """The label grid expanded over the whole bounding box (uint8, :attr:`shape`; for tests and
+        small maps: it allocates the box)."""
+        nb = self._table.shape
+        full = self._blocks.reshape(-1, BLOCK, BLOCK, BLOCK)[self._table]
+        full = full.transpose(0, 3, 1, 4, 2, 5).reshape(nb[0] * BLOCK, nb[1] * BLOCK, nb[2] * BLOCK)
+        return np.ascontiguousarray(full[: self.shape[0], : self.shape[1], : self.shape[2]])
+
+    def _values(self, i: np.ndarray, j: np.ndarray, k: np.ndarray, flags: bool = True) -> np.ndarray:
+        """Grid values of voxels (i, j, k) (int32 arrays, inside the grid)."""
+        nb = self._table.shape
+        if self._blocks.size >= 2**31:
+            i, j, k = (x.astype(np.int64) for x in (i, j, k))
+        t = self._table_flat[((i >> _BSHIFT) * nb[1] + (j >> _BSHIFT)) * nb[2] + (k >> _BSHIFT)]
+        m = BLOCK - 1
+        off = (((i & m) << _BSHIFT) + (j & m) << _BSHIFT) + (k & m)
+        off += t << (3 * _BSHIFT)
+        return (self._blocks if flags else self._blocks_labels)[off]
 
     def inside(self, points: np.ndarray) -> np.ndarray:
         """Which points lie inside the grid bounds (outside: farther than ``max_distance``
@@ -450,13 +596,12 @@ class MapIndex:
         if len(p) == 0:
             return np.zeros(0, np.uint8)
         q = (p - self.origin.astype(np.float32)) / np.float32(self.voxel_size)
-        lin = None
+        ks = []
         for a in range(3):
             qa = np.nan_to_num(q[:, a], nan=-1.0, posinf=-1.0, neginf=-1.0)
             np.clip(qa, 0, self.shape[a] - 1, out=qa)
-            ka = qa.astype(np.int64)
-            lin = ka if lin is None else lin * self.shape[a] + ka
-        out = self._flat[lin]
+            ks.append(qa.astype(np.int32))
+        out = self._values(*ks)
         return self._resolve(out, lambda sel: p[sel], exact)
 
     def _gather_depth(
@@ -476,21 +621,14 @@ class MapIndex:
         inv = 1.0 / self.voxel_size
         R = T[:3, :3] * inv
         t = (T[:3, 3] - self.origin) * inv
-        exact_dtype = np.float32 if np.prod(self.shape) < 2**24 else np.float64
-        lin = None
+        ks = []
         for a in range(3):
             qa = cv2.addWeighted(rx, R[a, 0], ry, R[a, 1], R[a, 2])
             qa = cv2.multiply(qa, z)
             qa += np.float32(t[a])
             np.clip(qa, 0, self.shape[a] - 1, out=qa)
-            np.floor(qa, out=qa)
-            if lin is None:
-                lin = qa.astype(exact_dtype, copy=False)
-            else:
-                lin *= self.shape[a]
-                lin += qa
-        table = self._flat if flags else self._labels_flat
-        out = table[lin.astype(np.int64 if exact_dtype is np.float64 else np.int32)]
+            ks.append(qa.astype(np.int32))  # truncation = floor (clipped to >= 0)
+        out = self._values(*ks, flags=flags)
         out[~valid] = 0
 
         def world(sel: tuple[np.ndarray, ...]) -> np.ndarray:
@@ -572,6 +710,80 @@ class MapIndex:
         )
 
 
+def _voxel_keys(points: np.ndarray, labels: np.ndarray, origin: np.ndarray, s: float, shape) -> np.ndarray:
+    """Sort keys of samples: voxel (linear index) << 16 | distance to the voxel centre in 1/1024
+    voxel << 6 | label; the smallest key of a voxel is its sample nearest to the centre."""
+    rel = (points - origin) / s
+    k = np.floor(rel).astype(np.int64)
+    q = np.minimum(np.linalg.norm(rel - k - 0.5, axis=1) * 1024, 1023).astype(np.int64)
+    del rel
+    lin = np.ravel_multi_index(k.T, shape)
+    return (lin << 16) | (q << 6) | np.asarray(labels, dtype=np.int64)
+
+
+def _near_and_flags(label_of: np.ndarray, empty: np.ndarray, radius: float) -> np.ndarray:
+    """Grid values from the occupied voxels' labels: nearest occupied voxel's label (0 beyond
+    ``radius`` voxels), with the ambiguous and shell bits."""
+    shape = empty.shape
+    idx = ndimage.distance_transform_edt(empty, return_distances=False, return_indices=True)
+    near = label_of[tuple(idx)]
+    # squared voxel distance to it, in int32 along broadcast axes (SciPy's own distances
+    # go through three float64 index volumes: twice the time of the transform itself)
+    d2 = np.zeros(shape, dtype=np.int32)
+    for a in range(3):
+        ax = np.arange(shape[a], dtype=np.int32).reshape([-1 if b == a else 1 for b in range(3)])
+        step = idx[a].astype(np.int32) - ax
+        d2 += step * step
+    del idx, step
+    near[np.sqrt(d2, dtype=np.float64) > radius] = 0
+    del d2
+    mixed = (near & _MIXED) > 0
+    grid = near & ~np.uint8(_MIXED)
+    # ambiguous: a mixed nearest voxel, or the 27-neighbourhood disagrees (label edge or the
+    # max_distance shell): there the exact query decides
+    lo_n, hi_n = ndimage.minimum_filter(grid, size=3), ndimage.maximum_filter(grid, size=3)
+    amb = mixed | (lo_n != hi_n)
+    shell = (lo_n == 0) & (hi_n > 0)
+    grid[amb] |= np.uint8(_AMBIGUOUS)
+    grid[shell] |= np.uint8(_SHELL)
+    return grid
+
+
+def _label_grid(occ_k, occ_val, ext_shape, radius, c0, c1, e0, shape) -> np.ndarray:
+    """Grid values of the core ``c0:c1`` of an extent (origin ``e0`` in the whole grid of ``shape``)
+    holding the occupied voxels ``occ_k`` (extent coordinates) with values ``occ_val``."""
+    label_of = np.zeros(ext_shape, np.uint8)
+    empty = np.ones(ext_shape, bool)
+    t = tuple(occ_k.T)
+    label_of[t] = occ_val
+    empty[t] = False
+    grid = _near_and_flags(label_of, empty, radius)
+    del label_of, empty
+    core = grid[c0[0] : c1[0], c0[1] : c1[1], c0[2] : c1[2]].copy()
+    for a in range(3):  # the outer layer of the whole grid stays void (clipped lookups read void)
+        if e0[a] + c0[a] == 0:
+            core[(slice(None),) * a + (0,)] = 0
+        if e0[a] + c1[a] == shape[a]:
+            core[(slice(None),) * a + (-1,)] = 0
+    return core
+
+
+def _dense_grid(index: MapIndex) -> np.ndarray:
+    """Naive reference of the label grid: one EDT over the whole bounding box (as built before the
+    sparse grid; memory and time grow with the box). Same values as ``index.grid``."""
+    s, shape = index.voxel_size, index.shape
+    best = []
+    for pts, lab in index._sample_pieces(0.7 * s):
+        best.append(_voxel_keys(pts, lab, index.origin, s, shape))
+    key = np.sort(np.concatenate(best))
+    start = np.flatnonzero(np.r_[True, (key[1:] >> 16) != (key[:-1] >> 16)])
+    labs = (key & _LABEL_BITS).astype(np.uint8)
+    mixed = np.minimum.reduceat(labs, start) != np.maximum.reduceat(labs, start)
+    k = np.stack(np.unravel_index(key[start] >> 16, shape), axis=1)
+    return _label_grid(k, labs[start] | np.where(mixed, _MIXED, 0).astype(np.uint8), shape,
+                       index.max_distance / s, np.zeros(3, int), np.asarray(shape), np.zeros(3, int), shape)
+
+
 _CACHE: list = []
 
 
@@ -614,10 +826,10 @@ def prepare(
 
 
 #: version of the index cache files (bump when the grid's meaning changes)
-INDEX_CACHE_VERSION = 1
+INDEX_CACHE_VERSION = 2
 #: environment variable that turns the index cache off (any non-empty value)
 NO_CACHE_ENV = "SEMMATCH_NO_INDEX_CACHE"
-_CACHED = ("grid", "origin", "shape", "voxel_size", "max_distance", "n_samples")
+_CACHED = ("table", "blocks", "origin", "shape", "voxel_size", "max_distance", "n_samples")
 
 
 def _cache_file(path: Path, max_distance: float, voxel_size: float) -> Path:
@@ -633,7 +845,7 @@ def _cache_file(path: Path, max_distance: float, voxel_size: float) -> Path:
 
 
 def load_index(path, *, max_distance: float = DEFAULT_MAX_DISTANCE, voxel_size: float = 0.02,
-               cache: bool = True, **index_params) -> MapIndex:
+               cache: bool = True, semantic_map: SemanticMap | None = None, **index_params) -> MapIndex:
     """The :class:`MapIndex` of a map file, built once and cached beside it.
 
     The label grid (the costly part: seconds and most of the memory for a room) is stored as
@@ -650,6 +862,8 @@ def load_index(path, *, max_distance: float = DEFAULT_MAX_DISTANCE, voxel_size: 
         As :class:`MapIndex`.
     cache : bool
         Use and write the cache (also off when ``SEMMATCH_NO_INDEX_CACHE`` is set).
+    semantic_map : SemanticMap, optional
+        The map already read from ``path`` (not read again).
 
     Returns
     -------
@@ -659,7 +873,7 @@ def load_index(path, *, max_distance: float = DEFAULT_MAX_DISTANCE, voxel_size: 
     from ..io import atomic_path, read_map
 
     path = Path(path)
-    m = read_map(path)
+    m = read_map(path) if semantic_map is None else semantic_map
     if not cache or os.environ.get(NO_CACHE_ENV) or index_params.get("max_voxels") is not None:
         return MapIndex(m, max_distance=max_distance, voxel_size=voxel_size, **index_params)
     cf = _cache_file(path, float(max_distance), float(voxel_size))
@@ -672,7 +886,8 @@ def load_index(path, *, max_distance: float = DEFAULT_MAX_DISTANCE, voxel_size: 
     index = MapIndex(m, max_distance=max_distance, voxel_size=voxel_size, **index_params)
     try:
         with atomic_path(cf) as tmp:
-            np.savez_compressed(tmp, **{k: np.asarray(getattr(index, k)) for k in _CACHED},
+            np.savez_compressed(tmp, **{k: np.asarray(getattr(index, {'table': '_table', 'blocks': '_blocks'}.get(k, k)))
+                                       for k in _CACHED},
                                 samples=index.samples if index.samples is not None else np.zeros((0, 3), np.float32),
                                 sample_labels=(index.sample_labels if index.sample_labels is not None
                                                else np.zeros(0, np.uint8)))

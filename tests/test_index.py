@@ -1,0 +1,132 @@
+"""The sparse map index: same grid as the dense reference, memory near the surface, budgets, cache."""
+
+from __future__ import annotations
+
+import pickle
+import warnings
+
+import numpy as np
+import pytest
+from scenes import furnished_room
+
+from semmatch.io import SemanticMap, write_map
+from semmatch.sim import render_frames
+from semmatch.transfer import MapIndex, load_index
+from semmatch.transfer.index import BLOCK, _dense_grid
+
+
+@pytest.fixture(scope="module")
+def room():
+    return furnished_room()
+
+
+@pytest.fixture(scope="module")
+def mesh_map(room):
+    return room.to_semantic_map()
+
+
+def _points(m: SemanticMap, rng, n=40000) -> np.ndarray:
+    lo, hi = m.points.min(axis=0), m.points.max(axis=0)
+    far = rng.uniform(lo - 0.3, hi + 0.3, (n, 3))
+    near = m.points[rng.integers(0, len(m.points), n)] + rng.normal(0, 0.05, (n, 3))
+    return np.concatenate([far, near]).astype(np.float32)
+
+
+@pytest.mark.parametrize("voxel,max_distance", [(0.04, 0.10), (0.03, 0.25), (0.05, 0.04)])
+def test_sparse_grid_equals_the_dense_reference(mesh_map, voxel, max_distance):
+    idx = MapIndex(mesh_map, voxel_size=voxel, max_distance=max_distance)
+    assert (idx.grid == _dense_grid(idx)).all()
+
+
+def test_sparse_grid_of_a_point_map_equals_the_dense_reference(mesh_map):
+    rng = np.random.default_rng(3)
+    pts = mesh_map.points + rng.normal(0, 0.01, mesh_map.points.shape)
+    idx = MapIndex(SemanticMap(pts.astype(np.float32), mesh_map.labels), voxel_size=0.03)
+    assert (idx.grid == _dense_grid(idx)).all()
+
+
+def test_lookups_read_the_dense_grid(mesh_map, room, rng):
+    """Every lookup path (points, depth images, labels only or with flags) reads the same voxels
+    as a gather from the dense grid, and pickling keeps the answers."""
+    idx = MapIndex(mesh_map, voxel_size=0.04)
+    dense = _dense_grid(idx)
+    pts = _points(mesh_map, rng)
+    k = np.clip(np.floor((pts - idx.origin.astype(np.float32)) / np.float32(idx.voxel_size)), 0,
+                np.asarray(idx.shape) - 1).astype(np.int64)
+    assert (idx.lookup(pts, exact=False) == (dense[tuple(k.T)] & 0x3F)).all()
+    again = pickle.loads(pickle.dumps(idx))
+    for exact in (False, True):
+        assert (again.lookup(pts, exact=exact) == idx.lookup(pts, exact=exact)).all()
+    from scenes import orbit_poses
+
+    for f in render_frames(room, orbit_poses(room, 2, 0.3)):
+        valid = f.depth > 0
+        fast = idx.lookup_depth(f.depth, f.pose, f.intrinsics, exact=False)
+        exact = idx.lookup_depth(f.depth, f.pose, f.intrinsics)
+        sup = idx.support_depth(f.depth, f.pose, f.intrinsics)
+        assert (fast[~valid] == 0).all() and (exact[~valid] == 0).all() and not sup[~valid].any()
+        assert (exact[valid] > 0).mean() > 0.5 and ((fast > 0) == (exact > 0)).mean() > 0.95
+
+
+def test_memory_follows_the_surface_not_the_bounding_box(rng):
+    """Two small clusters 50 m apart: a few blocks, not the 50 m box."""
+    a = rng.uniform(0, 0.3, (2000, 3))
+    pts = np.concatenate([a, a + [40.0, 30.0, 0]]).astype(np.float32)  # 50 m apart
+    idx = MapIndex(SemanticMap(pts, np.full(len(pts), 3, np.uint8)))
+    box_voxels = int(np.prod(idx.shape))
+    assert box_voxels > 40_000_000
+    assert 0 < idx.n_blocks <= 2 * 6**3  # each cluster: (0.3 + 2 * reach) / (BLOCK voxels) blocks a side
+    assert idx.nbytes < box_voxels / 50
+    assert idx.lookup(np.array([[0.1, 0.1, 0.1], [40.1, 30.1, 0.1], [20.0, 15.0, 0.1]]), exact=False).tolist() == [3, 3, 0]
+    assert BLOCK == 8
+
+
+def test_a_point_map_in_millimetres_is_refused_before_allocating(mesh_map):
+    mm = SemanticMap(mesh_map.points * 1000.0, mesh_map.labels)
+    with pytest.raises(ValueError, match=r"table of [\d,]+ blocks .* millimetres"):
+        MapIndex(mm)
+    with pytest.raises(ValueError, match=r"max_voxels=1,000.* millimetres"):
+        MapIndex(mesh_map, voxel_size=0.04, max_voxels=1000)
+
+
+def test_the_cache_is_reused_invalidated_and_survives_damage(mesh_map, tmp_path, rng, monkeypatch):
+    path = tmp_path / "m" / "upper.ply"
+    write_map(path, mesh_map)
+    built = load_index(path, voxel_size=0.04)
+    (cache,) = path.parent.glob(".upper.ply.index-*.npz")
+    pts = _points(mesh_map, rng, 5000)
+
+    def no_build(*a, **k):
+        raise AssertionError("built instead of read from the cache")
+
+    with monkeypatch.context() as mp:  # reused: no build
+        mp.setattr(MapIndex, "_build_grid", no_build)
+        cached = load_index(path, voxel_size=0.04)
+    assert (cached.grid == built.grid).all() and cached.n_blocks == built.n_blocks
+    for exact in (False, True):
+        assert (cached.lookup(pts, exact=exact) == built.lookup(pts, exact=exact)).all()
+    # another map content: another key, the old file is not read
+    m2 = SemanticMap(mesh_map.points + np.float32(0.5), mesh_map.labels, faces=mesh_map.faces)
+    write_map(path, m2)
+    moved = load_index(path, voxel_size=0.04)
+    assert len(list(path.parent.glob(".upper.ply.index-*.npz"))) == 2
+    assert not np.allclose(moved.origin, built.origin)
+    # a stale file under the current key (wrong table) or a damaged one: rebuilt with a warning
+    newest = max(path.parent.glob(".upper.ply.index-*.npz"), key=lambda p: p.stat().st_mtime)
+    with np.load(newest) as z:
+        data = {k: z[k] for k in z.files}
+    data["table"] = data["table"][:-1]
+    np.savez(newest.with_suffix(""), **data)  # np.savez adds .npz
+    for damage in (None, b"PK\x03\x04 truncated"):
+        if damage is not None:
+            newest.write_bytes(damage)
+        with pytest.warns(UserWarning, match="unreadable index cache"):
+            again = load_index(path, voxel_size=0.04)
+        assert (again.grid == moved.grid).all()
+    # switched off by the environment: nothing read
+    monkeypatch.setenv("SEMMATCH_NO_INDEX_CACHE", "1")
+    for c in path.parent.glob(".upper.ply.index-*.npz"):
+        c.write_bytes(b"junk")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        load_index(path, voxel_size=0.04)
