@@ -65,11 +65,13 @@ def _map_variant(base: Path, w: Path, name: str, fn) -> Path:
     return w / name
 
 
-def _scaled_map(base: Path, w: Path, name: str, factor: float) -> Path:
-    from semmatch.io import read_map, write_map
+def _scaled_map(base: Path, w: Path, name: str, factor: float, points_only: bool = False) -> Path:
+    from semmatch.io import SemanticMap, read_map, write_map
 
     m = read_map(base / "map.ply")
     m.points = m.points * factor
+    if points_only:  # a point cloud map: no mesh sampling budget stops it
+        m = SemanticMap(m.points, m.labels, source=m.source)
     write_map(w / name, m)
     return w / name
 
@@ -172,6 +174,8 @@ CASES = [
             np.random.default_rng(0).random((len(m.vertices), 3)))))), r"not colours of the category palette"),
     ("transfer-map-in-mm", transfer_with(lambda b, w: _scaled_map(b, w, "mm.ply", 1000.0)),
      r"mm\.ply: sampling the mesh every .* is the map in metres \(not millimetres\)"),
+    ("transfer-point-map-in-mm", transfer_with(lambda b, w: _scaled_map(b, w, "mm.ply", 1000.0, points_only=True)),
+     r"mm\.ply: the map spans .* blocks .* is the map in metres \(not millimetres\)"),
     ("transfer-unknown-method", transfer_with("{base}/map.ply", method="bogus"), r"invalid choice: 'bogus'"),
     ("transfer-out-is-input", lambda b, w: ["transfer", str(b / "low"), "--map", str(b / "map.ply"), "--method",
                                             "3d-neighborhood", "--out", str(b / "low")], r"outside the inputs"),

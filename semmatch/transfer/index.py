@@ -197,11 +197,11 @@ class MapIndex:
         self.is_mesh = semantic_map.is_mesh
         self.samples = None if self.is_mesh else semantic_map.points
         self.sample_labels = None if self.is_mesh else semantic_map.labels
-        self._tree = None if self.is_mesh else cKDTree(self.samples)
         self._rc = None
         self._class_trees: dict | None = None  # per-class KD-trees of instance lookups
         self._rays: dict[Intrinsics, tuple[np.ndarray, np.ndarray]] = {}
-        self._build_grid(float(voxel_size), int(max_voxels))
+        self._build_grid(float(voxel_size), int(max_voxels))  # budgets first
+        self._tree = None if self.is_mesh else cKDTree(self.samples)
 
     @classmethod
     def _from_cache(cls, semantic_map: SemanticMap, path, *, workers: int = 1) -> MapIndex:
