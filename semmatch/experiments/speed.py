@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ..io import read_map, read_sequence, save_figure
+from ..io import read_sequence, save_figure
 from .layout import GT, Layout
 from .tables import speed_table
 
@@ -61,13 +61,13 @@ def measure_speed(data_root: str | Path, methods: Sequence[str], *, n_frames: in
         (the reference is ``3d-neighborhood`` with Open3D closest-point queries on the mesh,
         as the authors' code).
     """
-    from ..transfer import prepare
+    from ..transfer import load_index
     from ..transfer.benchmark import time_methods
 
     layout = Layout(data_root)
     sd = layout.scene_dirs("eval")[scene]
     frames = _frames_at(sd, n_frames, width, height)
-    index = prepare(read_map(layout.upper_map(sd.name, GT)))
+    index = load_index(layout.upper_map(sd.name, GT))  # cached beside the map
 
     timing = time_methods(frames, index, methods, exact_variant=False)
     ref_fps = timing["reference"]["fps"]

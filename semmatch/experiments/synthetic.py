@@ -166,13 +166,13 @@ def _transfer_scene(data_root: str, methods: tuple[str, ...], networks: tuple[st
                     sid: str) -> list[dict]:
     """The labels of one scene's robot frames (a task of :func:`transfer_lower_labels`)."""
     from ..segment import predict_sequence
-    from ..transfer import prepare, transfer_sequence, write_fused_labels
+    from ..transfer import load_index, transfer_sequence, write_fused_labels
 
     layout = Layout(data_root)
     sd = layout.scenes / "eval" / sid
     models = {net: layout.load_network(net) for net in networks}
     rows = []
-    indexes = {source: prepare(read_map(layout.upper_map(sid, source))) for source in (GT, *networks)}
+    indexes = {source: load_index(layout.upper_map(sid, source)) for source in (GT, *networks)}  # cached beside
     for route in _routes(layout, sd):
         lower = read_sequence(layout.lower_sequence(sd, route)).load()  # read by every method
         for source in (GT, *networks):
