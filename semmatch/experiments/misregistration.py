@@ -25,7 +25,6 @@ import numpy as np
 import pandas as pd
 
 from ..io import read_map, read_sequence
-from ..progress import tqdm
 from .layout import GT, Layout
 from .synthetic import MEASURE_COLUMNS, eval_grid_origin
 
@@ -75,6 +74,7 @@ def misregistration_study(
     eval_voxel_size: float = 0.05,
     seed: int = 0,
     jobs: int = 1,
+    scheduler: str | None = None,
     progress: bool = True,
 ) -> pd.DataFrame:
     """Scores of every transfer method when the upper map is misregistered by known amounts.
@@ -99,7 +99,10 @@ def misregistration_study(
         Seed of the perturbations: each scene draws its own axis and direction from
         ``(seed, scene id)``, the same for all sizes, so a series grows along one direction.
     jobs : int
-        Worker processes of the label transfer.
+        Scenes run as tasks of :func:`semmatch.engine.map_tasks` on ``jobs`` local worker
+        processes (with one scene: its label transfer in ``jobs`` processes).
+    scheduler : str, optional
+        Dask scheduler address to run the scenes on (default ``SEMMATCH_SCHEDULER``; none: local).
     progress : bool
 
     Returns
@@ -117,44 +120,61 @@ def misregistration_study(
     ValueError
         Negative or non-finite perturbation sizes.
     """
+    from functools import partial
+
+    from ..engine import map_tasks, resolve_scheduler
+
+    layout = Layout(data_root)
+    cases = _perturbations(translations, rotations_deg)
+    sids = [sd.name for sd in _scene_dirs(layout, scenes)]
+    frame_jobs = int(jobs) if resolve_scheduler(scheduler) is None and len(sids) == 1 else 1
+    # scenes are engine tasks (jobs local processes or a scheduler); one scene: its frames in jobs processes
+    task = partial(_misregistration_scene, str(layout.root.resolve()), tuple(methods), tuple(cases),
+                   dict(voxel_size=voxel_size, eval_voxel_size=eval_voxel_size, seed=int(seed), frame_jobs=frame_jobs))
+    per_scene = map_tasks(task, sids, jobs=jobs, scheduler=scheduler, desc="misregistration scenes", progress=progress)
+    cols = ["scene", "method", "translation_m", "rotation_deg", *MEASURE_COLUMNS, "coverage"]
+    return pd.DataFrame([r for rows in per_scene for r in rows], columns=cols)
+
+
+def _misregistration_scene(data_root: str, methods: tuple[str, ...], cases: tuple[tuple[float, float], ...],
+                           o: dict, sid: str) -> list[dict]:
+    """The score rows of one scene (a task of :func:`misregistration_study`)."""
     from ..fusion import reconstruct_many
     from ..metrics import compare
     from ..registration import rigid_perturbation
     from ..transfer import prepare, transfer_sequence
 
     layout = Layout(data_root)
-    cases = _perturbations(translations, rotations_deg)
+    sd = layout.scenes / "eval" / sid
+    need = [(layout.upper_map(sid, GT), "03_reconstruct_upper"), (sd / "lower" / "poses.txt", "01_simulate"),
+            (layout.lower_reference(sid), "05_evaluate_synthetic")]
+    for path, stage in need:
+        if not path.is_file():
+            raise FileNotFoundError(f"{path}: missing; run {stage} first")
+    upper = read_map(layout.upper_map(sid, GT))
+    lower = read_sequence(sd / "lower").load()
+    reference = read_map(layout.lower_reference(sid))
+    index = prepare(upper)
+    center = upper.points.astype(np.float64).mean(axis=0)
+    scene_seed = int(np.random.SeedSequence([o["seed"], zlib.crc32(sid.encode())]).generate_state(1)[0])
+    labelings = []  # (translation, rotation, method, labels folder, coverage)
+    with tempfile.TemporaryDirectory(prefix=f".misregistration_{sid}.", dir=layout.root) as tmp:
+        for t, r in cases:
+            P = rigid_perturbation(t, r, center=center, seed=scene_seed)
+            poses = np.linalg.inv(P) @ lower.poses  # the cameras in the unmoved map = the map moved by P
+            for method in methods:
+                out = Path(tmp) / f"t{t:g}_r{r:g}" / method
+                res = transfer_sequence(method, lower, index, out, poses=poses, jobs=o["frame_jobs"], progress=False)
+                labelings.append((t, r, method, out, res["coverage"]))
+        # one fusion of the lower frames at their true poses for every labeling
+        maps = reconstruct_many(lower, [j[3] for j in labelings], o["voxel_size"])
     rows = []
-    for sd in tqdm(_scene_dirs(layout, scenes), desc="misregistration scenes", disable=not progress):
-        sid = sd.name
-        need = [(layout.upper_map(sid, GT), "03_reconstruct_upper"), (sd / "lower" / "poses.txt", "01_simulate"),
-                (layout.lower_reference(sid), "05_evaluate_synthetic")]
-        for path, stage in need:
-            if not path.is_file():
-                raise FileNotFoundError(f"{path}: missing; run {stage} first")
-        upper = read_map(layout.upper_map(sid, GT))
-        lower = read_sequence(sd / "lower").load()
-        reference = read_map(layout.lower_reference(sid))
-        index = prepare(upper)
-        center = upper.points.astype(np.float64).mean(axis=0)
-        scene_seed = int(np.random.SeedSequence([int(seed), zlib.crc32(sid.encode())]).generate_state(1)[0])
-        jobs_list = []  # (translation, rotation, method, labels folder, coverage)
-        with tempfile.TemporaryDirectory(prefix=f".misregistration_{sid}.", dir=layout.root) as tmp:
-            for t, r in tqdm(cases, desc=sid, leave=False, disable=not progress):
-                P = rigid_perturbation(t, r, center=center, seed=scene_seed)
-                poses = np.linalg.inv(P) @ lower.poses  # the cameras in the unmoved map = the map moved by P
-                for method in methods:
-                    out = Path(tmp) / f"t{t:g}_r{r:g}" / method
-                    res = transfer_sequence(method, lower, index, out, poses=poses, jobs=jobs, progress=False)
-                    jobs_list.append((t, r, method, out, res["coverage"]))
-            # one fusion of the lower frames at their true poses for every labeling
-            maps = reconstruct_many(lower, [j[3] for j in jobs_list], voxel_size)
-        for (t, r, method, _, cov), pred in zip(jobs_list, maps, strict=True):
-            s = compare(reference, pred, voxel_size=eval_voxel_size, grid_origin=eval_grid_origin(eval_voxel_size))
-            rows.append(dict(scene=sid, method=method, translation_m=t, rotation_deg=r,
-                             **{k: float(s[k]) for k in MEASURE_COLUMNS}, coverage=float(cov)))
-    cols = ["scene", "method", "translation_m", "rotation_deg", *MEASURE_COLUMNS, "coverage"]
-    return pd.DataFrame(rows, columns=cols)
+    for (t, r, method, _, cov), pred in zip(labelings, maps, strict=True):
+        s = compare(reference, pred, voxel_size=o["eval_voxel_size"],
+                    grid_origin=eval_grid_origin(o["eval_voxel_size"]))
+        rows.append(dict(scene=sid, method=method, translation_m=t, rotation_deg=r,
+                         **{k: float(s[k]) for k in MEASURE_COLUMNS}, coverage=float(cov)))
+    return rows
 
 
 def plot_misregistration(df: pd.DataFrame, path: str | Path, *, measure: str = "mean_acc",
