@@ -137,3 +137,18 @@ def test_local_workers_die_with_a_killed_parent(tmp_path):
     finally:
         if p.poll() is None:
             p.kill()
+
+
+def test_training_views_rendered_on_a_local_cluster_equal_the_serial_ones():
+    import numpy as np
+
+    from semmatch.segment.data import make_scenes, render_views
+
+    scenes = make_scenes(["living_room", "office", "bedroom"], [11, 12, 13])
+    heights = np.array([[1.4, 1.7], [0.5, 0.9], [1.0, 1.2]])
+    kw = dict(intrinsics=DEFAULT_INTRINSICS.scaled(48, 36), seed=3, progress=False)
+    a = render_views(scenes, heights, 4, **kw)
+    b = render_views(scenes, heights, 4, jobs=2, **kw)
+    assert len(a) == 3 * 2 * 4
+    for f in ("rgb", "depth", "labels", "scene", "height"):
+        assert getattr(a, f).dtype == getattr(b, f).dtype and np.array_equal(getattr(a, f), getattr(b, f)), f

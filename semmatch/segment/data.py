@@ -9,6 +9,7 @@ validation and evaluation scenes are disjoint (``params.yaml``), which :func:`ma
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 from collections.abc import Sequence
@@ -139,6 +140,8 @@ def render_views(
     seed: int = 0,
     same_path: bool = False,
     progress: bool = True,
+    jobs: int = 1,
+    scheduler: str | None = None,
 ) -> Views:
     """Render ``n_frames`` views per (scene, height) along the simulator's trajectories.
 
@@ -163,12 +166,19 @@ def render_views(
         path, only the height changes); otherwise every (scene, height) gets its own seed.
     progress : bool
         Show a tqdm bar.
+    jobs : int
+        Scenes rendered in parallel: tasks of :func:`semmatch.engine.map_tasks` on ``jobs`` local
+        worker processes (1: in this process); the views do not depend on it.
+    scheduler : str, optional
+        Dask scheduler address to render the scenes on (default ``SEMMATCH_SCHEDULER``; none: local).
 
     Returns
     -------
     Views
     """
-    from ..sim import Renderer, make_trajectory
+    from functools import partial
+
+    from ..engine import map_tasks
 
     if n_frames < 1:
         raise ValueError(f"n_frames must be >= 1, got {n_frames}")
@@ -180,29 +190,59 @@ def render_views(
     if not np.isfinite(h).all() or (h <= 0).any():
         raise ValueError("camera heights must be finite and > 0")
     period = max(2, int(tilt_period or n_frames))
+    task = partial(_render_scene, n_frames=int(n_frames), tilt_deg=float(tilt_deg), period=period,
+                   intrinsics=intrinsics, seed=int(seed), same_path=bool(same_path))
+    # one engine task per scene; serial: the bar counts frames, otherwise scenes
+    inner = progress and int(jobs) == 1 and len(scenes) > 0
+    parts = map_tasks(task, [(si, scene, h[si], inner) for si, scene in enumerate(scenes)], jobs=jobs,
+                      scheduler=scheduler, desc="render views", progress=progress and not inner)
     H, W = intrinsics.shape
-    total = len(scenes) * h.shape[1] * n_frames
+    total = sum(len(part[0]) for part in parts)
     rgb = np.empty((total, H, W, 3), np.uint8)
     depth = np.empty((total, H, W), np.float32)
     labels = np.empty((total, H, W), np.uint8)
     scene_idx = np.empty(total, np.int64)
     height = np.empty(total, np.float32)
     k = 0
-    bar = tqdm(total=total, desc="render views", disable=not progress, leave=False)
-    for si, scene in enumerate(scenes):
-        renderer = Renderer(scene, intrinsics)
-        for hi, hh in enumerate(h[si]):
+    for si in range(len(parts)):  # copied scene by scene, each part freed once copied
+        prgb, pdepth, plabels, pheight = parts[si]
+        n = len(prgb)
+        rgb[k:k + n], depth[k:k + n], labels[k:k + n], height[k:k + n] = prgb, pdepth, plabels, pheight
+        scene_idx[k:k + n] = si
+        k += n
+        parts[si] = None
+    return Views(rgb, depth, labels, scene_idx, height)
+
+
+def _render_scene(item: tuple, *, n_frames: int, tilt_deg: float, period: int, intrinsics: Intrinsics, seed: int,
+                  same_path: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The views of one scene at its heights (a task of :func:`render_views`): rgb, depth, labels, height."""
+    from ..sim import Renderer, make_trajectory
+
+    si, scene, heights, progress = item
+    # arrays unpickled on a Dask worker export the buffer format '=f', which Open3D refuses: own copies
+    scene = dataclasses.replace(scene, **{f.name: getattr(scene, f.name).copy() for f in dataclasses.fields(scene)
+                                          if isinstance(getattr(scene, f.name), np.ndarray)})
+    H, W = intrinsics.shape
+    total = len(heights) * n_frames
+    rgb = np.empty((total, H, W, 3), np.uint8)
+    depth = np.empty((total, H, W), np.float32)
+    labels = np.empty((total, H, W), np.uint8)
+    height = np.empty(total, np.float32)
+    k = 0
+    renderer = Renderer(scene, intrinsics)
+    with tqdm(total=total, desc=f"render views ({si + 1})", disable=not progress, leave=False) as bar:
+        for hi, hh in enumerate(heights):
             traj_seed = seed * 100_003 + si * 1009 + (0 if same_path else hi)
             poses = _poses(make_trajectory(scene, float(hh), n_frames, tilt_deg=tilt_deg,
                                            tilt_period=period, seed=traj_seed))
             for pose in poses[:n_frames]:
                 r = renderer.render(pose)
                 rgb[k], depth[k], labels[k] = r.rgb, r.depth, r.labels
-                scene_idx[k], height[k] = si, hh
+                height[k] = hh
                 k += 1
                 bar.update()
-    bar.close()
-    return Views(rgb[:k], depth[:k], labels[:k], scene_idx[:k], height[:k])
+    return rgb[:k], depth[:k], labels[:k], height[:k]
 
 
 def _poses(traj) -> np.ndarray:

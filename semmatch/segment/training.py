@@ -378,15 +378,31 @@ def evaluate_views(segmenter, views: D.Views, *, batch_size: int = 16) -> dict:
     return out
 
 
-def build_views(config: TrainConfig) -> tuple[D.Views, D.Views]:
-    """Render (or load from the cache) the training and validation views of ``config``."""
+def build_views(config: TrainConfig, *, jobs: int = 1, scheduler: str | None = None) -> tuple[D.Views, D.Views]:
+    """Render (or load from the cache) the training and validation views of ``config``.
+
+    Parameters
+    ----------
+    config : TrainConfig
+    jobs : int
+        Scenes rendered in parallel (:func:`semmatch.segment.data.render_views`); the views do
+        not depend on it.
+    scheduler : str, optional
+        Dask scheduler address to render the scenes on (default ``SEMMATCH_SCHEDULER``; none: local).
+
+    Returns
+    -------
+    (Views, Views)
+        Training and validation views.
+    """
     intr = DEFAULT_INTRINSICS.scaled(config.width, config.height)
     rng = np.random.default_rng(config.seed)
     train_heights = np.stack(
         [D.sample_heights(rng, config.heights[0], config.heights[1], config.n_heights) for _ in config.train_seeds]
     )
     val_h = [0.5 * (config.heights[0] + config.heights[1])]
-    common = dict(tilt_deg=config.tilt_deg, intrinsics=intr, progress=config.progress)
+    common = dict(tilt_deg=config.tilt_deg, intrinsics=intr, progress=config.progress, jobs=jobs,
+                  scheduler=scheduler)
 
     def make_train() -> D.Views:
         scenes = D.make_scenes(config.kinds, config.train_seeds)
