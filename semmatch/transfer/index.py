@@ -1,4 +1,4 @@
-"""The upper map, indexed once: a dense voxel label grid plus exact nearest-neighbour queries.
+"""The upper map, indexed once: a sparse voxel label grid plus exact nearest-neighbour queries.
 
 :class:`MapIndex` turns a :class:`~semmatch.io.SemanticMap` (points + labels, or a semantic mesh)
 into
@@ -6,7 +6,10 @@ into
 * a **label grid**: every voxel (default 2 cm) within reach of the map holds the label of the map
   surface nearest to its centre, or 0 (void) when that surface is farther than
   ``max_distance``. A lookup is then one gather per pixel. Voxels whose 26 neighbours do not all
-  hold the same value (label boundaries and the ``max_distance`` shell) are flagged *ambiguous*;
+  hold the same value (label boundaries and the ``max_distance`` shell) are flagged *ambiguous*.
+  The grid is sparse: only blocks of ``BLOCK**3`` voxels near the surface are stored (a block
+  table over the bounding box points to them), and it is built chunk by chunk, so memory follows
+  the map's surface, not its bounding box (docs/map_index.md);
 * **exact queries** for the points that fall into ambiguous voxels: the closest point on the
   mesh (Open3D ``RaycastingScene.compute_closest_points``, what the authors' code does) or the
   nearest map point (SciPy ``cKDTree``) for point maps.
@@ -22,7 +25,9 @@ from __future__ import annotations
 
 import os
 import warnings
+from collections import deque
 from concurrent.futures import ThreadPoolExecutor
+from functools import partial
 from pathlib import Path
 
 import cv2
@@ -47,6 +52,7 @@ _AMBIGUOUS = 0x80  # grid bit: exact query needed (low 6 bits: the voxel-centre 
 _SHELL = 0x40  # grid bit: the neighbourhood mixes void and labelled voxels (max_distance shell)
 _MIXED = 0x40  # build-time flag (same bit, used before _SHELL is set)
 _LABEL_BITS = 0x3F
+_EMPTY = 0xFF  # build-time value of a voxel that holds no sample
 
 
 #: most samples :func:`sample_mesh` may make (a map in millimetres would ask for billions)
@@ -56,18 +62,21 @@ MAX_MESH_SAMPLES = 60_000_000
 #: voxels along a block edge of the sparse label grid (blocks of BLOCK**3 voxels)
 BLOCK = 8
 _BSHIFT = 3  # log2(BLOCK)
-_CHUNK = 8  # blocks along a chunk edge: the label grid is computed chunk by chunk (64^3 voxels + halo)
+#: blocks along the x, y, z edges of a chunk: the label grid is computed chunk by chunk (48^3 voxels
+#: plus a halo; small chunks keep their distance transforms in cache)
+_CHUNK = np.array([6, 6, 6])
 #: most blocks the block table may cover (int32 each; the bounding box / BLOCK**3)
 MAX_TABLE_BLOCKS = 100_000_000
-_BUILD_SAMPLES = 1_000_000  # mesh samples made (and reduced to voxels) at a time while building
-#: most mesh samples an index build may make (made and reduced a million at a time)
+_BUILD_SAMPLES = 500_000  # mesh samples made (and reduced to voxels) at a time while building
+#: most mesh samples an index build may make (made and reduced half a million at a time)
 MAX_INDEX_SAMPLES = 2_000_000_000
 _BUILD_THREADS = 2  # chunks of the label grid computed at once (SciPy releases the GIL)
 
 
 def _mesh_sample_chunks(points: np.ndarray, faces: np.ndarray, labels: np.ndarray, spacing: float,
                         chunk_samples: int = _BUILD_SAMPLES):
-    """:func:`sample_mesh`'s samples in its order, as a generator of (samples, labels) pieces."""
+    """:func:`sample_mesh`'s samples in its order, as a generator of functions that each make one
+    piece (samples, labels) when called (so that pieces can be made in worker threads)."""
     v = np.asarray(points, dtype=np.float64)[faces]
     edges = np.stack([v[:, 1] - v[:, 0], v[:, 2] - v[:, 1], v[:, 0] - v[:, 2]], axis=1)
     n_sub = np.maximum(1, np.ceil(np.linalg.norm(edges, axis=2).max(axis=1) / spacing)).astype(np.int64)
@@ -81,9 +90,28 @@ def _mesh_sample_chunks(points: np.ndarray, faces: np.ndarray, labels: np.ndarra
         nearest = np.argmax(bary, axis=1)
         chunk = max(1, chunk_samples // len(bary))
         for s in range(0, len(sel), chunk):
-            f = sel[s : s + chunk]
-            yield (np.einsum("kc,fcd->fkd", bary, v[f]).reshape(-1, 3).astype(np.float32),
-                   flab[f][:, nearest].reshape(-1).astype(np.uint8))
+            yield partial(_mesh_piece, v, flab, bary, nearest, sel[s : s + chunk])
+
+
+def _mesh_piece(v, flab, bary, nearest, f) -> tuple[np.ndarray, np.ndarray]:
+    """Samples and labels of the faces ``f`` (one piece of :func:`_mesh_sample_chunks`)."""
+    return (np.einsum("kc,fcd->fkd", bary, v[f]).reshape(-1, 3).astype(np.float32),
+            flab[f][:, nearest].reshape(-1).astype(np.uint8))
+
+
+def _bounded_map(fn, items, threads: int):
+    """``map(fn, items)`` in order on ``threads`` threads, at most ``threads`` items ahead."""
+    if threads <= 1:
+        yield from map(fn, items)
+        return
+    pending: deque = deque()
+    with ThreadPoolExecutor(threads) as ex:
+        for it in items:
+            pending.append(ex.submit(fn, it))
+            if len(pending) > threads:
+                yield pending.popleft().result()
+        while pending:
+            yield pending.popleft().result()
 
 
 def sample_mesh(
@@ -244,12 +272,14 @@ class MapIndex:
 
     # ------------------------------------------------------------------ construction
     def _sample_pieces(self, spacing: float):
-        """The map's samples (mesh: :func:`sample_mesh` order) as (points, labels) pieces."""
+        """The map's samples (mesh: :func:`sample_mesh` order) as functions making (points, labels)
+        pieces."""
         if self.is_mesh:
             yield from _mesh_sample_chunks(self.map.points, self.map.faces, self.map.labels, spacing)
         else:
             for a in range(0, len(self.samples), _BUILD_SAMPLES):
-                yield self.samples[a : a + _BUILD_SAMPLES], self.sample_labels[a : a + _BUILD_SAMPLES]
+                yield partial(lambda a: (self.samples[a : a + _BUILD_SAMPLES],
+                                         self.sample_labels[a : a + _BUILD_SAMPLES]), a)
 
     def _bounds(self, spacing: float) -> tuple[np.ndarray, np.ndarray, int]:
         """Lowest and highest sample and the number of samples, before any sample is made."""
@@ -292,18 +322,21 @@ class MapIndex:
                 "metres (not millimetres)? is the voxel size too small?")
         # occupied voxels: label of the sample nearest to the voxel centre (ties: the lowest label),
         # flagged mixed when the voxel holds samples of several labels; made piece by piece
-        best, lmin, lmax = [], [], []
-        self.n_samples = 0
-        for pts, lab in self._sample_pieces(0.7 * s):
-            self.n_samples += len(pts)
+        def piece(make):
+            pts, lab = make()
             key = _voxel_keys(pts, lab, self.origin, s, self.shape)
             key.sort()
             start = np.flatnonzero(np.r_[True, (key[1:] >> 16) != (key[:-1] >> 16)])
             labs = (key & _LABEL_BITS).astype(np.uint8)
-            best.append(key[start])
-            lmin.append(np.minimum.reduceat(labs, start))
-            lmax.append(np.maximum.reduceat(labs, start))
-            del key, labs, start
+            return len(pts), key[start], np.minimum.reduceat(labs, start), np.maximum.reduceat(labs, start)
+
+        best, lmin, lmax = [], [], []
+        self.n_samples = 0
+        for n, b, mn, mx in _bounded_map(piece, self._sample_pieces(0.7 * s), _BUILD_THREADS):
+            self.n_samples += n
+            best.append(b)
+            lmin.append(mn)
+            lmax.append(mx)
         best, lmin, lmax = np.concatenate(best), np.concatenate(lmin), np.concatenate(lmax)
         if len(lmin) > 1:
             order = np.argsort(best, kind="stable")
@@ -319,11 +352,19 @@ class MapIndex:
         # voxels of an occupied one (its nearest surface, or a neighbour's, for the flags)
         reach = int(np.floor(self.max_distance / s)) + 1
         occ_k = np.stack(np.unravel_index(occ_lin, self.shape), axis=1).astype(np.int32)
-        occ_blocks = np.zeros(tuple(nb), bool)
-        occ_blocks[tuple((occ_k >> _BSHIFT).T)] = True
-        near_blocks = ndimage.binary_dilation(occ_blocks, np.ones((3, 3, 3), bool),
-                                              iterations=-(-reach // BLOCK))
-        del occ_blocks
+        del occ_lin
+        # the occupied voxels' values in blocks too (0xFF: not occupied), for gathering chunks
+        bk = occ_k >> _BSHIFT
+        blin = (bk[:, 0].astype(np.int64) * nb[1] + bk[:, 1]) * nb[2] + bk[:, 2]
+        uniq, slot = np.unique(blin, return_inverse=True)
+        occ_table = np.zeros(tuple(nb), np.int32)
+        occ_table.reshape(-1)[uniq] = np.arange(1, len(uniq) + 1, dtype=np.int32)
+        occ_blocks = np.full((len(uniq) + 1, BLOCK**3), _EMPTY, np.uint8)
+        m = BLOCK - 1
+        occ_blocks[slot + 1, ((occ_k[:, 0] & m) * BLOCK + (occ_k[:, 1] & m)) * BLOCK + (occ_k[:, 2] & m)] = occ_val
+        occ_blocks = occ_blocks.reshape(-1, BLOCK, BLOCK, BLOCK)
+        del bk, blin, uniq, slot, occ_k, occ_val
+        near_blocks = ndimage.binary_dilation(occ_table > 0, np.ones((3, 3, 3), bool), iterations=-(-reach // BLOCK))
         n_alloc = int(near_blocks.sum())
         if n_alloc * BLOCK**3 > max_voxels:
             raise ValueError(
@@ -332,45 +373,27 @@ class MapIndex:
                 "voxel size too small?")
         # chunk by chunk: EDT over the chunk plus a halo that holds every occupied voxel within
         # max_distance of the chunk's voxels and of their neighbours
-        pad = reach + 1
-        span = BLOCK * _CHUNK
-        ck = occ_k // span
-        nc = -(-shape // span)
-        ckey = (ck[:, 0].astype(np.int64) * nc[1] + ck[:, 1]) * nc[2] + ck[:, 2]
-        order = np.argsort(ckey, kind="stable")
-        ckey, occ_k, occ_val = ckey[order], occ_k[order], occ_val[order]
-        del order, ck, occ_lin
+        pad = reach  # the core's neighbours (1) + the farthest occupied voxel within max_distance of them
         chunk_ids = np.unique(np.stack(np.nonzero(near_blocks), axis=1) // _CHUNK, axis=0)
 
         def one(c: np.ndarray):
-            c0 = c * span
-            c1 = np.minimum(c0 + span, shape)
+            b0 = c * _CHUNK
+            c0 = b0 * BLOCK
+            c1 = np.minimum(c0 + _CHUNK * BLOCK, shape)
             e0, e1 = np.maximum(c0 - pad, 0), np.minimum(c1 + pad, shape)
-            parts = []
-            for d in np.stack(np.meshgrid(*[np.arange(-1, 2)] * 3, indexing="ij"), -1).reshape(-1, 3):
-                n = c + d
-                if (n < 0).any() or (n >= nc).any():
-                    continue
-                key = (n[0] * nc[1] + n[1]) * nc[2] + n[2]
-                a, b = np.searchsorted(ckey, [key, key + 1])
-                if b > a:
-                    parts.append(np.arange(a, b))
-            if not parts:
-                return c, None
-            sel = np.concatenate(parts)
-            k = occ_k[sel]
-            ok = ((k >= e0) & (k < e1)).all(axis=1)
-            if not ok.any():
-                return c, None
-            return c, _label_grid(k[ok] - e0, occ_val[sel[ok]], tuple(e1 - e0), self.max_distance / s,
-                                  c0 - e0, c1 - e0, e0, shape)
+            s0, s1 = e0 >> _BSHIFT, -(-e1 // BLOCK)
+            sub = occ_blocks[occ_table[s0[0] : s1[0], s0[1] : s1[1], s0[2] : s1[2]]]
+            n = s1 - s0
+            vals = sub.transpose(0, 3, 1, 4, 2, 5).reshape(n * BLOCK)
+            o0, o1 = e0 - s0 * BLOCK, e1 - s0 * BLOCK
+            vals = vals[o0[0] : o1[0], o0[1] : o1[1], o0[2] : o1[2]]
+            return c, _label_grid(vals, self.max_distance / s, c0 - e0, c1 - e0, e0, shape)
 
         table = np.zeros(tuple(nb), np.int32)
-        blocks = [np.zeros((1, BLOCK, BLOCK, BLOCK), np.uint8)]
+        blocks = np.zeros((n_alloc + 1, BLOCK, BLOCK, BLOCK), np.uint8)  # row 0: the all-void block
         n_used = 1
         threads = max(1, min(_BUILD_THREADS, len(chunk_ids)))
-        results = map(one, chunk_ids) if threads == 1 else ThreadPoolExecutor(threads).map(one, chunk_ids)
-        for c, core in results:
+        for c, core in _bounded_map(one, chunk_ids, threads):
             if core is None:
                 continue
             b0 = c * _CHUNK
@@ -382,16 +405,16 @@ class MapIndex:
             idx = np.nonzero(keep)
             if not len(idx[0]):
                 continue
-            blocks.append(cb[idx])
+            blocks[n_used : n_used + len(idx[0])] = cb[idx]
             table[b0[0] + idx[0], b0[1] + idx[1], b0[2] + idx[2]] = np.arange(n_used, n_used + len(idx[0]))
             n_used += len(idx[0])
         self._table = table
-        self._blocks = np.concatenate(blocks).reshape(-1)
+        blocks.resize((n_used, BLOCK, BLOCK, BLOCK), refcheck=False)  # drop the rows of all-void blocks
+        self._blocks = blocks.reshape(-1)
         self._set_tables()
 
     def _set_tables(self) -> None:
-        """Derived lookup tables: the voxel-centre labels of every block (flag bits cleared)."""
-        self._blocks_labels = self._blocks & np.uint8(_LABEL_BITS)
+        """Derived lookup view: the flat block table."""
         self._table_flat = self._table.reshape(-1)
 
     @property
@@ -402,7 +425,7 @@ class MapIndex:
     @property
     def nbytes(self) -> int:
         """Bytes held by the label grid (block table and blocks)."""
-        return self._table.nbytes + self._blocks.nbytes + self._blocks_labels.nbytes
+        return self._table.nbytes + self._blocks.nbytes
 
     @property
     def grid(self) -> np.ndarray:
@@ -422,7 +445,10 @@ class MapIndex:
         m = BLOCK - 1
         off = (((i & m) << _BSHIFT) + (j & m) << _BSHIFT) + (k & m)
         off += t << (3 * _BSHIFT)
-        return (self._blocks if flags else self._blocks_labels)[off]
+        out = self._blocks[off]
+        if not flags:
+            out &= np.uint8(_LABEL_BITS)
+        return out
 
     def inside(self, points: np.ndarray) -> np.ndarray:
         """Which points lie inside the grid bounds (outside: farther than ``max_distance``
@@ -721,21 +747,27 @@ def _voxel_keys(points: np.ndarray, labels: np.ndarray, origin: np.ndarray, s: f
     return (lin << 16) | (q << 6) | np.asarray(labels, dtype=np.int64)
 
 
-def _near_and_flags(label_of: np.ndarray, empty: np.ndarray, radius: float) -> np.ndarray:
+def _near_and_flags(label_of: np.ndarray, empty: np.ndarray, radius: float, w0=(0, 0, 0), w1=None) -> np.ndarray:
     """Grid values from the occupied voxels' labels: nearest occupied voxel's label (0 beyond
-    ``radius`` voxels), with the ambiguous and shell bits."""
-    shape = empty.shape
-    idx = ndimage.distance_transform_edt(empty, return_distances=False, return_indices=True)
+    ``radius`` voxels), with the ambiguous and shell bits; of the window ``w0:w1`` (default: all)."""
+    w1 = empty.shape if w1 is None else w1
+    win = tuple(slice(a, b) for a, b in zip(w0, w1))
+    idx = ndimage.distance_transform_edt(empty, return_distances=False, return_indices=True)[(slice(None), *win)]
+    shape = idx.shape[1:]
     near = label_of[tuple(idx)]
     # squared voxel distance to it, in int32 along broadcast axes (SciPy's own distances
     # go through three float64 index volumes: twice the time of the transform itself)
     d2 = np.zeros(shape, dtype=np.int32)
     for a in range(3):
-        ax = np.arange(shape[a], dtype=np.int32).reshape([-1 if b == a else 1 for b in range(3)])
+        ax = np.arange(w0[a], w0[a] + shape[a], dtype=np.int32).reshape([-1 if b == a else 1 for b in range(3)])
         step = idx[a].astype(np.int32) - ax
         d2 += step * step
     del idx, step
-    near[np.sqrt(d2, dtype=np.float64) > radius] = 0
+    # sqrt(d2) > radius, in integers: the largest squared distance whose root is within radius
+    limit = int(np.floor(radius)) ** 2
+    while np.sqrt(np.float64(limit + 1)) <= radius:
+        limit += 1
+    near[d2 > limit] = 0
     del d2
     mixed = (near & _MIXED) > 0
     grid = near & ~np.uint8(_MIXED)
@@ -749,17 +781,32 @@ def _near_and_flags(label_of: np.ndarray, empty: np.ndarray, radius: float) -> n
     return grid
 
 
-def _label_grid(occ_k, occ_val, ext_shape, radius, c0, c1, e0, shape) -> np.ndarray:
+def _label_grid(vals: np.ndarray, radius: float, c0, c1, e0, shape) -> np.ndarray:
     """Grid values of the core ``c0:c1`` of an extent (origin ``e0`` in the whole grid of ``shape``)
-    holding the occupied voxels ``occ_k`` (extent coordinates) with values ``occ_val``."""
-    label_of = np.zeros(ext_shape, np.uint8)
-    empty = np.ones(ext_shape, bool)
-    t = tuple(occ_k.T)
-    label_of[t] = occ_val
-    empty[t] = False
-    grid = _near_and_flags(label_of, empty, radius)
-    del label_of, empty
-    core = grid[c0[0] : c1[0], c0[1] : c1[1], c0[2] : c1[2]].copy()
+    whose occupied voxels hold their values in ``vals`` (``_EMPTY``: not occupied).
+
+    Only voxels within ``floor(radius) + 1`` voxels of an occupied one can be non-void, so the
+    distance transform covers the occupied voxels' bounding box grown by that reach and one
+    voxel (their neighbours), not the whole extent."""
+    reach = int(np.floor(radius)) + 1
+    c0, c1 = np.asarray(c0), np.asarray(c1)
+    core = np.zeros(tuple(c1 - c0), np.uint8)
+    occ = vals != _EMPTY
+    along = [np.flatnonzero(occ.any(axis=tuple(b for b in range(3) if b != a))) for a in range(3)]
+    if not len(along[0]):
+        return core
+    b0 = np.maximum([x[0] - reach - 1 for x in along], 0)
+    b1 = np.minimum([x[-1] + reach + 2 for x in along], vals.shape)
+    w0 = np.maximum(np.maximum(c0 - 1, 0), b0)  # the core and its neighbours, within that box
+    w1 = np.minimum(np.minimum(c1 + 1, vals.shape), b1)
+    a0, a1 = np.maximum(w0, c0), np.minimum(w1, c1)
+    if (a1 <= a0).any():
+        return core
+    box = tuple(slice(x, y) for x, y in zip(b0, b1))
+    grid = _near_and_flags(vals[box], ~occ[box], radius, w0 - b0, w1 - b0)
+    del occ
+    core[a0[0] - c0[0] : a1[0] - c0[0], a0[1] - c0[1] : a1[1] - c0[1], a0[2] - c0[2] : a1[2] - c0[2]] = \
+        grid[a0[0] - w0[0] : a1[0] - w0[0], a0[1] - w0[1] : a1[1] - w0[1], a0[2] - w0[2] : a1[2] - w0[2]]
     for a in range(3):  # the outer layer of the whole grid stays void (clipped lookups read void)
         if e0[a] + c0[a] == 0:
             core[(slice(None),) * a + (0,)] = 0
@@ -773,15 +820,16 @@ def _dense_grid(index: MapIndex) -> np.ndarray:
     sparse grid; memory and time grow with the box). Same values as ``index.grid``."""
     s, shape = index.voxel_size, index.shape
     best = []
-    for pts, lab in index._sample_pieces(0.7 * s):
+    for make in index._sample_pieces(0.7 * s):
+        pts, lab = make()
         best.append(_voxel_keys(pts, lab, index.origin, s, shape))
     key = np.sort(np.concatenate(best))
     start = np.flatnonzero(np.r_[True, (key[1:] >> 16) != (key[:-1] >> 16)])
     labs = (key & _LABEL_BITS).astype(np.uint8)
     mixed = np.minimum.reduceat(labs, start) != np.maximum.reduceat(labs, start)
-    k = np.stack(np.unravel_index(key[start] >> 16, shape), axis=1)
-    return _label_grid(k, labs[start] | np.where(mixed, _MIXED, 0).astype(np.uint8), shape,
-                       index.max_distance / s, np.zeros(3, int), np.asarray(shape), np.zeros(3, int), shape)
+    vals = np.full(shape, _EMPTY, np.uint8)
+    vals.reshape(-1)[key[start] >> 16] = labs[start] | np.where(mixed, _MIXED, 0).astype(np.uint8)
+    return _label_grid(vals, index.max_distance / s, np.zeros(3, int), np.asarray(shape), np.zeros(3, int), shape)
 
 
 _CACHE: list = []
