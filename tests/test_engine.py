@@ -152,3 +152,31 @@ def test_training_views_rendered_on_a_local_cluster_equal_the_serial_ones():
     assert len(a) == 3 * 2 * 4
     for f in ("rgb", "depth", "labels", "scene", "height"):
         assert getattr(a, f).dtype == getattr(b, f).dtype and np.array_equal(getattr(a, f), getattr(b, f)), f
+
+
+class _ReddishNet:
+    """A picklable stand-in for a Segmenter: labels from the red channel."""
+
+    def predict_labels(self, rgb):
+        import numpy as np
+
+        return (np.asarray(rgb)[..., 0] // 40).astype(np.uint8) + 1
+
+
+def test_per_scene_experiment_rows_on_a_local_cluster_equal_the_serial_ones(tmp_path):
+    from semmatch.experiments.adapt import adapted_lower_maps
+    from semmatch.experiments.layout import Layout
+    from semmatch.fusion import reconstruct
+    from semmatch.io import read_sequence, write_map
+
+    root = tmp_path / "data"
+    generate_dataset(root / "scenes", **{**TINY, "train_seeds": [], "eval_seeds": [9001, 9002],
+                                         "n_frames_lower": 6, "intrinsics": DEFAULT_INTRINSICS.scaled(64, 48)})
+    layout = Layout(root)
+    for sd in layout.scene_dirs("eval"):
+        write_map(layout.lower_reference(sd.name), reconstruct(read_sequence(layout.lower_sequence(sd)), None, 0.08))
+    nets = {"reddish": _ReddishNet()}
+    serial_rows = adapted_lower_maps(root, nets, voxel_size=0.08, eval_voxel_size=0.1, progress=False)
+    cluster_rows = adapted_lower_maps(root, nets, voxel_size=0.08, eval_voxel_size=0.1, jobs=2, progress=False)
+    assert list(serial_rows["scene"]) == [sd.name for sd in layout.scene_dirs("eval")]
+    assert serial_rows.equals(cluster_rows)

@@ -19,7 +19,6 @@ import pandas as pd
 from ..adapt import adapted_name, fine_tune, robot_training_views
 from ..io import read_map, read_sequence
 from ..metrics import MEASURES, compare
-from ..progress import tqdm
 from ..stats import bootstrap_ci, paired_difference_ci
 from .layout import Layout
 from .synthetic import eval_grid_origin
@@ -128,32 +127,57 @@ def gap_table(per_scene: pd.DataFrame, network: str, *, low: float = 0.2, high: 
 
 
 def adapted_lower_maps(data_root: str | Path, networks: dict[str, object], *, voxel_size: float = 0.04,
-                       eval_voxel_size: float = 0.05, progress: bool = True) -> pd.DataFrame:
+                       eval_voxel_size: float = 0.05, jobs: int = 1, scheduler: str | None = None,
+                       progress: bool = True) -> pd.DataFrame:
     """Table 2 rows of networks applied to the robot's own frames: per evaluation scene, the
     robot's frames segmented by each network, fused (TSDF) and scored against the reference
     (05's ``reference.ply``, on the protocol's grid).
 
     Parameters
     ----------
+    data_root : path
+        The pipeline's data root.
     networks : dict
-        ``{name: Segmenter}``.
+        ``{name: Segmenter}`` (pickled to the workers when scenes run elsewhere).
+    voxel_size, eval_voxel_size : float
+        Fusion and evaluation voxel sizes (m).
+    jobs : int
+        Scenes run as tasks of :func:`semmatch.engine.map_tasks` on ``jobs`` local worker
+        processes (1: in this process).
+    scheduler : str, optional
+        Dask scheduler address to run the scenes on (default ``SEMMATCH_SCHEDULER``; none: local).
+    progress : bool
 
     Returns
     -------
     DataFrame
         ``scene``, ``model``, ``method`` (``lower``) and the paper's measures.
     """
+    from functools import partial
+
+    from ..engine import map_tasks
+
+    layout = Layout(data_root)
+    scenes = [sd.name for sd in layout.scene_dirs("eval")]
+    task = partial(_adapted_lower_scene, str(layout.root.resolve()), networks, float(voxel_size),
+                   float(eval_voxel_size))
+    per_scene = map_tasks(task, scenes, jobs=jobs, scheduler=scheduler, desc="adapted lower maps", progress=progress)
+    return pd.DataFrame([row for rows in per_scene for row in rows])
+
+
+def _adapted_lower_scene(data_root: str, networks: dict[str, object], voxel_size: float, eval_voxel_size: float,
+                         sid: str) -> list[dict]:
+    """The rows of one scene (a task of :func:`adapted_lower_maps`)."""
     from ..fusion import reconstruct_many
 
     layout = Layout(data_root)
+    seq = read_sequence(layout.lower_sequence(layout.scenes / "eval" / sid)).load()
+    labelings = [[m.predict_labels(f.rgb) for f in seq] for m in networks.values()]
+    maps = reconstruct_many(seq, labelings, voxel_size)
+    ref = read_map(layout.lower_reference(sid))
     origin = eval_grid_origin(eval_voxel_size)
     rows = []
-    for sd in tqdm(layout.scene_dirs("eval"), desc="adapted lower maps", disable=not progress):
-        seq = read_sequence(layout.lower_sequence(sd)).load()
-        labelings = [[m.predict_labels(f.rgb) for f in seq] for m in networks.values()]
-        maps = reconstruct_many(seq, labelings, voxel_size)
-        ref = read_map(layout.lower_reference(sd.name))
-        for name, pred in zip(networks, maps, strict=True):
-            s = compare(ref, pred, eval_voxel_size, grid_origin=origin)
-            rows.append({"scene": sd.name, "model": name, "method": "lower", **{k: float(s[k]) for k in MEASURES}})
-    return pd.DataFrame(rows)
+    for name, pred in zip(networks, maps, strict=True):
+        s = compare(ref, pred, eval_voxel_size, grid_origin=origin)
+        rows.append({"scene": sid, "model": name, "method": "lower", **{k: float(s[k]) for k in MEASURES}})
+    return rows
