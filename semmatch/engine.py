@@ -51,11 +51,15 @@ def dask_setup(worker) -> None:  # noqa: ARG001 - Dask's preload hook
     die_with_parent(int(os.environ.get("SEMMATCH_PARENT_PID", "0")) or None)
 
 
-def _local_client(jobs: int):
-    """The process's LocalCluster client with ``jobs`` workers (started on first use, reused)."""
+def _local_client(jobs: int, most: int | None = None):
+    """The process's LocalCluster client with ``jobs`` workers (started on first use).
+
+    A running cluster of this process is reused when it has between ``jobs`` and ``most``
+    (default ``jobs``) workers: starting one costs seconds (worker processes import semmatch).
+    """
     from distributed import Client, LocalCluster
 
-    if _LOCAL.get("pid") == os.getpid() and _LOCAL.get("workers") == jobs:
+    if _LOCAL.get("pid") == os.getpid() and jobs <= _LOCAL.get("workers", 0) <= (most or jobs):
         return _LOCAL["client"]
     close_local_cluster()
     try:
@@ -143,7 +147,7 @@ def map_tasks(fn: Callable[..., Any], items: Iterable[Any], *, jobs: int = 1, sc
         return [fn(item) for item in tqdm(items, desc=desc, disable=not progress)]
     from distributed import as_completed
 
-    client = _remote_client(address) if address else _local_client(min(int(jobs), len(items)))
+    client = _remote_client(address) if address else _local_client(min(int(jobs), len(items)), int(jobs))
     try:
         # pure=False: every call runs (a task's outputs are files, not only its return value)
         futures = client.map(fn, items, pure=False)

@@ -53,6 +53,9 @@ def test_local_cluster_writes_the_same_files_as_a_serial_run(serial, tmp_path):
     generate_dataset(tmp_path, jobs=2, **TINY)
     assert digests(tmp_path) == serial
     assert engine.map_tasks(abs, [-3, 4, -5], jobs=2, progress=False) == [3, 4, 5]  # input order
+    cluster = engine._LOCAL["cluster"]
+    assert engine.map_tasks(abs, [-3, 4], jobs=3, progress=False) == [3, 4]
+    assert engine._LOCAL["cluster"] is cluster  # two workers are enough: the running cluster is reused
 
 
 def test_a_scheduler_and_workers_started_separately_give_the_same_files(serial, tmp_path):
@@ -99,17 +102,24 @@ def test_an_unreachable_scheduler_is_a_clear_error_before_anything_is_written(tm
 
 def test_a_killed_worker_s_task_reruns_and_the_output_is_complete(serial, tmp_path):
     client = engine._local_client(2)
-    pids = list(client.run(os.getpid).values())
+    pid_of = client.run(os.getpid)  # worker address -> process id
     out = tmp_path / "data"
     done: dict = {}
     th = threading.Thread(target=lambda: done.update(r=generate_dataset(out, jobs=2, **TINY)))
     th.start()
     deadline = time.time() + 60
-    while not list(out.glob("**/.*.partial")) and time.time() < deadline and th.is_alive():
-        time.sleep(0.05)  # wait until a worker is writing a scene
-    os.kill(pids[0], signal.SIGKILL)
+    victim = None
+    while victim is None and time.time() < deadline and th.is_alive():
+        busy = [a for a, tasks in client.processing().items() if tasks and a in pid_of]
+        if busy and list(out.glob("**/.*.partial")):  # a worker holds a scene and one is being written
+            victim = busy[0]
+        else:
+            time.sleep(0.02)
+    assert victim is not None, "no worker was caught with a task"
+    os.kill(pid_of[victim], signal.SIGKILL)
     th.join(timeout=300)
     assert "r" in done, "the run did not finish after a worker was killed"
+    assert not _alive(pid_of[victim]) and victim not in client.run(os.getpid)  # the nanny started a new worker
     assert digests(out) == serial
     engine.close_local_cluster()
 
