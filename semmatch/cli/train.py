@@ -38,15 +38,19 @@ def register(sub) -> None:
     p.add_argument("--device", choices=("auto", "cpu", "cuda"), default="auto", help="auto: CUDA when present (default %(default)s)")
     p.add_argument("--threads", type=int, help="torch threads")
     p.add_argument("--cache-dir", help="cache rendered views here")
+    p.add_argument("--jobs", type=int, default=1, help="scenes rendered in parallel (local worker processes; default 1)")
+    p.add_argument("--scheduler", default=None,
+                   help="Dask scheduler address (tcp://host:8786) to render the views on; default "
+                        "SEMMATCH_SCHEDULER, else --jobs local processes")
     add_quiet(p)
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     """Train and print the checkpoint path and validation scores."""
-    from semmatch.segment.training import make_config, train
+    from semmatch.segment.training import build_views, make_config, train
 
-    for flag in ("lr", "steps", "batch_size", "eval_every", "width", "height"):
+    for flag in ("lr", "steps", "batch_size", "eval_every", "width", "height", "jobs"):
         v = getattr(args, flag, None)
         if v is not None and v <= 0:
             raise ValueError(f"--{flag.replace('_', '-')} must be > 0, got {v}")
@@ -60,7 +64,7 @@ def run(args: argparse.Namespace) -> int:
         train_seeds=args.train_seeds, val_seeds=args.val_seeds, eval_seeds=args.eval_seeds, seed=args.seed,
         device=args.device, threads=args.threads, cache_dir=args.cache_dir, progress=not args.quiet,
     )
-    path = train(cfg)
+    path = train(cfg, views=build_views(cfg, jobs=args.jobs, scheduler=args.scheduler))
     from semmatch.segment import load_model
 
     m = load_model(path).info
