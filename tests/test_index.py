@@ -130,3 +130,25 @@ def test_the_cache_is_reused_invalidated_and_survives_damage(mesh_map, tmp_path,
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         load_index(path, voxel_size=0.04)
+
+
+def test_block_lookups_equal_dense_lookups(mesh_map, room, rng, monkeypatch):
+    """A large box looks up through the block table (two gathers); a small one through its dense
+    copy: same answers."""
+    from scenes import orbit_poses
+
+    import semmatch.transfer.index as index_module
+
+    dense = MapIndex(mesh_map, voxel_size=0.04)
+    monkeypatch.setattr(index_module, "DENSE_LOOKUP_VOXELS", 0)
+    blocks = MapIndex(mesh_map, voxel_size=0.04)
+    assert dense._dense is not None and blocks._dense is None
+    pts = _points(mesh_map, rng)
+    for exact in (False, True):
+        assert (blocks.lookup(pts, exact=exact) == dense.lookup(pts, exact=exact)).all()
+    for f in render_frames(room, orbit_poses(room, 2, 0.3)):
+        for exact in (False, True):
+            assert (blocks.lookup_depth(f.depth, f.pose, f.intrinsics, exact=exact)
+                    == dense.lookup_depth(f.depth, f.pose, f.intrinsics, exact=exact)).all()
+        assert (blocks.support_depth(f.depth, f.pose, f.intrinsics)
+                == dense.support_depth(f.depth, f.pose, f.intrinsics)).all()

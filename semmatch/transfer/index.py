@@ -70,6 +70,8 @@ MAX_TABLE_BLOCKS = 100_000_000
 _BUILD_SAMPLES = 500_000  # mesh samples made (and reduced to voxels) at a time while building
 #: most mesh samples an index build may make (made and reduced half a million at a time)
 MAX_INDEX_SAMPLES = 2_000_000_000
+#: a box of at most this many voxels also keeps its grid dense for lookups (one byte a voxel)
+DENSE_LOOKUP_VOXELS = 48_000_000
 _BUILD_THREADS = 2  # chunks of the label grid computed at once (SciPy releases the GIL)
 
 
@@ -268,7 +270,12 @@ class MapIndex:
     def __getstate__(self) -> dict:
         state = self.__dict__.copy()
         state["_rc"] = None  # Open3D scenes do not pickle; rebuilt on first use
+        state["_dense"] = None  # the expanded grid is rebuilt from the blocks (smaller pickles)
         return state
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self._set_tables()
 
     # ------------------------------------------------------------------ construction
     def _sample_pieces(self, spacing: float):
@@ -414,8 +421,10 @@ class MapIndex:
         self._set_tables()
 
     def _set_tables(self) -> None:
-        """Derived lookup view: the flat block table."""
+        """Derived lookup tables: the flat block table and, for a box of at most
+        :data:`DENSE_LOOKUP_VOXELS`, the grid expanded (one gather per lookup instead of two)."""
         self._table_flat = self._table.reshape(-1)
+        self._dense = self.grid.reshape(-1) if np.prod(self.shape) <= DENSE_LOOKUP_VOXELS else None
 
     @property
     def n_blocks(self) -> int:
@@ -424,17 +433,24 @@ class MapIndex:
 
     @property
     def nbytes(self) -> int:
-        """Bytes held by the label grid (block table and blocks)."""
-        return self._table.nbytes + self._blocks.nbytes
+        """Bytes held by the label grid (block table, blocks and, for a small box, its dense copy)."""
+        return self._table.nbytes + self._blocks.nbytes + (0 if self._dense is None else self._dense.nbytes)
 
     @property
     def grid(self) -> np.ndarray:
         """The label grid expanded over the whole bounding box (uint8, :attr:`shape`; for tests and
         small maps: it allocates the box)."""
+        if getattr(self, "_dense", None) is not None:
+            return self._dense.reshape(self.shape).copy()
         nb = self._table.shape
-        full = self._blocks.reshape(-1, BLOCK, BLOCK, BLOCK)[self._table]
-        full = full.transpose(0, 3, 1, 4, 2, 5).reshape(nb[0] * BLOCK, nb[1] * BLOCK, nb[2] * BLOCK)
-        return np.ascontiguousarray(full[: self.shape[0], : self.shape[1], : self.shape[2]])
+        blocks = self._blocks.reshape(-1, BLOCK, BLOCK, BLOCK)
+        out = np.empty(self.shape, np.uint8)
+        for bx in range(nb[0]):  # a slab of blocks at a time: the box plus one slab in memory
+            slab = blocks[self._table[bx]].transpose(2, 0, 3, 1, 4).reshape(BLOCK, nb[1] * BLOCK, nb[2] * BLOCK)
+            x0 = bx * BLOCK
+            n = min(BLOCK, self.shape[0] - x0)
+            out[x0 : x0 + n] = slab[:n, : self.shape[1], : self.shape[2]]
+        return out
 
     def _values(self, i: np.ndarray, j: np.ndarray, k: np.ndarray, flags: bool = True) -> np.ndarray:
         """Grid values of voxels (i, j, k) (int32 arrays, inside the grid)."""
@@ -627,7 +643,10 @@ class MapIndex:
             qa = np.nan_to_num(q[:, a], nan=-1.0, posinf=-1.0, neginf=-1.0)
             np.clip(qa, 0, self.shape[a] - 1, out=qa)
             ks.append(qa.astype(np.int32))
-        out = self._values(*ks)
+        if self._dense is not None:
+            out = self._dense[(ks[0].astype(np.int64) * self.shape[1] + ks[1]) * self.shape[2] + ks[2]]
+        else:
+            out = self._values(*ks)
         return self._resolve(out, lambda sel: p[sel], exact)
 
     def _gather_depth(
@@ -647,14 +666,29 @@ class MapIndex:
         inv = 1.0 / self.voxel_size
         R = T[:3, :3] * inv
         t = (T[:3, 3] - self.origin) * inv
-        ks = []
+        dense = self._dense is not None  # one gather: the voxel's linear index, exact in floats
+        exact_dtype = np.float32 if np.prod(self.shape) < 2**24 else np.float64
+        ks, lin = [], None
         for a in range(3):
             qa = cv2.addWeighted(rx, R[a, 0], ry, R[a, 1], R[a, 2])
             qa = cv2.multiply(qa, z)
             qa += np.float32(t[a])
             np.clip(qa, 0, self.shape[a] - 1, out=qa)
-            ks.append(qa.astype(np.int32))  # truncation = floor (clipped to >= 0)
-        out = self._values(*ks, flags=flags)
+            if not dense:
+                ks.append(qa.astype(np.int32))  # truncation = floor (clipped to >= 0)
+                continue
+            np.floor(qa, out=qa)
+            if lin is None:
+                lin = qa.astype(exact_dtype, copy=False)
+            else:
+                lin *= self.shape[a]
+                lin += qa
+        if dense:
+            out = self._dense[lin.astype(np.int64 if exact_dtype is np.float64 else np.int32)]
+            if not flags:
+                out &= np.uint8(_LABEL_BITS)
+        else:
+            out = self._values(*ks, flags=flags)
         out[~valid] = 0
 
         def world(sel: tuple[np.ndarray, ...]) -> np.ndarray:
