@@ -335,42 +335,59 @@ class MapIndex:
             key.sort()
             start = np.flatnonzero(np.r_[True, (key[1:] >> 16) != (key[:-1] >> 16)])
             labs = (key & _LABEL_BITS).astype(np.uint8)
-            return len(pts), key[start], np.minimum.reduceat(labs, start), np.maximum.reduceat(labs, start)
+            # one row per voxel of the piece: its smallest key << 12 | lowest label << 6 | highest label
+            row = key[start].astype(np.uint64) << np.uint64(12)
+            row |= np.minimum.reduceat(labs, start).astype(np.uint64) << np.uint64(6)
+            row |= np.maximum.reduceat(labs, start).astype(np.uint64)
+            return len(pts), row
 
-        best, lmin, lmax = [], [], []
+        rows = []
         self.n_samples = 0
-        for n, b, mn, mx in _bounded_map(piece, self._sample_pieces(0.7 * s), _BUILD_THREADS):
+        for n, r in _bounded_map(piece, self._sample_pieces(0.7 * s), _BUILD_THREADS):
             self.n_samples += n
-            best.append(b)
-            lmin.append(mn)
-            lmax.append(mx)
-        best, lmin, lmax = np.concatenate(best), np.concatenate(lmin), np.concatenate(lmax)
-        if len(lmin) > 1:
-            order = np.argsort(best, kind="stable")
-            best, lmin, lmax = best[order], lmin[order], lmax[order]
-            del order
-            start = np.flatnonzero(np.r_[True, (best[1:] >> 16) != (best[:-1] >> 16)])
-            lmin, lmax = np.minimum.reduceat(lmin, start), np.maximum.reduceat(lmax, start)
-            best = best[start]
-        occ_lin = best >> 16
-        occ_val = (best & _LABEL_BITS).astype(np.uint8) | np.where(lmin != lmax, _MIXED, 0).astype(np.uint8)
-        del best, lmin, lmax
+            rows.append(r)
+        rows = np.concatenate(rows)
+        rows.sort()  # in place: the rows of a voxel together, its smallest key first
+        occ_lin, occ_val = [], []
+        i, n_rows = 0, len(rows)
+        while i < n_rows:  # reduce to one value per voxel a few million rows at a time
+            j = min(i + (1 << 22), n_rows)
+            if j < n_rows:  # up to the end of the last voxel's rows
+                j = int(np.searchsorted(rows, ((rows[j - 1] >> np.uint64(28)) + np.uint64(1)) << np.uint64(28)))
+            r = rows[i:j]
+            lin = (r >> np.uint64(28)).astype(np.int64)
+            start = np.flatnonzero(np.r_[True, lin[1:] != lin[:-1]])
+            lmin = np.minimum.reduceat(((r >> np.uint64(6)) & np.uint64(_LABEL_BITS)).astype(np.uint8), start)
+            lmax = np.maximum.reduceat((r & np.uint64(_LABEL_BITS)).astype(np.uint8), start)
+            occ_lin.append(lin[start])
+            occ_val.append(((r[start] >> np.uint64(12)) & np.uint64(_LABEL_BITS)).astype(np.uint8)
+                           | np.where(lmin != lmax, _MIXED, 0).astype(np.uint8))
+            i = j
+        del rows
+        occ_lin, occ_val = np.concatenate(occ_lin), np.concatenate(occ_val)
         # blocks within reach: a voxel can be non-void only within floor(max_distance / voxel) + 1
         # voxels of an occupied one (its nearest surface, or a neighbour's, for the flags)
         reach = int(np.floor(self.max_distance / s)) + 1
-        occ_k = np.stack(np.unravel_index(occ_lin, self.shape), axis=1).astype(np.int32)
-        del occ_lin
-        # the occupied voxels' values in blocks too (0xFF: not occupied), for gathering chunks
-        bk = occ_k >> _BSHIFT
-        blin = (bk[:, 0].astype(np.int64) * nb[1] + bk[:, 1]) * nb[2] + bk[:, 2]
-        uniq, slot = np.unique(blin, return_inverse=True)
+        # the occupied voxels' values in blocks too (0xFF: not occupied), for gathering chunks;
+        # one slab of blocks at a time (occ_lin is sorted, x first)
+        bounds = np.searchsorted(occ_lin, np.arange(nb[0] + 1, dtype=np.int64) * BLOCK * shape[1] * shape[2])
         occ_table = np.zeros(tuple(nb), np.int32)
-        occ_table.reshape(-1)[uniq] = np.arange(1, len(uniq) + 1, dtype=np.int32)
-        occ_blocks = np.full((len(uniq) + 1, BLOCK**3), _EMPTY, np.uint8)
-        m = BLOCK - 1
-        occ_blocks[slot + 1, ((occ_k[:, 0] & m) * BLOCK + (occ_k[:, 1] & m)) * BLOCK + (occ_k[:, 2] & m)] = occ_val
-        occ_blocks = occ_blocks.reshape(-1, BLOCK, BLOCK, BLOCK)
-        del bk, blin, uniq, slot, occ_k, occ_val
+        store = [np.full((1, BLOCK**3), _EMPTY, np.uint8)]
+        n_slots, m = 1, BLOCK - 1
+        for bx in range(nb[0]):
+            a, b = bounds[bx], bounds[bx + 1]
+            if a == b:
+                continue
+            k = np.unravel_index(occ_lin[a:b], self.shape)
+            uniq, slot = np.unique((k[1] >> _BSHIFT) * nb[2] + (k[2] >> _BSHIFT), return_inverse=True)
+            occ_table[bx].reshape(-1)[uniq] = np.arange(n_slots, n_slots + len(uniq))
+            blk = np.full((len(uniq), BLOCK**3), _EMPTY, np.uint8)
+            blk[slot, ((k[0] & m) * BLOCK + (k[1] & m)) * BLOCK + (k[2] & m)] = occ_val[a:b]
+            store.append(blk)
+            n_slots += len(uniq)
+        del occ_lin, occ_val
+        occ_blocks = np.concatenate(store).reshape(-1, BLOCK, BLOCK, BLOCK)
+        del store
         near_blocks = ndimage.binary_dilation(occ_table > 0, np.ones((3, 3, 3), bool), iterations=-(-reach // BLOCK))
         n_alloc = int(near_blocks.sum())
         if n_alloc * BLOCK**3 > max_voxels:
