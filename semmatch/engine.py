@@ -28,7 +28,7 @@ import os
 from collections.abc import Callable, Iterable
 from typing import Any
 
-__all__ = ["map_tasks", "resolve_scheduler", "SCHEDULER_ENV", "close_local_cluster"]
+__all__ = ["map_tasks", "resolve_scheduler", "check_scheduler", "SCHEDULER_ENV", "close_local_cluster"]
 
 #: environment variable naming a Dask scheduler address to run per-scene tasks on
 SCHEDULER_ENV = "SEMMATCH_SCHEDULER"
@@ -104,7 +104,18 @@ def _remote_client(address: str):
                          f"{SCHEDULER_ENV})") from None
 
 
-def map_tasks(fn: Callable[..., Any], items: Iterable[Any], *, jobs: int = 1, scheduler: str | None = None,
+def check_scheduler(address: str) -> None:
+    """Connect to the Dask scheduler at ``address`` and disconnect.
+
+    Raises
+    ------
+    ValueError
+        The scheduler cannot be reached within ``CONNECT_TIMEOUT`` seconds.
+    """
+    _remote_client(address).close()
+
+
+def map_tasks(fn: Callable[..., Any], items: Iterable[Any], *, jobs: int | None = 1, scheduler: str | None = None,
               desc: str = "tasks", progress: bool = True) -> list:
     """``[fn(item) for item in items]``, run serially, on a local cluster or on a scheduler.
 
@@ -114,8 +125,9 @@ def map_tasks(fn: Callable[..., Any], items: Iterable[Any], *, jobs: int = 1, sc
         A module-level function (or ``functools.partial`` of one): it is pickled to the workers.
     items : iterable
         One argument per task.
-    jobs : int
-        Local worker processes (1: run in this process). Ignored with a scheduler.
+    jobs : int or None
+        Local worker processes (1: run in this process; None: one per CPU core), at most one per
+        item. Ignored with a scheduler.
     scheduler : str, optional
         Address of a Dask scheduler (``tcp://host:8786``); default ``SEMMATCH_SCHEDULER``.
     desc : str
@@ -138,6 +150,7 @@ def map_tasks(fn: Callable[..., Any], items: Iterable[Any], *, jobs: int = 1, sc
     from .progress import tqdm
 
     items = list(items)
+    jobs = (os.cpu_count() or 1) if jobs is None else jobs
     if int(jobs) < 1:
         raise ValueError(f"jobs must be >= 1, got {jobs}")
     address = resolve_scheduler(scheduler)

@@ -190,3 +190,16 @@ def test_per_scene_experiment_rows_on_a_local_cluster_equal_the_serial_ones(tmp_
     cluster_rows = adapted_lower_maps(root, nets, voxel_size=0.08, eval_voxel_size=0.1, jobs=2, progress=False)
     assert list(serial_rows["scene"]) == [sd.name for sd in layout.scene_dirs("eval")]
     assert serial_rows.equals(cluster_rows)
+
+
+def test_the_runner_refuses_an_unreachable_scheduler_before_running_a_notebook(tmp_path, monkeypatch):
+    from semmatch.experiments.pipeline import main
+
+    monkeypatch.delenv(engine.SCHEDULER_ENV, raising=False)
+    reports = tmp_path / "reports"
+    t = time.perf_counter()
+    rc = main(["run", "04_label_transfer", "--profile", "smoke", "--reports-dir", str(reports),
+               "--scheduler", "tcp://127.0.0.1:9", "--quiet"])
+    assert rc != 0 and time.perf_counter() - t < 10
+    assert not reports.exists()  # nothing written, no kernel started
+    assert engine.map_tasks(abs, [-1, 2], jobs=None, progress=False) == [1, 2]  # None: one worker per core

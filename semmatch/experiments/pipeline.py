@@ -224,6 +224,14 @@ def run_notebook(
     if not src.is_file():
         raise FileNotFoundError(f"{src}: no such notebook")
     params = _declared(src, params, load_params(params_file, params["profile"]).get(section_of(notebook)) or {})
+    from ..engine import SCHEDULER_ENV, check_scheduler, resolve_scheduler
+
+    # --scheduler, else the profile's common.scheduler, else SEMMATCH_SCHEDULER: reached before
+    # anything is written (an unreachable address is a clear error within seconds)
+    address = resolve_scheduler(scheduler or (load_params(params_file, params["profile"]).get("common") or {})
+                                .get("scheduler"))
+    if address:
+        check_scheduler(address)
     out_dir = Path(reports_dir) if reports_dir is not None else Path(cwd) / "reports" / params["profile"]
     out_dir.mkdir(parents=True, exist_ok=True)
     out = out_dir / f"{notebook}.ipynb"
@@ -233,11 +241,8 @@ def run_notebook(
     # directory itself (notebook_setup leaves it)
     kernel_env = {"SEMMATCH_PROGRESS": "text", "SEMMATCH_PIPELINE": "1",
                   "SEMMATCH_PARAMS": str(Path(params_file).resolve())}
-    address = scheduler or (load_params(params_file, params["profile"]).get("common") or {}).get("scheduler")
     if address:
-        from ..engine import SCHEDULER_ENV
-
-        kernel_env[SCHEDULER_ENV] = str(address)
+        kernel_env[SCHEDULER_ENV] = address
     saved = {k: os.environ.get(k) for k in kernel_env}
     os.environ.update(kernel_env)
     try:
