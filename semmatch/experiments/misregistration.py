@@ -142,7 +142,7 @@ def _misregistration_scene(data_root: str, methods: tuple[str, ...], cases: tupl
     from ..fusion import reconstruct_many
     from ..metrics import compare
     from ..registration import rigid_perturbation
-    from ..transfer import prepare, transfer_sequence
+    from ..transfer import load_index, transfer_sequence
 
     layout = Layout(data_root)
     sd = layout.scenes / "eval" / sid
@@ -154,7 +154,7 @@ def _misregistration_scene(data_root: str, methods: tuple[str, ...], cases: tupl
     upper = read_map(layout.upper_map(sid, GT))
     lower = read_sequence(sd / "lower").load()
     reference = read_map(layout.lower_reference(sid))
-    index = prepare(upper)
+    index = load_index(layout.upper_map(sid, GT), semantic_map=upper)  # cached beside the map
     center = upper.points.astype(np.float64).mean(axis=0)
     scene_seed = int(np.random.SeedSequence([o["seed"], zlib.crc32(sid.encode())]).generate_state(1)[0])
     labelings = []  # (translation, rotation, method, labels folder, coverage)
