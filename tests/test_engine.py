@@ -172,6 +172,9 @@ class _ReddishNet:
 
         return (np.asarray(rgb)[..., 0] // 40).astype(np.uint8) + 1
 
+    def predict_labels_batch(self, rgb, depth=None):
+        return self.predict_labels(rgb)
+
 
 def test_per_scene_experiment_rows_on_a_local_cluster_equal_the_serial_ones(tmp_path):
     from semmatch.experiments.adapt import adapted_lower_maps
@@ -203,3 +206,19 @@ def test_the_runner_refuses_an_unreachable_scheduler_before_running_a_notebook(t
     assert rc != 0 and time.perf_counter() - t < 10
     assert not reports.exists()  # nothing written, no kernel started
     assert engine.map_tasks(abs, [-1, 2], jobs=None, progress=False) == [1, 2]  # None: one worker per core
+
+
+def test_height_sweep_scores_on_a_local_cluster_equal_the_serial_ones(tmp_path):
+    from semmatch.experiments.height import sweep_sequences
+    from semmatch.segment.viewpoint import viewpoint_gap_sequences
+
+    root = tmp_path / "data"
+    generate_dataset(root / "scenes", **{**TINY, "train_seeds": [], "eval_seeds": [9001, 9002],
+                                         "heights_sweep": [0.4, 1.2], "n_frames_sweep": 3})
+    sweeps = sweep_sequences(root)
+    assert {h: len(p) for h, p in sweeps.items()} == {0.4: 4, 1.2: 4}
+    for per_scene in (True, False):
+        serial_rows = viewpoint_gap_sequences({"reddish": _ReddishNet()}, sweeps, per_scene=per_scene, progress=False)
+        cluster_rows = viewpoint_gap_sequences({"reddish": _ReddishNet()}, sweeps, per_scene=per_scene, jobs=2,
+                                               progress=False)
+        assert len(serial_rows) == (8 if per_scene else 2) and serial_rows.equals(cluster_rows)

@@ -85,15 +85,17 @@ def load_adapted(data_root: str | Path, network: str, checkpoints: dict[str, Pat
     return {name: load_model(p) if flip is None else load_model(p, flip=flip) for name, p in checkpoints.items()}
 
 
-def adapted_height_study(data_root: str | Path, network: str, checkpoints: dict[str, Path], *,
-                         progress: bool = True) -> pd.DataFrame:
+def adapted_height_study(data_root: str | Path, network: str, checkpoints: dict[str, Path], *, jobs: int = 1,
+                         scheduler: str | None = None, progress: bool = True) -> pd.DataFrame:
     """Per-scene pixel scores of the unadapted and every adapted network on the evaluation
-    scenes' height sweeps (:func:`semmatch.segment.viewpoint.viewpoint_gap_sequences`)."""
+    scenes' height sweeps (:func:`semmatch.segment.viewpoint.viewpoint_gap_sequences`; the scenes
+    are engine tasks on ``jobs`` local worker processes or the cluster at ``scheduler``)."""
     from ..segment.viewpoint import viewpoint_gap_sequences
     from .height import sweep_sequences
 
     models = {network: Layout(data_root).load_network(network), **load_adapted(data_root, network, checkpoints)}
-    return viewpoint_gap_sequences(models, sweep_sequences(data_root), per_scene=True, progress=progress)
+    return viewpoint_gap_sequences(models, sweep_sequences(data_root), per_scene=True, jobs=jobs,
+                                   scheduler=scheduler, progress=progress)
 
 
 def gap_table(per_scene: pd.DataFrame, network: str, *, low: float = 0.2, high: float = 1.6,

@@ -35,9 +35,13 @@ def sweep_sequences(data_root: str | Path, split: str = "eval") -> dict[float, l
 
 
 def height_study(
-    data_root: str | Path, networks: Sequence[str], *, figures_dir: str | Path, progress: bool = True
+    data_root: str | Path, networks: Sequence[str], *, figures_dir: str | Path, jobs: int = 1,
+    scheduler: str | None = None, progress: bool = True,
 ) -> pd.DataFrame:
     """Score each network on every evaluation scene's height sweep; write Fig. 3.
+
+    The scenes are tasks of :func:`semmatch.engine.map_tasks` (``jobs`` local worker processes,
+    or the cluster at ``scheduler``; the networks are pickled to the workers).
 
     Writes ``fig3_height_per_scene.csv`` (one row per network, scene and height),
     ``fig3_height.{csv,md}`` (mean over scenes with a 95 % bootstrap interval) and
@@ -54,7 +58,8 @@ def height_study(
 
     layout = Layout(data_root)
     models = {net: layout.load_network(net) for net in networks}
-    df = viewpoint_gap_sequences(models, sweep_sequences(data_root), per_scene=True, progress=progress)
+    df = viewpoint_gap_sequences(models, sweep_sequences(data_root), per_scene=True, jobs=jobs, scheduler=scheduler,
+                                 progress=progress)
     save_table(df, figures_dir, "fig3_height_per_scene")
     summary = summarize_over_scenes(df, ("mean_acc", "miou"), by=("model", "height"))
     save_table(summary, figures_dir, "fig3_height")

@@ -41,9 +41,9 @@ def _predict_labels(model, rgb: np.ndarray, depth: np.ndarray) -> np.ndarray:
     return np.stack([np.asarray(model.predict(r)).argmax(-1) for r in rgb]).astype(np.uint8)
 
 
-def _score(models: Mapping, batches: Iterable[tuple[float, str, np.ndarray, np.ndarray, np.ndarray]],
-           per_scene: bool) -> pd.DataFrame:
-    """Accumulate confusion matrices per (model, scene, height) and turn them into rows."""
+def _accumulate(models: Mapping, batches: Iterable[tuple[float, str, np.ndarray, np.ndarray, np.ndarray]],
+                per_scene: bool) -> tuple[dict, dict]:
+    """Confusion matrices (int64) and frame counts per (model, scene or ``all``, height)."""
     if not models:
         raise ValueError("viewpoint gap: no models given")
     conf: dict[tuple[str, str, float], np.ndarray] = {}
@@ -55,12 +55,23 @@ def _score(models: Mapping, batches: Iterable[tuple[float, str, np.ndarray, np.n
             c = confusion(labels, pred)
             conf[key] = conf[key] + c if key in conf else c
             frames[key] = frames.get(key, 0) + len(rgb)
+    return conf, frames
+
+
+def _rows(conf: dict, frames: dict) -> pd.DataFrame:
+    """One row per (model, scene, height) from :func:`_accumulate`'s counts."""
     rows = []
     for (name, scene, height), c in conf.items():
         s = scores(c)
         rows.append(dict(model=name, scene=scene, height=height, n_frames=frames[(name, scene, height)],
                          **{k: s[k] for k in _COLUMNS}))
     return pd.DataFrame(rows).sort_values(["model", "scene", "height"]).reset_index(drop=True)
+
+
+def _score(models: Mapping, batches: Iterable[tuple[float, str, np.ndarray, np.ndarray, np.ndarray]],
+           per_scene: bool) -> pd.DataFrame:
+    """Accumulate confusion matrices per (model, scene, height) and turn them into rows."""
+    return _rows(*_accumulate(models, batches, per_scene))
 
 
 def viewpoint_gap(
@@ -143,6 +154,8 @@ def viewpoint_gap_sequences(
     batch_size: int = 8,
     per_scene: bool = False,
     progress: bool = True,
+    jobs: int = 1,
+    scheduler: str | None = None,
 ) -> pd.DataFrame:
     """:func:`viewpoint_gap` on sequence folders written by ``semmatch simulate``.
 
@@ -153,25 +166,56 @@ def viewpoint_gap_sequences(
         E.g. ``{0.2: ["data/full/scenes/eval/s1001/h020", ...], ...}``; every frame needs
         ground-truth labels. The scene name is the folder's parent name.
     batch_size, per_scene, progress : see :func:`viewpoint_gap`.
+    jobs : int
+        Scenes (all their heights) run as tasks of :func:`semmatch.engine.map_tasks` on ``jobs``
+        local worker processes (1: in this process; the models are pickled to the workers). The
+        confusion counts are integers, summed over scenes in the same way wherever they ran.
+    scheduler : str, optional
+        Dask scheduler address to run the scenes on (default ``SEMMATCH_SCHEDULER``; none: local).
 
     Returns
     -------
     pandas.DataFrame
         As :func:`viewpoint_gap`.
     """
+    from functools import partial
+
+    from ..engine import map_tasks
+
+    if not models:
+        raise ValueError("viewpoint gap: no models given")
+    by_scene: dict[str, list[tuple[float, str]]] = {}
+    for h, paths in sweeps.items():
+        for path in paths:
+            by_scene.setdefault(Path(path).parent.name, []).append((float(h), str(path)))
+    task = partial(_sweep_counts, dict(models), int(batch_size), bool(per_scene))
+    parts = map_tasks(task, list(by_scene.values()), jobs=jobs, scheduler=scheduler, desc="viewpoint gap (scenes)",
+                      progress=progress)
+    conf: dict = {}
+    frames: dict = {}
+    for c, f in parts:
+        for key, m in c.items():
+            conf[key] = conf[key] + m if key in conf else m
+            frames[key] = frames.get(key, 0) + f[key]
+    if not conf:
+        raise ValueError("viewpoint gap: no frames in the sweeps")
+    return _rows(conf, frames)
+
+
+def _sweep_counts(models: dict, batch_size: int, per_scene: bool, sweeps: list[tuple[float, str]]) -> tuple[dict, dict]:
+    """Confusions and frame counts of one scene's height sweeps (a task of :func:`viewpoint_gap_sequences`)."""
 
     def batches() -> Iterator:
-        for h, paths in sweeps.items():
-            for path in tqdm(paths, desc=f"h={h:g} m", disable=not progress, leave=False):
-                seq = read_sequence(path)
-                if not seq.has_labels:
-                    raise ValueError(f"{path}: the sequence has no ground-truth labels")
-                for j in range(0, len(seq), batch_size):
-                    fr = seq[j : j + batch_size]
-                    yield (h, Path(path).parent.name, np.stack([f.rgb for f in fr]),
-                           np.stack([f.depth for f in fr]), np.stack([f.labels for f in fr]))
+        for h, path in sweeps:
+            seq = read_sequence(path)
+            if not seq.has_labels:
+                raise ValueError(f"{path}: the sequence has no ground-truth labels")
+            for j in range(0, len(seq), batch_size):
+                fr = seq[j : j + batch_size]
+                yield (h, Path(path).parent.name, np.stack([f.rgb for f in fr]),
+                       np.stack([f.depth for f in fr]), np.stack([f.labels for f in fr]))
 
-    return _score(models, batches(), per_scene)
+    return _accumulate(models, batches(), per_scene)
 
 
 def gap_summary(df: pd.DataFrame, *, low: float = 0.2, high: float = 1.6, metric: str = "miou") -> pd.DataFrame:
