@@ -37,7 +37,6 @@ from ..panoptic import (
     sequence_panoptic_frames,
     transfer_panoptic,
 )
-from ..progress import tqdm
 from ..transfer.index import MapIndex
 from .layout import GT, Layout
 from .synthetic import eval_grid_origin
@@ -67,6 +66,8 @@ def choose_clustering(
     frame_step: int = 4,
     min_vertices: int = 50,
     scenes: int | None = None,
+    jobs: int = 1,
+    scheduler: str | None = None,
     progress: bool = True,
 ) -> tuple[float, pd.DataFrame]:
     """Pick the clustering radius of :func:`segment_instances` on the validation scenes.
@@ -74,7 +75,8 @@ def choose_clustering(
     Each validation scene's upper frames (every ``frame_step``-th) are fused with ground-truth
     classes; the map is clustered at every radius of ``eps_grid`` and scored (PQ over thing
     classes, voxels of ``eval_voxel_size``) against the same map with instances fused from the
-    ground-truth instance images.
+    ground-truth instance images. The scenes are tasks of :func:`semmatch.engine.map_tasks`
+    (``jobs`` local worker processes, or the cluster at ``scheduler``).
 
     Returns
     -------
@@ -83,7 +85,9 @@ def choose_clustering(
     scores : DataFrame
         ``scene``, ``eps``, ``pq_things``, ``sq_things``, ``rq_things``.
     """
-    from ..fusion import reconstruct
+    from functools import partial
+
+    from ..engine import map_tasks
 
     layout = Layout(data_root)
     val = layout.scene_dirs("val")
@@ -91,24 +95,36 @@ def choose_clustering(
         # spread over the kinds: the validation folders sort by kind, then seed
         kinds = sorted({sd.name.rsplit("_", 1)[0] for sd in val})
         val = [sd for k in kinds for sd in val if sd.name.rsplit("_", 1)[0] == k][:: max(1, len(val) // scenes)][:scenes]
-    origin = eval_grid_origin(eval_voxel_size)
-    rows = []
-    for sd in tqdm(val, desc="clustering (validation)", disable=not progress):
-        seq = read_sequence(sd / "upper")
-        frames = [seq[i] for i in range(0, len(seq), int(frame_step))]
-        m = reconstruct(frames, voxel_size=voxel_size)
-        ref = fuse_instances(m, sequence_panoptic_frames(seq, step=frame_step), clean=False)
-        gvox = panoptic_voxels(ref, eval_voxel_size, grid_origin=origin)
-        for eps in eps_grid:
-            q = panoptic_quality(gvox, segment_instances(m, eps=float(eps), min_vertices=min_vertices),
-                                 eval_voxel_size, grid_origin=origin)
-            rows.append({"scene": sd.name, "eps": float(eps),
-                         **{k: q[k] for k in ("pq_things", "sq_things", "rq_things")}})
+    # one engine task per validation scene (jobs local processes or the cluster at scheduler)
+    task = partial(_clustering_scene, tuple(float(e) for e in eps_grid), float(voxel_size), float(eval_voxel_size),
+                   int(frame_step), int(min_vertices))
+    rows = [r for part in map_tasks(task, [str(sd.resolve()) for sd in val], jobs=jobs, scheduler=scheduler,
+                                    desc="clustering (validation)", progress=progress) for r in part]
     scores = pd.DataFrame(rows)
     if scores.empty:
         raise ValueError(f"{layout.scenes / 'val'}: no validation scene to choose the clustering radius on")
     mean = scores.groupby("eps", sort=True)["pq_things"].mean()
     return float(mean.idxmax()), scores
+
+
+def _clustering_scene(eps_grid: tuple[float, ...], voxel_size: float, eval_voxel_size: float, frame_step: int,
+                      min_vertices: int, scene_dir: str) -> list[dict]:
+    """PQ of every clustering radius on one validation scene (a task of :func:`choose_clustering`)."""
+    from ..fusion import reconstruct
+
+    sd = Path(scene_dir)
+    origin = eval_grid_origin(eval_voxel_size)
+    seq = read_sequence(sd / "upper")
+    frames = [seq[i] for i in range(0, len(seq), int(frame_step))]
+    m = reconstruct(frames, voxel_size=voxel_size)
+    ref = fuse_instances(m, sequence_panoptic_frames(seq, step=frame_step), clean=False)
+    gvox = panoptic_voxels(ref, eval_voxel_size, grid_origin=origin)
+    rows = []
+    for eps in eps_grid:
+        q = panoptic_quality(gvox, segment_instances(m, eps=float(eps), min_vertices=min_vertices),
+                             eval_voxel_size, grid_origin=origin)
+        rows.append({"scene": sd.name, "eps": float(eps), **{k: q[k] for k in ("pq_things", "sq_things", "rq_things")}})
+    return rows
 
 
 def _upper_panoptic(layout: Layout, sd: Path, source: str, *, eps: float, min_vertices: int,
