@@ -32,8 +32,9 @@ __all__ = ["map_tasks", "resolve_scheduler", "check_scheduler", "SCHEDULER_ENV",
 
 #: environment variable naming a Dask scheduler address to run per-scene tasks on
 SCHEDULER_ENV = "SEMMATCH_SCHEDULER"
-#: seconds to wait for a scheduler before giving up
-CONNECT_TIMEOUT = 8
+#: seconds to wait for a scheduler before giving up (a live one answers in milliseconds; the
+#: rest of the 10 s a refused address may take goes to start-up: imports, parameters)
+CONNECT_TIMEOUT = 6
 
 _LOCAL: dict = {}  # "client", "cluster", "workers", "pid" of the process's local cluster
 

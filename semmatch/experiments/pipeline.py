@@ -218,20 +218,20 @@ def run_notebook(
     import papermill as pm
 
     params = notebook_parameters(notebook, profile, params_file, **overrides)
+    from ..engine import SCHEDULER_ENV, check_scheduler, resolve_scheduler
+
+    # --scheduler, else the profile's common.scheduler, else SEMMATCH_SCHEDULER: reached first,
+    # before anything is written (an unreachable address is a clear error within seconds)
+    address = resolve_scheduler(scheduler or (load_params(params_file, params["profile"]).get("common") or {})
+                                .get("scheduler"))
+    if address:
+        check_scheduler(address)
     check_protocol(load_params(params_file, params["profile"]).get("common") or {},
                    where=f"{params_file} (profile {params['profile']})")
     src = Path(notebooks_dir) / f"{notebook}.ipynb"
     if not src.is_file():
         raise FileNotFoundError(f"{src}: no such notebook")
     params = _declared(src, params, load_params(params_file, params["profile"]).get(section_of(notebook)) or {})
-    from ..engine import SCHEDULER_ENV, check_scheduler, resolve_scheduler
-
-    # --scheduler, else the profile's common.scheduler, else SEMMATCH_SCHEDULER: reached before
-    # anything is written (an unreachable address is a clear error within seconds)
-    address = resolve_scheduler(scheduler or (load_params(params_file, params["profile"]).get("common") or {})
-                                .get("scheduler"))
-    if address:
-        check_scheduler(address)
     out_dir = Path(reports_dir) if reports_dir is not None else Path(cwd) / "reports" / params["profile"]
     out_dir.mkdir(parents=True, exist_ok=True)
     out = out_dir / f"{notebook}.ipynb"
