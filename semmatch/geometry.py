@@ -334,7 +334,9 @@ def unpack_keys(packed: np.ndarray) -> np.ndarray:
 
 
 def cluster_dbscan(points: np.ndarray, eps: float, min_points: int) -> np.ndarray:
-    """DBSCAN cluster id of every point (Open3D ``cluster_dbscan``; -1 = noise).
+    """DBSCAN cluster id of every point (-1 = noise), the labels of Open3D ``cluster_dbscan``.
+
+    Computed by the compiled kernel of :func:`semmatch.dbscan.dbscan_labels`.
 
     Parameters
     ----------
@@ -348,9 +350,6 @@ def cluster_dbscan(points: np.ndarray, eps: float, min_points: int) -> np.ndarra
     -------
     int64 (N,)
     """
-    if len(points) == 0:
-        return np.zeros(0, np.int64)
-    import open3d as o3d
+    from .dbscan import dbscan_labels
 
-    pc = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.asarray(points, dtype=np.float64)))
-    return np.asarray(pc.cluster_dbscan(float(eps), int(min_points)), dtype=np.int64)
+    return dbscan_labels(points, eps, min_points)

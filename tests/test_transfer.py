@@ -74,6 +74,18 @@ def test_exact_map_gives_exact_transfer(method, frames, index):
 
 
 @pytest.mark.parametrize("method", METHODS)
+def test_every_method_repeats_exactly(method, frames, index):
+    """Same frame, same map: the same labels, purity and groups on every call (the RANSAC of
+    ``dbscan`` is seeded; Open3D's parallel sampler was not repeatable)."""
+    for f in frames[:3]:
+        a, b = transfer_frame(method, f, index), transfer_frame(method, f, index)
+        np.testing.assert_array_equal(a.labels, b.labels)
+        np.testing.assert_array_equal(a.purity, b.purity)
+        if a.groups is not None:
+            np.testing.assert_array_equal(a.groups, b.groups)
+
+
+@pytest.mark.parametrize("method", METHODS)
 def test_points_farther_than_threshold_get_void(method, scene, frames, gt_map):
     # remove the sofa (label 10) from the map: most of it is > 0.1 m from everything left
     keep_tri = scene.labels != 10

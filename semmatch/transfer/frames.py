@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import lru_cache
 
 import cv2
 import numpy as np
@@ -66,17 +67,27 @@ class FrameData:
 
     def world_points(self, pixels: np.ndarray) -> np.ndarray:
         """World coordinates of the given flat pixel indices (float32 (N,3))."""
-        W = self.intrinsics.width
-        v, u = np.divmod(np.asarray(pixels, dtype=np.int64), W)
-        z = self.depth.reshape(-1)[pixels]
         intr = self.intrinsics
+        uf, vf = _pixel_grid(intr.width, intr.height)
+        pixels = np.asarray(pixels, dtype=np.int64)
+        z = self.depth.reshape(-1)[pixels]
         cam = np.empty((len(z), 1, 3), np.float32)
-        cam[:, 0, 0] = (u.astype(np.float32) - np.float32(intr.cx)) * (z / np.float32(intr.fx))
-        cam[:, 0, 1] = (v.astype(np.float32) - np.float32(intr.cy)) * (z / np.float32(intr.fy))
+        cam[:, 0, 0] = (uf[pixels] - np.float32(intr.cx)) * (z / np.float32(intr.fx))
+        cam[:, 0, 1] = (vf[pixels] - np.float32(intr.cy)) * (z / np.float32(intr.fy))
         cam[:, 0, 2] = z
         if len(z) == 0:
             return cam.reshape(0, 3)
         return cv2.transform(cam, self.pose[:3].astype(np.float32)).reshape(-1, 3)
+
+
+@lru_cache(maxsize=8)
+def _pixel_grid(width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
+    """Column and row of every flat pixel index, as float32 (read-only, cached per size)."""
+    v, u = np.divmod(np.arange(width * height, dtype=np.int64), width)
+    uf, vf = u.astype(np.float32), v.astype(np.float32)
+    uf.flags.writeable = False
+    vf.flags.writeable = False
+    return uf, vf
 
 
 def check_frame(frame: Frame, *, need_rgb: bool = True) -> FrameData:

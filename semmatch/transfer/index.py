@@ -488,6 +488,17 @@ class MapIndex:
         from every map surface, so without support)."""
         p = np.asarray(points).reshape(-1, 3)
         hi = self.origin + np.asarray(self.shape) * self.voxel_size
+        if p.dtype == np.float32 and len(p):
+            # one OpenCV pass with the float32 bounds that decide exactly as the float64 ones:
+            # p >= lo  <=>  p >= the smallest float32 >= lo;  p < hi  <=>  p <= the largest
+            # float32 < hi
+            lo32 = self.origin.astype(np.float32)
+            lo32 = np.where(lo32 < self.origin, np.nextafter(lo32, np.float32(np.inf)), lo32)
+            hi32 = hi.astype(np.float32)
+            hi32 = np.where(hi32 >= hi, np.nextafter(hi32, np.float32(-np.inf)), hi32)
+            inside = cv2.inRange(np.ascontiguousarray(p).reshape(-1, 1, 3),
+                                 tuple(float(x) for x in lo32), tuple(float(x) for x in hi32))
+            return inside.reshape(-1) > 0
         ok = np.ones(len(p), bool)
         for a in range(3):
             ok &= (p[:, a] >= self.origin[a]) & (p[:, a] < hi[a])

@@ -20,10 +20,12 @@ from __future__ import annotations
 import numpy as np
 
 from ..geometry import cluster_dbscan, pixel_rays
+from ..planes import ransac_plane
 from .frames import FrameData
 from .index import MapIndex
 from .superpixels import skimage_slic, superpixels
 from .voting import paint, vote
+from .voxels import voxel_downsample
 
 __all__ = ["slic_2d", "projected_sp_3d", "slic_3d", "dbscan", "neighborhood_3d", "render_labels"]
 
@@ -40,17 +42,23 @@ def _mapped_points(fd: FrameData, index: MapIndex) -> tuple[np.ndarray, np.ndarr
 
 def _finish(fd: FrameData, index: MapIndex, labels: np.ndarray, purity: np.ndarray, groups: np.ndarray):
     """Apply the per-pixel support mask shared by the group methods."""
-    support = index.support_depth(fd.depth, fd.pose, fd.intrinsics)
-    labels = np.where(support, labels, 0).astype(np.uint8)
-    purity = np.where(support, purity, 0).astype(np.float32)
-    return labels, purity, np.asarray(groups, dtype=np.int64).reshape(fd.shape)
+    support = index.support_depth(fd.depth, fd.pose, fd.intrinsics).reshape(-1)
+    labels = np.asarray(labels).reshape(-1).astype(np.uint8)
+    purity = np.asarray(purity).reshape(-1).astype(np.float32)
+    labels[~support] = 0
+    purity[~support] = 0
+    return labels.reshape(fd.shape), purity.reshape(fd.shape), np.asarray(groups, dtype=np.int64).reshape(fd.shape)
 
 
-def _pixel_groups(fd: FrameData, pix: np.ndarray, group_of_point: np.ndarray) -> np.ndarray:
-    """Per-pixel group ids (-1 for pixels without a point) from the groups of the points."""
+def _finish_points(
+    fd: FrameData, index: MapIndex, pix: np.ndarray, group_of_point: np.ndarray, winner: np.ndarray,
+    purity: np.ndarray,
+):
+    """Paint the votes of point groups (``-1`` = none) into their pixels, then apply the
+    per-pixel support mask (:func:`_finish`)."""
     g = np.full(fd.shape[0] * fd.shape[1], -1, np.int64)
     g[pix] = group_of_point
-    return g
+    return _finish(fd, index, paint(g, winner), paint(g, purity, 0.0), g)
 
 
 def render_labels(
@@ -195,46 +203,6 @@ def projected_sp_3d(
     return _finish(fd, index, paint(seg, winner), paint(seg, purity, 0.0), seg)
 
 
-def _voxel_downsample(points: np.ndarray, voxel_size: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Voxelise a point cloud on the paper's grid ``floor((P - mean(P)) / voxel)``.
-
-    Returns
-    -------
-    keys : int64 (V,3)
-        Voxel coordinates (shifted to start at 0).
-    centroids : float32 (V,3)
-    voxel_of : int64 (N,)
-        Voxel of every point (the trace back to pixels).
-    """
-    if not voxel_size > 0:
-        raise ValueError(f"voxel_size must be > 0, got {voxel_size}")
-    cols = [np.ascontiguousarray(points[:, a], dtype=np.float32) for a in range(3)]
-    inv_v = np.float32(1.0 / voxel_size)
-    ks, dims = [], []
-    for c in cols:
-        k = np.floor((c - np.float32(c.mean(dtype=np.float64))) * inv_v).astype(np.int64)
-        k -= k.min()
-        ks.append(k)
-        dims.append(int(k.max()) + 1)
-    lin = (ks[0] * dims[1] + ks[1]) * dims[2] + ks[2]
-    total = dims[0] * dims[1] * dims[2]
-    if total <= 4 * len(lin) + 1_000_000:  # dense counting beats sorting
-        cnt = np.bincount(lin, minlength=total)
-        occ = np.flatnonzero(cnt)
-        remap = np.zeros(total, np.int64)
-        remap[occ] = np.arange(len(occ))
-        inv = remap[lin]
-        uniq, cnt = occ, cnt[occ].astype(np.float64)
-    else:
-        uniq, inv = np.unique(lin, return_inverse=True)
-        cnt = np.bincount(inv).astype(np.float64)
-    cen = np.empty((len(uniq), 3), np.float32)
-    for a, c in enumerate(cols):
-        cen[:, a] = np.bincount(inv, c, minlength=len(uniq)) / cnt
-    vkeys = np.stack(np.unravel_index(uniq, dims), axis=1)
-    return vkeys, cen, inv
-
-
 def slic_3d(
     fd: FrameData,
     index: MapIndex,
@@ -253,11 +221,8 @@ def slic_3d(
     pts, pix = _mapped_points(fd, index)
     if len(pts) == 0:
         return out
-    vkeys, cen, inv = _voxel_downsample(pts, voxel_size)
+    vkeys, cen, inv, col = voxel_downsample(pts, voxel_size, fd.rgb, pix)
     dims = tuple(vkeys.max(axis=0) + 1)
-    rgb = fd.rgb.reshape(-1, 3)[pix].astype(np.float64) / 255.0
-    cnt = np.bincount(inv).astype(np.float64)
-    col = np.stack([np.bincount(inv, rgb[:, c]) / cnt for c in range(3)], axis=1)
     grid = np.zeros(dims + (3,), np.float32)
     mask = np.zeros(dims, bool)
     grid[tuple(vkeys.T)] = col
@@ -269,17 +234,7 @@ def slic_3d(
                                max_num_iter=int(iterations), mask=mask, channel_axis=-1, start_label=1)
         sv = sv_grid[tuple(vkeys.T)].astype(np.int64) - 1
     winner, purity = vote(sv, index.lookup(cen, exact=exact), int(sv.max()) + 1)
-    labels = np.zeros(fd.shape, np.uint8)
-    pur = np.zeros(fd.shape, np.float32)
-    labels.reshape(-1)[pix] = paint(sv[inv], winner)
-    pur.reshape(-1)[pix] = paint(sv[inv], purity, 0.0)
-    return _finish(fd, index, labels, pur, _pixel_groups(fd, pix, sv[inv]))
-
-
-def _cloud(points: np.ndarray):
-    import open3d as o3d
-
-    return o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.asarray(points, dtype=np.float64)))
+    return _finish_points(fd, index, pix, sv[inv], winner, purity)
 
 
 def _peel_planes(
@@ -295,8 +250,9 @@ def _peel_planes(
 ):
     """RANSAC planes, each cut to its largest DBSCAN cluster (Alg. 3 step 4).
 
-    The plane hypothesis comes from Open3D ``segment_plane`` on at most ``sample`` random points
-    of the remaining cloud; its inliers are then taken from the whole remaining cloud.
+    The plane comes from :func:`semmatch.planes.ransac_plane` (Open3D ``segment_plane``'s
+    algorithm, seeded by ``rng``) on at most ``sample`` random points of the remaining cloud;
+    its inliers are then taken from the whole remaining cloud.
 
     Returns the cluster id of every point (planes first), the number of planes and the
     indices of the points left for the final DBSCAN.
@@ -310,8 +266,9 @@ def _peel_planes(
             break
         rest = points[remaining]
         sub = rest if len(rest) <= sample else rest[rng.choice(len(rest), int(sample), replace=False)]
-        model, _ = _cloud(sub).segment_plane(float(distance), 3, int(iterations))
-        model = np.asarray(model, dtype=np.float64)
+        model, _ = ransac_plane(sub, float(distance), int(iterations), rng)
+        if not model[:3].any():
+            break  # every sample degenerate (collinear points): no plane to peel
         dist = np.abs(rest.astype(np.float64) @ model[:3] + model[3]) / max(np.linalg.norm(model[:3]), 1e-12)
         inliers = np.flatnonzero(dist <= distance)
         if len(inliers) < int(min_points):
@@ -344,17 +301,14 @@ def dbscan(
     exact: bool = False,
 ):
     """``dbscan`` (Alg. 3): voxel-downsample the lower cloud, peel up to ``max_planes`` RANSAC
-    planes (each cut to its largest DBSCAN cluster), cluster the rest with DBSCAN (Open3D),
+    planes (each cut to its largest DBSCAN cluster), cluster the rest with DBSCAN (Open3D's labels),
     label each voxel centroid from the map and vote per cluster. DBSCAN noise stays void.
     RANSAC scores its hypotheses on ``ransac_sample`` random points (seeded by ``seed``)."""
-    import open3d as o3d
-
     out = np.zeros(fd.shape, np.uint8), np.zeros(fd.shape, np.float32), np.full(fd.shape, -1, np.int64)
     pts, pix = _mapped_points(fd, index)
     if len(pts) == 0:
         return out
-    _, cen, inv = _voxel_downsample(pts, voxel_size)
-    o3d.utility.random.seed(int(seed))
+    _, cen, inv, _ = voxel_downsample(pts, voxel_size)
     cluster, k, remaining = _peel_planes(
         cen, distance=ransac_distance, iterations=ransac_iterations, max_planes=max_planes,
         eps=eps, min_points=min_points, sample=int(ransac_sample), rng=np.random.default_rng(seed),
@@ -364,11 +318,7 @@ def dbscan(
         cluster[remaining] = np.where(lab >= 0, lab + k, -1)
     n = int(cluster.max()) + 1
     winner, purity = vote(cluster, index.lookup(cen, exact=exact), n)
-    labels = np.zeros(fd.shape, np.uint8)
-    pur = np.zeros(fd.shape, np.float32)
-    labels.reshape(-1)[pix] = paint(cluster[inv], winner)
-    pur.reshape(-1)[pix] = paint(cluster[inv], purity, 0.0)
-    return _finish(fd, index, labels, pur, _pixel_groups(fd, pix, cluster[inv]))
+    return _finish_points(fd, index, pix, cluster[inv], winner, purity)
 
 
 def neighborhood_3d(fd: FrameData, index: MapIndex, *, exact: bool = False, backend: str = "grid"):
