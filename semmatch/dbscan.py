@@ -21,11 +21,11 @@ clouds of the ``dbscan`` transfer method.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 __all__ = ["dbscan_labels"]
-
-_KERNEL = None
 
 
 def dbscan_labels(points: np.ndarray, eps: float, min_points: int) -> np.ndarray:
@@ -87,15 +87,9 @@ def dbscan_labels(points: np.ndarray, eps: float, min_points: int) -> np.ndarray
                      float(eps) * float(eps), int(min_points))
 
 
+@functools.cache
 def _kernel():
     """The compiled kernel (numba, compiled on first use and cached on disk)."""
-    global _KERNEL
-    if _KERNEL is None:
-        _KERNEL = _compile()
-    return _KERNEL
-
-
-def _compile():
     from numba import njit
 
     @njit(cache=True, nogil=True)
@@ -108,6 +102,13 @@ def _compile():
             parent[i] = root
             i = nxt
         return root
+
+    @njit(cache=True, nogil=True)
+    def near(ps, s, t, eps2):
+        dx = ps[s, 0] - ps[t, 0]
+        dy = ps[s, 1] - ps[t, 1]
+        dz = ps[s, 2] - ps[t, 2]
+        return dx * dx + dy * dy + dz * dz < eps2
 
     @njit(cache=True, nogil=True)
     def kernel(p, order, ukeys, bounds, offsets, eps2, min_points):
@@ -131,17 +132,13 @@ def _compile():
         core = np.zeros(n, np.bool_)
         for a in range(m):
             for s in range(bounds[a], bounds[a + 1]):
-                x, y, z = ps[s, 0], ps[s, 1], ps[s, 2]
                 cnt = 0
                 for o in range(27):
                     b = nbc[a, o]
                     if b < 0:
                         continue
                     for t in range(bounds[b], bounds[b + 1]):
-                        dx = x - ps[t, 0]
-                        dy = y - ps[t, 1]
-                        dz = z - ps[t, 2]
-                        if dx * dx + dy * dy + dz * dz < eps2:
+                        if near(ps, s, t, eps2):
                             cnt += 1
                     if cnt >= min_points:
                         break
@@ -152,7 +149,6 @@ def _compile():
             for s in range(bounds[a], bounds[a + 1]):
                 if not core[s]:
                     continue
-                x, y, z = ps[s, 0], ps[s, 1], ps[s, 2]
                 for o in range(27):
                     b = nbc[a, o]
                     if b < 0:
@@ -160,10 +156,7 @@ def _compile():
                     for t in range(max(bounds[b], s + 1), bounds[b + 1]):
                         if not core[t]:
                             continue
-                        dx = x - ps[t, 0]
-                        dy = y - ps[t, 1]
-                        dz = z - ps[t, 2]
-                        if dx * dx + dy * dy + dz * dz < eps2:
+                        if near(ps, s, t, eps2):
                             rs = find(parent, s)
                             rt = find(parent, t)
                             if rs != rt:
@@ -188,7 +181,6 @@ def _compile():
             for s in range(bounds[a], bounds[a + 1]):
                 if core[s]:
                     continue
-                x, y, z = ps[s, 0], ps[s, 1], ps[s, 2]
                 best = -1
                 for o in range(27):
                     b = nbc[a, o]
@@ -197,10 +189,7 @@ def _compile():
                     for t in range(bounds[b], bounds[b + 1]):
                         if not core[t]:
                             continue
-                        dx = x - ps[t, 0]
-                        dy = y - ps[t, 1]
-                        dz = z - ps[t, 2]
-                        if dx * dx + dy * dy + dz * dz < eps2:
+                        if near(ps, s, t, eps2):
                             if best < 0 or labels[t] < best:
                                 best = labels[t]
                 labels[s] = best

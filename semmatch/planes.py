@@ -13,11 +13,11 @@ sample) is kept.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 __all__ = ["ransac_plane"]
-
-_KERNEL = None
 
 
 def ransac_plane(
@@ -81,15 +81,9 @@ def ransac_plane(
     return model, inl
 
 
+@functools.cache
 def _kernel():
     """The compiled kernel (numba, compiled on first use and cached on disk)."""
-    global _KERNEL
-    if _KERNEL is None:
-        _KERNEL = _compile()
-    return _KERNEL
-
-
-def _compile():
     from numba import njit
 
     @njit(cache=True, nogil=True)

@@ -9,11 +9,11 @@ reference).
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 __all__ = ["voxel_downsample"]
-
-_KERNEL = None
 
 
 def voxel_downsample(
@@ -65,15 +65,9 @@ def voxel_downsample(
     return keys, cen, inv, (col if want else None)
 
 
+@functools.cache
 def _kernel():
     """The compiled kernel (numba, compiled on first use and cached on disk)."""
-    global _KERNEL
-    if _KERNEL is None:
-        _KERNEL = _compile()
-    return _KERNEL
-
-
-def _compile():
     from numba import njit
 
     @njit(cache=True, nogil=True)
