@@ -45,7 +45,7 @@ stages = {
  "reconstruct_upper": dict(
     nb="03_reconstruct_upper", deps=[f"data/{P}/scenes", f"data/{P}/models"],
     params=["profile", *common("networks", "voxel_size", "eval_voxel_size", "jobs"), f"profiles.{P}.reconstruct_upper"],
-    outs=[f"data/{P}/upper"], figs=tbl("upper_maps")),
+    outs=[f"data/{P}/upper"], figs=[*tbl("upper_maps"), "upper_maps.png"]),
  "label_transfer": dict(
     nb="04_label_transfer", deps=[f"data/{P}/scenes", f"data/{P}/models", f"data/{P}/upper"],
     params=["profile", *common("methods", "networks", "jobs", "fused_base"), f"profiles.{P}.label_transfer"],

@@ -154,9 +154,10 @@ def test_gate_is_chosen_by_the_lowest_mean_ate(tiny_root):
 
 
 def test_misregistration_costs_accuracy(tiny_root, tmp_path):
-    from semmatch.experiments.misregistration import misregistration_study, plot_misregistration
+    from semmatch.experiments.misregistration import misregistration_study
     from semmatch.fusion import reconstruct, reconstruct_many
     from semmatch.io import read_sequence
+    from semmatch.plots import plot_misregistration
 
     layout = Layout(tiny_root)
     sd = layout.scenes / "eval" / SCENE

@@ -240,12 +240,9 @@ def test_cli_train_and_bench(tmp_path, capsys):
 
 
 def test_viewpoint_gap_table_and_figure(trained, tmp_path):
-    from semmatch.segment.viewpoint import (
-        gap_summary,
-        plot_training_curves,
-        plot_viewpoint_gap,
-        viewpoint_gap,
-    )
+    from semmatch.plots import plot_height_study, plot_training_curves
+    from semmatch.segment import training_histories
+    from semmatch.segment.viewpoint import gap_summary, viewpoint_gap
 
     net = load_model(trained)
     df = viewpoint_gap({"tiny": net}, make_scenes(["living_room"], [1001]), heights=(0.2, 1.6), n_frames=2,
@@ -254,8 +251,10 @@ def test_viewpoint_gap_table_and_figure(trained, tmp_path):
     assert ((df[["miou", "pixel_acc", "mean_acc"]] >= 0) & (df[["miou", "pixel_acc", "mean_acc"]] <= 1)).all().all()
     g = gap_summary(df)
     assert np.isclose(g["gap"].iloc[0], df["miou"].iloc[1] - df["miou"].iloc[0])
-    plot_viewpoint_gap(df, path=tmp_path / "fig3.png")
-    plot_training_curves({"tiny": trained}, path=tmp_path / "curves.png")
+    plot_height_study(df.groupby(["model", "height"], as_index=False)[["mean_acc", "miou"]].mean(), tmp_path / "fig3.png")
+    histories = training_histories({"tiny": trained})
+    assert [h["step"] for h in histories["tiny"]] == sorted(h["step"] for h in histories["tiny"])
+    plot_training_curves(histories, tmp_path / "curves.png")
     assert (tmp_path / "fig3.png").stat().st_size > 1000 and (tmp_path / "curves.png").stat().st_size > 1000
 
 

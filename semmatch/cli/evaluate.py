@@ -62,38 +62,6 @@ def results_table(results: dict[str, dict], *, per_class: bool = False):
     return pd.DataFrame(rows).set_index("prediction")
 
 
-def confusion_figure(results: dict[str, dict], path: str | Path) -> Path:
-    """Row-normalised confusion matrices (one panel per prediction), written atomically."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from semmatch.io import save_figure
-    from semmatch.labels import NAMES
-
-    n = len(results)
-    fig, axes = plt.subplots(1, n, figsize=(5.2 * n, 4.8), squeeze=False)
-    for ax, (name, s) in zip(axes[0], results.items()):
-        conf = np.asarray(s["confusion"], dtype=np.float64)
-        rows = conf.sum(axis=1, keepdims=True)
-        norm = np.divide(conf, rows, out=np.zeros_like(conf), where=rows > 0)
-        names = [NAMES[c] for c in s["classes"]]
-        im = ax.imshow(norm, vmin=0, vmax=1, cmap="Blues")
-        ax.set_xticks(range(len(names)), names, rotation=60, ha="right", fontsize=8)
-        ax.set_yticks(range(len(names)), names, fontsize=8)
-        ax.set_xlabel("predicted")
-        ax.set_ylabel("ground truth")
-        ax.set_title(f"{name}\nMean Acc. {s['mean_acc']:.3f}", fontsize=9)
-        for (i, j), v in np.ndenumerate(norm):
-            if conf[i, j]:
-                ax.text(j, i, f"{v:.2f}", ha="center", va="center", fontsize=6,
-                        color="white" if v > 0.5 else "black")
-        fig.colorbar(im, ax=ax, fraction=0.046)
-    fig.tight_layout()
-    return save_figure(fig, path)
-
-
 def run(args: argparse.Namespace) -> int:
     """Evaluate every prediction and print the table."""
     import pandas as pd
@@ -120,5 +88,7 @@ def run(args: argparse.Namespace) -> int:
         fmt = ["g"] + [".4f" if df[c].dtype.kind == "f" else ".0f" for c in df.columns]
         atomic_write_text(args.markdown, df.to_markdown(floatfmt=fmt) + "\n")
     if args.figure:
+        from semmatch.plots import confusion_figure
+
         confusion_figure(results, args.figure)
     return 0

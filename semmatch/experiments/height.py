@@ -15,7 +15,7 @@ from ..io import atomic_write_text
 from .layout import Layout
 from .tables import save_table
 
-__all__ = ["sweep_sequences", "height_study", "choose_test_time_flip", "plot_height_study"]
+__all__ = ["sweep_sequences", "height_study", "choose_test_time_flip"]
 
 _SWEEP = re.compile(r"^h(\d{3})$")
 
@@ -63,33 +63,10 @@ def height_study(
     save_table(df, figures_dir, "fig3_height_per_scene")
     summary = summarize_over_scenes(df, ("mean_acc", "miou"), by=("model", "height"))
     save_table(summary, figures_dir, "fig3_height")
+    from ..plots import plot_height_study
+
     plot_height_study(summary, Path(figures_dir) / "fig3_height.png")
     return df
-
-
-def plot_height_study(summary: pd.DataFrame, path: str | Path, *, metrics: Sequence[str] = ("mean_acc", "miou"),
-                      title: str = "Segmentation accuracy against camera height (tilting ±20°), "
-                                   "mean over scenes with 95% interval") -> Path:
-    """Fig. 3 from :func:`summarize_over_scenes` rows (model, height, measure, measure_lo/hi)."""
-    import matplotlib.pyplot as plt
-
-    from ..io import save_figure
-
-    names = {"mean_acc": "Mean Acc.", "miou": "mIoU (classes 1..10)"}
-    fig, axes = plt.subplots(1, len(metrics), figsize=(4.8 * len(metrics), 3.6), squeeze=False)
-    for ax, m in zip(axes[0], metrics, strict=True):
-        for model, g in summary.groupby("model", sort=False):
-            g = g.sort_values("height")
-            ax.plot(g["height"], g[m], marker="o", label=str(model))
-            if f"{m}_lo" in g:
-                ax.fill_between(g["height"], g[f"{m}_lo"], g[f"{m}_hi"], alpha=0.2)
-        ax.set_xlabel("camera height [m]")
-        ax.set_ylabel(names.get(m, m))
-        ax.grid(alpha=0.3)
-    axes[0][-1].legend(title="network", fontsize=7, title_fontsize=8, loc="lower right")
-    fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
-    return save_figure(fig, path)
 
 
 def choose_test_time_flip(

@@ -28,7 +28,7 @@ from ..io import read_map, read_sequence
 from .layout import GT, Layout
 from .synthetic import MEASURE_COLUMNS, eval_grid_origin
 
-__all__ = ["misregistration_study", "plot_misregistration"]
+__all__ = ["misregistration_study"]
 
 
 def _perturbations(translations: Sequence[float], rotations_deg: Sequence[float]) -> list[tuple[float, float]]:
@@ -175,63 +175,3 @@ def _misregistration_scene(data_root: str, methods: tuple[str, ...], cases: tupl
         rows.append(dict(scene=sid, method=method, translation_m=t, rotation_deg=r,
                          **{k: float(s[k]) for k in MEASURE_COLUMNS}, coverage=float(cov)))
     return rows
-
-
-def plot_misregistration(df: pd.DataFrame, path: str | Path, *, measure: str = "mean_acc",
-                         confidence: float = 0.95, seed: int = 0) -> Path:
-    """Two panels: ``measure`` against translation and against rotation, one line per method.
-
-    Each point is the mean over scenes with a ``confidence`` percentile-bootstrap band
-    (:func:`semmatch.stats.bootstrap_ci`); the unperturbed case starts both series.
-
-    Parameters
-    ----------
-    df : DataFrame
-        :func:`misregistration_study`'s result.
-    path : path
-        Figure file (format from the suffix), written atomically.
-    measure : str
-        A column of ``df`` (default Mean Acc.).
-    confidence : float
-    seed : int
-        Seed of the bootstrap.
-
-    Returns
-    -------
-    Path
-
-    Raises
-    ------
-    ValueError
-        An empty ``df`` or a missing column.
-    """
-    import matplotlib.pyplot as plt
-
-    from ..io import save_figure
-    from ..stats import bootstrap_ci
-
-    need = {"method", "translation_m", "rotation_deg", measure}
-    if df.empty or not need <= set(df.columns):
-        raise ValueError(f"plot_misregistration needs a non-empty table with {sorted(need)}, "
-                         f"got columns {list(df.columns)} and {len(df)} rows")
-    fig, axes = plt.subplots(1, 2, figsize=(10, 4), sharey=True)
-    series = (("translation_m", "rotation_deg", 100.0, "translation (cm)"),
-              ("rotation_deg", "translation_m", 1.0, "rotation (degrees)"))
-    for ax, (x, other, scale, label) in zip(axes, series, strict=True):
-        sel = df[df[other] == 0]
-        for method, g in sel.groupby("method", sort=False):
-            xs = sorted(g[x].unique())
-            stats = np.array([bootstrap_ci(g.loc[g[x] == v, measure].to_numpy(), confidence=confidence, seed=seed)
-                              for v in xs])
-            xv = np.asarray(xs) * scale
-            (line,) = ax.plot(xv, stats[:, 0], marker="o", label=method)
-            ax.fill_between(xv, stats[:, 1], stats[:, 2], color=line.get_color(), alpha=0.2)
-        ax.set_xlabel(label)
-        ax.grid(alpha=0.3)
-    n = df["scene"].nunique() if "scene" in df.columns else 0
-    axes[0].set_ylabel(f"{measure} (mean over {n} scenes, {confidence:.0%} bootstrap band)")
-    axes[0].set_title("map translated")
-    axes[1].set_title("map rotated about its centroid")
-    axes[1].legend(fontsize="small")
-    fig.tight_layout()
-    return save_figure(fig, path)

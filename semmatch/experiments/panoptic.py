@@ -23,7 +23,6 @@ from __future__ import annotations
 from collections.abc import Sequence
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
 
 from ..io import read_map, read_sequence, write_map
@@ -43,7 +42,7 @@ from .synthetic import eval_grid_origin
 
 __all__ = [
     "PANOPTIC_MEASURES", "choose_clustering", "panoptic_scene", "panoptic_study", "panoptic_summary",
-    "plot_panoptic", "panoptic_figure",
+    "panoptic_figure",
 ]
 
 #: the headline panoptic measures, in table order
@@ -248,29 +247,6 @@ def panoptic_summary(per_scene: pd.DataFrame, *, seed: int = 0) -> pd.DataFrame:
     return summarize_over_scenes(per_scene, PANOPTIC_MEASURES, by=("source", "method"), seed=seed)
 
 
-def plot_panoptic(summary: pd.DataFrame, path: str | Path, *, measure: str = "pq_things") -> Path:
-    """Grouped bars of ``measure`` per method and upper-map source, with 95 % intervals."""
-    import matplotlib.pyplot as plt
-
-    from ..io import save_figure
-
-    sources = list(dict.fromkeys(summary["source"]))
-    methods = list(dict.fromkeys(summary["method"]))
-    fig, ax = plt.subplots(figsize=(1.6 + 1.3 * len(methods), 3.6))
-    w = 0.8 / max(len(sources), 1)
-    for k, s in enumerate(sources):
-        sel = summary[summary["source"] == s].set_index("method").reindex(methods)
-        x = np.arange(len(methods)) + (k - (len(sources) - 1) / 2) * w
-        err = np.vstack([sel[measure] - sel[f"{measure}_lo"], sel[f"{measure}_hi"] - sel[measure]])
-        ax.bar(x, sel[measure], w, yerr=err, capsize=2, label=s)
-    ax.set_xticks(np.arange(len(methods)), methods, rotation=20)
-    ax.set_ylabel(measure.replace("_", " "))
-    ax.set_ylim(0, 1)
-    ax.legend(title="upper map", fontsize=8)
-    ax.set_title("Panoptic transfer into the robot's map (mean over scenes, 95 % CI)")
-    return save_figure(fig, path)
-
-
 def panoptic_figure(
     data_root: str | Path,
     path: str | Path,
@@ -285,36 +261,26 @@ def panoptic_figure(
     Columns: the reference (robot frames with ground-truth instances), then ``method``'s map from
     each upper-map source (written by :func:`panoptic_study`).
     """
-    import matplotlib.pyplot as plt
-
     from ..geometry import Intrinsics
-    from ..io import save_figure
     from ..panoptic import instance_colors
-    from .qualitative import overview_pose, render_map
+    from ..plots import image_grid
+    from .qualitative import _eval_scene, overview_pose, render_map
 
     layout = Layout(data_root)
-    scenes = layout.scene_dirs("eval")
-    if not 0 <= scene < len(scenes):
-        raise ValueError(f"scene index {scene} out of range: {len(scenes)} evaluation scenes")
-    sid = scenes[scene].name
+    sid = _eval_scene(layout, scene).name
     base = layout.panoptic(sid)
     panels = [("reference", base / "reference.ply")] + [
         (f"{s}\n{method}", base / _folder(s) / f"{method}.ply") for s in (ORACLE, GT_CLUSTERED, *networks)
     ]
     w, h = size
     intr = Intrinsics(w, h, 0.9 * w, 0.9 * w, w / 2, h / 2)
-    fig, axes = plt.subplots(1, len(panels), figsize=(2.8 * len(panels), 2.6), squeeze=False)
-    pose = None
-    for ax, (title, p) in zip(axes[0], panels):
+    pose, row = None, []
+    for _, p in panels:
         m = read_map(p)
         if m.instances is None:
             raise ValueError(f"{p}: no instance layer; run panoptic_study first")
         pose = overview_pose(m) if pose is None else pose
-        ax.imshow(render_map(m, pose, intr, colors=instance_colors(m.instances, m.labels)))
-        ax.set_title(title, fontsize=9)
-        ax.set_xticks([])
-        ax.set_yticks([])
-    fig.suptitle(f"Instances in the robot's map of {sid} (one colour per instance; stuff in its class colour)",
-                 fontsize=10)
-    fig.tight_layout()
-    return save_figure(fig, path, dpi=110)
+        row.append(render_map(m, pose, intr, colors=instance_colors(m.instances, m.labels)))
+    return image_grid([row], path, col_titles=[t for t, _ in panels], cell=(2.8, 2.6), suptitle_fontsize=10,
+                      suptitle=f"Instances in the robot's map of {sid} (one colour per instance; stuff in its "
+                               "class colour)")

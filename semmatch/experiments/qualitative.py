@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 
 from ..geometry import Intrinsics, look_at
-from ..io import SemanticMap, read_map, save_figure
-from ..labels import NAMES, PALETTE
+from ..io import SemanticMap, read_map
+from ..labels import PALETTE
 from .layout import GT, Layout
 
 __all__ = ["overview_pose", "render_map", "qualitative_figure", "transferred_frames_figure"]
@@ -61,6 +61,14 @@ def render_map(
     return rgb
 
 
+def _eval_scene(layout: Layout, scene: int):
+    """The folder of evaluation scene number ``scene`` (a clear error when out of range)."""
+    scenes = layout.scene_dirs("eval")
+    if not 0 <= scene < len(scenes):
+        raise ValueError(f"scene index {scene} out of range: {len(scenes)} evaluation scenes")
+    return scenes[scene]
+
+
 def qualitative_figure(
     data_root: str | Path,
     methods: Sequence[str],
@@ -75,37 +83,26 @@ def qualitative_figure(
     One row per upper-map source (default: ground truth, as the paper's Fig. 4), one column per
     method, the reference (lower frames fused with ground-truth labels) first.
     """
-    import matplotlib.pyplot as plt
-    from matplotlib.patches import Patch
+    from ..plots import image_grid
 
     layout = Layout(data_root)
-    scenes = layout.scene_dirs("eval")
-    if not 0 <= scene < len(scenes):
-        raise ValueError(f"scene index {scene} out of range: {len(scenes)} evaluation scenes")
-    sid = scenes[scene].name
+    sid = _eval_scene(layout, scene).name
     ref = read_map(layout.lower_reference(sid))
     pose = overview_pose(ref)
     w, h = size
     intr = Intrinsics(w, h, 0.9 * w, 0.9 * w, w / 2, h / 2)
     cols = ["reference", *methods]
-    fig, axes = plt.subplots(len(sources), len(cols), figsize=(2.6 * len(cols), 2.2 * len(sources) + 0.6),
-                             squeeze=False)
-    seen: set[int] = set()
-    for r, source in enumerate(sources):
-        for c, name in enumerate(cols):
+    images, seen = [], set()
+    for source in sources:
+        row = []
+        for name in cols:
             m = ref if name == "reference" else read_map(layout.lower_map(sid, source, name))
             seen |= set(np.unique(m.labels).tolist())
-            axes[r][c].imshow(render_map(m, pose, intr))
-            axes[r][c].set_xticks([])
-            axes[r][c].set_yticks([])
-            if r == 0:
-                axes[r][c].set_title(name, fontsize=9)
-        axes[r][0].set_ylabel("GT upper map" if source == GT else f"{source} upper map", fontsize=9)
-    handles = [Patch(color=PALETTE[i] / 255.0, label=NAMES[i]) for i in sorted(seen) if i > 0]
-    fig.legend(handles=handles, loc="lower center", ncol=min(len(handles), 8), fontsize=7, frameon=False)
-    fig.suptitle(f"Lower-view semantic maps of {sid}")
-    fig.tight_layout(rect=(0, 0.08, 1, 1))
-    return save_figure(fig, path, dpi=110)
+            row.append(render_map(m, pose, intr))
+        images.append(row)
+    return image_grid(images, path, col_titles=cols,
+                      row_titles=["GT upper map" if s == GT else f"{s} upper map" for s in sources],
+                      legend=seen - {0}, suptitle=f"Lower-view semantic maps of {sid}")
 
 
 def transferred_frames_figure(
@@ -122,39 +119,25 @@ def transferred_frames_figure(
     Labels are shown in the palette colours (void black); the frames are spread evenly over the
     robot's sequence; ``source`` names the upper map the transfers used (04's label folders).
     """
-    import matplotlib.pyplot as plt
-    from matplotlib.patches import Patch
-
     from ..io import read_label_image, read_sequence
+    from ..plots import image_grid
 
     layout = Layout(data_root)
-    scenes = layout.scene_dirs("eval")
-    if not 0 <= scene < len(scenes):
-        raise ValueError(f"scene index {scene} out of range: {len(scenes)} evaluation scenes")
-    sd = scenes[scene]
+    sd = _eval_scene(layout, scene)
     seq = read_sequence(layout.lower_sequence(sd))
     idx = np.linspace(0, len(seq) - 1, max(1, int(frames))).round().astype(int)
-    cols = ["RGB", "ground truth", *methods]
-    fig, axes = plt.subplots(len(idx), len(cols), figsize=(2.1 * len(cols), 1.7 * len(idx) + 0.6), squeeze=False)
-    seen: set[int] = set()
-    for r, i in enumerate(idx):
+    images, seen = [], set()
+    for i in idx:
         f = seq[int(i)]
-        images = [f.rgb, PALETTE[f.labels]]
+        row = [f.rgb, PALETTE[f.labels]]
         seen |= set(np.unique(f.labels).tolist())
         for m in methods:
             lab = read_label_image(layout.lower_labels(sd.name, source, m) / f"{int(i):06d}.png")
             seen |= set(np.unique(lab).tolist())
-            images.append(PALETTE[lab])
-        for c, img in enumerate(images):
-            axes[r][c].imshow(img)
-            axes[r][c].set_xticks([])
-            axes[r][c].set_yticks([])
-            if r == 0:
-                axes[r][c].set_title(cols[c], fontsize=8)
-        axes[r][0].set_ylabel(f"frame {int(i)}", fontsize=8)
-    handles = [Patch(color=PALETTE[k] / 255.0, label=NAMES[k]) for k in sorted(seen)]
-    fig.legend(handles=handles, loc="lower center", ncol=min(len(handles), 8), fontsize=7, frameon=False)
+            row.append(PALETTE[lab])
+        images.append(row)
     src = "the ground-truth upper map" if source == GT else f"the {source} upper map"
-    fig.suptitle(f"Robot frames of {sd.name}: labels transferred from {src} (black: no support)", fontsize=9)
-    fig.tight_layout(rect=(0, 0.07, 1, 1))
-    return save_figure(fig, path, dpi=110)
+    return image_grid(images, path, col_titles=["RGB", "ground truth", *methods],
+                      row_titles=[f"frame {int(i)}" for i in idx], legend=seen, cell=(2.1, 1.7), fontsize=8,
+                      suptitle=f"Robot frames of {sd.name}: labels transferred from {src} (black: no support)",
+                      suptitle_fontsize=9)

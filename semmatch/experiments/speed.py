@@ -8,11 +8,11 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ..io import read_sequence, save_figure
+from ..io import read_sequence
 from .layout import GT, Layout
 from .tables import speed_table
 
-__all__ = ["measure_speed", "plot_speed"]
+__all__ = ["measure_speed"]
 
 
 def _frames_at(sd: Path, n_frames: int, width: int, height: int) -> list:
@@ -76,23 +76,3 @@ def measure_speed(data_root: str | Path, methods: Sequence[str], *, n_frames: in
     df.attrs["reference_fps"] = ref_fps
     df.attrs["frames"] = len(frames)
     return df
-
-
-def plot_speed(df: pd.DataFrame, path: str | Path) -> Path:
-    """Bar chart (log scale) of our FPS beside the paper's, per method."""
-    import matplotlib.pyplot as plt
-
-    x = np.arange(len(df))
-    fig, ax = plt.subplots(figsize=(6.5, 3.4))
-    ax.bar(x - 0.2, df["fps"], 0.4, label="semmatch (this machine, 1 process)", color="#3b75af")
-    ax.bar(x + 0.2, df["paper_fps"], 0.4, label="paper Table 1 (server CPU + GPUs)", color="#bbbbbb")
-    ref = df.attrs.get("reference_fps")
-    if ref:
-        ax.axhline(ref, color="k", ls="--", lw=1, label=f"reference closest-point backend ({ref:.1f} FPS)")
-    ax.set_yscale("log")
-    ax.set_xticks(x, df["method"], rotation=20, ha="right")
-    ax.set_ylabel("frames per second (640x480)")
-    ax.legend(fontsize=7)
-    ax.grid(axis="y", alpha=0.3, which="both")
-    fig.tight_layout()
-    return save_figure(fig, path)

@@ -9,7 +9,6 @@ from __future__ import annotations
 from collections.abc import Sequence
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
 
 from ..io import read_map, read_sequence
@@ -26,7 +25,6 @@ __all__ = [
     "evaluate_synthetic",
     "main_rows",
     "average_over_scenes",
-    "plot_table",
 ]
 
 MEASURE_COLUMNS = MEASURES  # the paper's four measures (semmatch.metrics.MEASURES)
@@ -317,37 +315,3 @@ def average_over_scenes(df: pd.DataFrame) -> pd.DataFrame:
     out = df.groupby(["model", "method"], sort=False)[cols].mean().reset_index()
     out.insert(2, "scenes", df.groupby(["model", "method"], sort=False).size().values)
     return out
-
-
-def plot_table(df: pd.DataFrame, path: str | Path, *, title: str, methods: Sequence[str]) -> Path:
-    """Bar chart of Mean Acc. per upper map and method with 95 % intervals (``mean_acc_lo/hi``
-    when present) and the paper's values as markers."""
-    import matplotlib.pyplot as plt
-
-    from ..io import save_figure
-
-    models = list(dict.fromkeys(df["model"]))
-    order = ["upper", "lower", *methods, "fused"]
-    fig, axes = plt.subplots(1, len(models), figsize=(4.2 * len(models), 3.6), sharey=True, squeeze=False)
-    for ax, model in zip(axes[0], models, strict=True):
-        sub = df[df["model"] == model].set_index("method")
-        names = [m for m in order if m in sub.index]
-        x = np.arange(len(names))
-        colors = ["#999999" if n in ("upper", "lower") else "#d08c2f" if n == "fused" else "#3b75af" for n in names]
-        mean = sub.loc[names, "mean_acc"].to_numpy(dtype=float)
-        err = None
-        if "mean_acc_lo" in sub.columns:
-            lo, hi = sub.loc[names, "mean_acc_lo"].to_numpy(dtype=float), sub.loc[names, "mean_acc_hi"].to_numpy(dtype=float)
-            err = np.vstack([mean - lo, hi - mean])
-        ax.bar(x, mean, color=colors, yerr=err, capsize=3, label="semmatch (95% interval)")
-        if "paper_mean_acc" in sub.columns:
-            ax.plot(x, sub.loc[names, "paper_mean_acc"], "k_", markersize=18, mew=2, label="paper")
-        ax.set_xticks(x, names, rotation=45, ha="right")
-        ax.set_title(model)
-        ax.set_ylim(0, 1)
-        ax.grid(axis="y", alpha=0.3)
-    axes[0][0].set_ylabel("Mean Acc.")
-    axes[0][0].legend(loc="lower left", fontsize=8)
-    fig.suptitle(title)
-    fig.tight_layout()
-    return save_figure(fig, path)

@@ -32,8 +32,7 @@ _EXPORTS = {
     "NoisyOracle": "oracle",
     "noisy_labels": "oracle",
     "viewpoint_gap": "viewpoint",
-    "plot_viewpoint_gap": "viewpoint",
-    "plot_training_curves": "viewpoint",
+    "training_histories": "predict",
 }
 
 __all__ = sorted(_EXPORTS)

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import os
 import pickle
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -33,7 +33,7 @@ from ..labels import NUM_CLASSES, table_fingerprint
 from ..progress import tqdm
 from .models import CHECKPOINT_FORMAT, ModelConfig, build_network, normalise_inputs
 
-__all__ = ["Segmenter", "load_model", "predict_sequence", "check_rgb", "check_depth"]
+__all__ = ["Segmenter", "load_model", "training_histories", "predict_sequence", "check_rgb", "check_depth"]
 
 
 def check_rgb(rgb: np.ndarray, what: str = "rgb") -> np.ndarray:
@@ -263,6 +263,34 @@ def load_model(checkpoint: str | os.PathLike, *, arch: str | None = None, device
         raise ValueError(f"{path}: weights do not fit the {config.arch!r} architecture ({str(e)[:300]})") from None
     info = {k: v for k, v in ckpt.items() if k != "state_dict"}
     return Segmenter(net, config, device=device, info=info, name=path.stem, flip=flip)
+
+
+def training_histories(checkpoints: Mapping[str, str | os.PathLike | Segmenter]) -> dict[str, list[dict]]:
+    """The training history each checkpoint stores (one dict per evaluation during training).
+
+    Parameters
+    ----------
+    checkpoints : mapping name -> checkpoint path or loaded :class:`Segmenter`
+
+    Returns
+    -------
+    dict name -> list of dict
+        ``step``, ``train_loss``, ``val_miou`` and the other entries :func:`semmatch.segment.train`
+        records (:func:`semmatch.plots.plot_training_curves` draws them).
+
+    Raises
+    ------
+    ValueError
+        A checkpoint without a training history (e.g. an oracle).
+    """
+    out = {}
+    for name, src in checkpoints.items():
+        net = load_model(src) if isinstance(src, str | os.PathLike) else src
+        hist = list(getattr(net, "info", {}).get("history", []))
+        if not hist:
+            raise ValueError(f"{name}: no training history in the checkpoint")
+        out[name] = hist
+    return out
 
 
 def predict_sequence(

@@ -17,7 +17,7 @@ import numpy as np
 import pandas as pd
 
 from ..geometry import DEFAULT_INTRINSICS, Intrinsics
-from ..io import atomic_path, read_sequence
+from ..io import read_sequence
 from ..progress import tqdm
 from .scores import confusion, scores
 
@@ -26,8 +26,6 @@ __all__ = [
     "viewpoint_gap",
     "viewpoint_gap_sequences",
     "gap_summary",
-    "plot_viewpoint_gap",
-    "plot_training_curves",
 ]
 
 #: the paper's camera heights (metres)
@@ -228,87 +226,3 @@ def gap_summary(df: pd.DataFrame, *, low: float = 0.2, high: float = 1.6, metric
     out = pd.DataFrame({f"{metric}_{low:g}m": piv[round(low, 3)], f"{metric}_{high:g}m": piv[round(high, 3)]})
     out["gap"] = out.iloc[:, 1] - out.iloc[:, 0]
     return out.reset_index()
-
-
-def _save(fig, path: str | os.PathLike | None) -> None:
-    if path is not None:
-        with atomic_path(path) as tmp:
-            fig.savefig(tmp, dpi=130, bbox_inches="tight")
-
-
-def plot_viewpoint_gap(
-    df: pd.DataFrame,
-    *,
-    metrics: Sequence[str] = ("mean_acc", "miou"),
-    path: str | os.PathLike | None = None,
-):
-    """Figure of the viewpoint gap (paper Fig. 3): each metric against camera height, one line per model.
-
-    Parameters
-    ----------
-    df : DataFrame
-        From :func:`viewpoint_gap` (scenes are averaged).
-    metrics : sequence of str
-        One panel per metric.
-    path : path, optional
-        Also save the figure there (PNG, atomically).
-
-    Returns
-    -------
-    matplotlib.figure.Figure
-    """
-    import matplotlib.pyplot as plt
-
-    names = {"mean_acc": "Mean Acc.", "miou": "mIoU (classes 1..10)", "pixel_acc": "pixel accuracy",
-             "jaccard": "Jaccard", "sorensen": "Sorensen", "color_acc": "Color Acc."}
-    fig, axes = plt.subplots(1, len(metrics), figsize=(4.6 * len(metrics), 3.6), squeeze=False)
-    pooled = df.groupby(["model", "height"], as_index=False)[list(metrics)].mean()
-    for ax, m in zip(axes[0], metrics, strict=True):
-        for model, g in pooled.groupby("model"):
-            ax.plot(g["height"], g[m], marker="o", label=str(model))
-        ax.set_xlabel("camera height [m]")
-        ax.set_ylabel(names.get(m, m))
-        ax.grid(alpha=0.3)
-    axes[0][0].legend(title="network")
-    fig.suptitle("Segmentation accuracy as the camera height changes (tilting +-20 deg)")
-    fig.tight_layout()
-    _save(fig, path)
-    return fig
-
-
-def plot_training_curves(checkpoints: Mapping[str, object], *, path: str | os.PathLike | None = None):
-    """Training loss and validation mIoU against step, one line per network.
-
-    Parameters
-    ----------
-    checkpoints : mapping name -> checkpoint path, Segmenter or history list
-        Histories as stored by :func:`semmatch.segment.train`.
-    path : path, optional
-        Also save the figure there (PNG, atomically).
-
-    Returns
-    -------
-    matplotlib.figure.Figure
-    """
-    import matplotlib.pyplot as plt
-
-    from .predict import load_model
-
-    fig, (a0, a1) = plt.subplots(1, 2, figsize=(9.5, 3.6))
-    for name, src in checkpoints.items():
-        if isinstance(src, str | os.PathLike):
-            src = load_model(src)
-        hist = src if isinstance(src, list) else src.info.get("history", [])
-        if not hist:
-            raise ValueError(f"{name}: no training history")
-        h = pd.DataFrame(hist)
-        a0.plot(h["step"], h["train_loss"], marker=".", label=name)
-        a1.plot(h["step"], h["val_miou"], marker=".", label=name)
-    a0.set(xlabel="step", ylabel="training loss (weighted CE)", yscale="log")
-    a1.set(xlabel="step", ylabel="validation mIoU (classes 1..10)", ylim=(0, 1))
-    for a in (a0, a1):
-        a.grid(alpha=0.3)
-        a.legend()
-    fig.tight_layout()
-    _save(fig, path)
-    return fig

@@ -9,7 +9,6 @@
 >>> simulate_sequence(scene, poses, "data/tmp/upper")             # doctest: +SKIP
 """
 
-from .figures import frame_figure
 from .noise import NoiseConfig
 from .plyscene import scene_from_ply
 from .procedural import SCENE_KINDS, box_room, generate_scene
@@ -50,7 +49,6 @@ __all__ = [
     "generate_scene",
     "box_room",
     "scene_from_ply",
-    "frame_figure",
     "FreeSpace",
     "free_space",
     "scene_levels",

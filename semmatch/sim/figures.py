@@ -1,4 +1,7 @@
-"""Figures of simulated frames: the README figure of an upper and a lower frame."""
+"""The simulator's figures (frames of a scene, camera tours) and a summary table of a generated dataset.
+
+The frames and tours are gathered here; :mod:`semmatch.plots` draws them.
+"""
 
 from __future__ import annotations
 
@@ -8,78 +11,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io import save_figure
-from ..labels import EVAL_CLASSES, NAMES, PALETTE, labels_to_colors
+from ..labels import EVAL_CLASSES
+from ..plots import frame_figure
 
-__all__ = ["frame_figure", "scene_frames_figure", "sequence_frames_figure", "dataset_summary", "routes_figure"]
-
-
-def frame_figure(
-    frames: Sequence,
-    path: str | os.PathLike,
-    *,
-    titles: Sequence[str] | None = None,
-    max_depth: float | None = None,
-    dpi: int = 110,
-) -> Path:
-    """Save a grid of frames, one row each: RGB, depth, labels (with a category legend).
-
-    Parameters
-    ----------
-    frames : sequence
-        Objects with ``rgb``, ``depth`` and ``labels`` attributes
-        (:class:`semmatch.io.Frame` or :class:`semmatch.sim.RenderResult`).
-    path : path
-        PNG to write (atomically).
-    titles : sequence of str, optional
-        Row titles (e.g. "upper 1.6 m", "lower 0.2 m").
-    max_depth : float, optional
-        Top of the depth colour scale (default: the largest depth shown).
-    dpi : int
-
-    Returns
-    -------
-    Path
-
-    Raises
-    ------
-    ValueError
-        No frames, a frame without labels, or titles that do not match the frames.
-    """
-    import matplotlib.pyplot as plt
-    from matplotlib.patches import Patch
-
-    frames = list(frames)
-    if not frames:
-        raise ValueError("frame_figure: no frames given")
-    if titles is not None and len(titles) != len(frames):
-        raise ValueError(f"frame_figure: {len(titles)} titles for {len(frames)} frames")
-    for i, f in enumerate(frames):
-        if getattr(f, "labels", None) is None:
-            raise ValueError(f"frame_figure: frame {i} has no labels")
-    vmax = max_depth or max(float(np.max(f.depth)) for f in frames) or 1.0
-    h, w = frames[0].rgb.shape[:2]
-    fig, axes = plt.subplots(len(frames), 3, figsize=(3 * 3.2, len(frames) * 3.2 * h / w + 0.9), squeeze=False)
-    present = sorted(set().union(*[np.unique(f.labels).tolist() for f in frames]) - {0})
-    for r, f in enumerate(frames):
-        d = np.where(f.depth > 0, f.depth, np.nan)
-        axes[r, 0].imshow(f.rgb)
-        im = axes[r, 1].imshow(d, cmap="turbo", vmin=0, vmax=vmax)
-        axes[r, 2].imshow(labels_to_colors(f.labels))
-        for c, name in enumerate(("RGB", "depth (m)", "labels")):
-            axes[r, c].set_xticks([])
-            axes[r, c].set_yticks([])
-            if r == 0:
-                axes[r, c].set_title(name, fontsize=10)
-        if titles is not None:
-            axes[r, 0].set_ylabel(titles[r], fontsize=10)
-        fig.colorbar(im, ax=axes[r, 1], fraction=0.035, pad=0.02)
-    handles = [
-        Patch(color=PALETTE[i] / 255.0, label=NAMES[i] + ("" if i in EVAL_CLASSES else "*")) for i in present
-    ]
-    fig.legend(handles=handles, loc="lower center", ncol=min(8, len(handles)), fontsize=8, frameon=False)
-    fig.tight_layout(rect=(0, 0.08, 1, 1))
-    return save_figure(fig, path, dpi=dpi)
+__all__ = ["scene_frames_figure", "sequence_frames_figure", "dataset_summary", "routes_figure"]
 
 
 def scene_frames_figure(
@@ -219,10 +154,9 @@ def routes_figure(split_dir: str | os.PathLike, path: str | os.PathLike, *, max_
     """
     import json
 
-    import matplotlib.pyplot as plt
-
-    from ..io import read_map, read_sequence, save_figure
+    from ..io import read_map, read_sequence
     from ..labels import id_of
+    from ..plots import floor_plans_figure
     from .procedural import generate_scene
     from .trajectory import free_space, tour_coverage
 
@@ -230,33 +164,21 @@ def routes_figure(split_dir: str | os.PathLike, path: str | os.PathLike, *, max_
               if (d / "upper").is_dir() and (d / "lower").is_dir() and (d / "scene.ply").is_file()][:max_scenes]
     if not scenes:
         raise FileNotFoundError(f"{split_dir}: no scene with upper and lower sequences")
-    cols = min(4, len(scenes))
-    rows = -(-len(scenes) // cols)
-    fig, axes = plt.subplots(rows, cols, figsize=(3.6 * cols, 3.4 * rows), squeeze=False)
-    styles = {"upper": ("#1f77b4", "-"), "lower": ("#ff7f0e", "-"), "lower_shared": ("#2ca02c", ":")}
-    for ax, sd in zip(axes.flat, scenes):
+    plans = []
+    for sd in scenes:
         m = read_map(sd / "scene.ply")
         keep = (m.labels != id_of("floor")) & (m.labels != id_of("ceiling"))
-        ax.scatter(m.points[keep, 0], m.points[keep, 1], s=0.2, c="0.75", rasterized=True)
         meta = json.loads((sd / "scene.json").read_text()) if (sd / "scene.json").is_file() else {}
         scene = generate_scene(meta["kind"], int(meta["seed"])) if "kind" in meta and "seed" in meta else None
-        cover = []
-        for name, (color, ls) in styles.items():
+        paths, cover = {}, []
+        for name in ("upper", "lower", "lower_shared"):
             if not (sd / name).is_dir():
                 continue
             poses = read_sequence(sd / name).poses
-            ax.plot(poses[:, 0, 3], poses[:, 1, 3], ls, color=color, lw=1.2, label=name)
-            ax.plot(poses[0, 0, 3], poses[0, 1, 3], "o", color=color, ms=4)
+            paths[name] = poses[:, :2, 3]
             if scene is not None:
                 fs = free_space(scene, float(np.median(poses[:, 2, 3]) - scene.meta.get("floor_z", 0.0)))
                 cover.append(f"{name} {tour_coverage(fs, poses, radius):.0%}")
-        ax.set_title(f"{sd.name}\n" + ", ".join(cover), fontsize=8)
-        ax.set_aspect("equal")
-        ax.set_xticks([])
-        ax.set_yticks([])
-    for ax in list(axes.flat)[len(scenes):]:
-        ax.axis("off")
-    axes.flat[0].legend(fontsize=7, loc="lower left", framealpha=0.8)
-    fig.suptitle(f"Camera tours\n(coverage: share of the free space within {radius:g} m of the path)", fontsize=9)
-    fig.tight_layout()
-    return save_figure(fig, path)
+        plans.append({"title": f"{sd.name}\n" + ", ".join(cover), "obstacles": m.points[keep, :2], "paths": paths})
+    return floor_plans_figure(plans, path, suptitle=f"Camera tours\n(coverage: share of the free space within "
+                                                    f"{radius:g} m of the path)")
