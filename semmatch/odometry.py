@@ -1,18 +1,13 @@
 """Camera poses for recordings without them, and trajectory errors against ground truth.
 
-Tracker: ``"frame-to-frame"`` multi-scale RGB-D odometry of ``open3d.t.pipelines.odometry``
+Tracker: multi-scale frame-to-frame RGB-D odometry of ``open3d.t.pipelines.odometry``
 (point-to-plane, with a hybrid depth + intensity alternative chosen per frame by photometric and
 depth misfit), chained, then refined by a pose graph (``pose_graph=True``, default): edges to the
 previous few frames and loop-closure edges to earlier keyframes that see the same surfaces, each a
 point-to-plane RGB-D registration started from the chained estimate and kept only when it
 converged close to it, optimised by Open3D's ``global_optimization`` (Levenberg-Marquardt with
 line-process pruning of wrong loop closures), as Open3D's reconstruction system does for its
-fragments. Chained odometry drifts (on a 120-frame simulated lower sequence with Kinect-like
-noise: ATE 2.0 cm, up to 1.7 degrees of heading error); the pose graph takes it to 0.5 cm,
-which is what the 5 cm voxel measures need (a 2 cm offset of a perfect map already costs about
-0.2 of Mean Acc.). (Open3D's frame-to-model ``t.pipelines.slam.Model`` was tried, as a tracker
-and as a refinement against the map fused from the chained poses, and made the poses worse on
-the simulated sequences, so it is not offered.)
+fragments. How much drift the pose graph removes is measured in docs/protocol.md ("Odometry").
 
 The first pose is ``init_pose`` (identity by default; pass the known start pose to build maps in
 the world frame). Errors: ATE (RMSE of positions after a least-squares rigid alignment,
@@ -37,10 +32,7 @@ from .geometry import check_pose
 from .io import Frame
 
 __all__ = ["estimate_poses", "refine_pose_graph", "shrink_frame", "align_trajectory", "ate", "rpe", "trajectory_errors",
-           "ground_truth_poses", "real_like_chain"]
-
-METHODS = ("frame-to-frame",)
-
+           "ground_truth_poses", "start_pose", "real_like_chain"]
 
 #: a frame with fewer valid depth pixels than this share is a sensor dropout (as in fusion)
 MIN_VALID_DEPTH = 0.001
@@ -55,7 +47,6 @@ def _depth_mm(depth: np.ndarray, where: str) -> np.ndarray:
 def estimate_poses(
     seq: Iterable[Frame],
     *,
-    method: str = "frame-to-frame",
     residual: str = "point-to-plane",
     robust: bool = True,
     max_step: float = 0.5,
@@ -75,8 +66,6 @@ def estimate_poses(
     seq : sequence or iterable of Frame
         Frames with metric depth and RGB (e.g. :func:`semmatch.io.read_sequence`,
         :func:`semmatch.recordings.read_tum_rgbd`).
-    method : {"frame-to-frame"}
-        Tracker (see the module doc).
     residual : {"point-to-plane", "hybrid", "intensity"}
         Residual of the frame-to-frame odometry (Open3D ``Method``): geometric, geometric +
         photometric, or photometric. Point-to-plane is the most accurate on simulated frames
@@ -104,11 +93,10 @@ def estimate_poses(
         Ignore depth beyond this (metres).
     pose_graph : bool
         Refine the chained poses with :func:`refine_pose_graph` (neighbour and loop-closure
-        edges; about doubles the run time, divides the drift by about four).
+        edges).
     downsample : int
         Track on frames shrunk by this factor (RGB area-averaged, depth by nearest pixel so
-        that no depth is invented at edges; intrinsics scaled to match): 2 is about 3x faster
-        at 640x480 and keeps sub-centimetre accuracy on simulated frames.
+        that no depth is invented at edges; intrinsics scaled to match).
     device : str, optional
         Open3D device (default :func:`semmatch.fusion.default_device`).
     progress : bool
@@ -121,7 +109,7 @@ def estimate_poses(
     Raises
     ------
     ValueError
-        Unknown method or residual, empty sequence, depth in the wrong unit, a prior of the
+        Unknown residual, empty sequence, depth in the wrong unit, a prior of the
         wrong shape, frames of different sizes.
 
     Warns
@@ -130,44 +118,24 @@ def estimate_poses(
         Frames for which no residual converged to a plausible motion (their motion is the
         prior's, or extrapolated without a prior); the message lists them.
     """
-    import open3d as o3d
-    import open3d.core as o3c
-
     from .progress import tqdm
 
-    if method not in METHODS:
-        raise ValueError(f"method must be one of {METHODS}, got {method!r}")
     n = len(seq) if hasattr(seq, "__len__") else None
     if prior is not None:
         prior = np.asarray(prior, dtype=np.float64)
         if prior.ndim != 3 or prior.shape[1:] != (4, 4) or (n is not None and len(prior) != n):
             raise ValueError(f"prior must have shape (N,4,4) for the {n} frames, got {prior.shape}")
-    residuals = {
-        "point-to-plane": o3d.t.pipelines.odometry.Method.PointToPlane,
-        "hybrid": o3d.t.pipelines.odometry.Method.Hybrid,
-        "intensity": o3d.t.pipelines.odometry.Method.Intensity,
-    }
-    if residual not in residuals:
-        raise ValueError(f"residual must be one of {tuple(residuals)}, got {residual!r}")
-    odo_method = residuals[residual]
-    candidates = [residuals["point-to-plane"], residuals["hybrid"]] if robust else []
-    criteria = [o3d.t.pipelines.odometry.OdometryConvergenceCriteria(n) for n in (30, 15, 8)]
-    prev_frame = None
-    lost: list[int] = []
-    dropped: list[int] = []  # sensor dropouts: (almost) no valid depth, not tracked
-    T_prev, i_prev = None, -1  # pose and index of the last tracked frame
-    dev = o3c.Device(device or default_device())
-    T = np.eye(4) if init_pose is None else check_pose(init_pose, what="init_pose").copy()
+    if int(downsample) < 1:
+        raise ValueError(f"downsample must be an integer >= 1, got {downsample}")
     name = str(getattr(seq, "path", "sequence"))
+    tracker = _Tracker(residual=residual, robust=robust, max_step=max_step, prior=prior,
+                       prior_tolerance=prior_tolerance, depth_max=depth_max, device=device,
+                       T=np.eye(4) if init_pose is None else check_pose(init_pose, what="init_pose").copy())
     poses: list[np.ndarray] = []
     depths_mm: list[np.ndarray] = []  # kept for the pose graph (depth only: 2 bytes a pixel)
     intrinsics = None
-    prev = None
-    motion = np.eye(4)
-    if int(downsample) < 1:
-        raise ValueError(f"downsample must be an integer >= 1, got {downsample}")
     frames = seq if int(downsample) == 1 else (shrink_frame(f, int(downsample)) for f in seq)
-    for i, f in enumerate(tqdm(frames, total=n, desc=f"odometry ({method})", disable=not progress, leave=False)):
+    for i, f in enumerate(tqdm(frames, total=n, desc="odometry", disable=not progress, leave=False)):
         where = f"{name} frame {getattr(f, 'index', i)}"
         d_mm = _depth_mm(f.depth, where)
         if intrinsics is None:
@@ -176,89 +144,146 @@ def estimate_poses(
             raise ValueError(f"{where}: frame size/intrinsics differ from the first frame's")
         if pose_graph:
             depths_mm.append(d_mm)
-        if np.count_nonzero((d_mm > 0) & (d_mm <= depth_max * 1000.0)) < MIN_VALID_DEPTH * d_mm.size:
-            # a sensor dropout: no tracking; its pose follows the prior (else constant velocity)
-            # from the last tracked frame, which stays the reference of the next one
-            dropped.append(getattr(f, "index", i))
-            if T_prev is None:
-                poses.append(T.copy())
-            elif prior is not None:
-                poses.append(T_prev @ np.linalg.inv(prior[i_prev]) @ prior[i])
-            else:
-                poses.append(T_prev @ np.linalg.matrix_power(motion, i - i_prev))
-            continue
-        depth = o3d.t.geometry.Image(o3c.Tensor(d_mm)).to(dev)
-        color = o3d.t.geometry.Image(o3c.Tensor(np.ascontiguousarray(f.rgb, dtype=np.uint8))).to(dev)
-        K = o3c.Tensor(f.intrinsics.K)
-        if method == "frame-to-frame":
-            rgbd = o3d.t.geometry.RGBDImage(color, depth)
-            if prev is not None:
-                # candidates: the chosen residual and, for robustness in geometrically degenerate
-                # views (a wall and the floor), the other geometric/photometric one; the
-                # candidate with the smaller photometric + depth misfit wins
-                cands = [odo_method] + [m for m in candidates if m != odo_method]
-                gap = i - i_prev  # > 1 after dropouts: the motion since the last tracked frame
-                inits = [motion if gap == 1 else np.linalg.matrix_power(motion, gap)]
-                prior_motion = None
-                if prior is not None:
-                    prior_motion = np.linalg.inv(prior[i_prev]) @ prior[i]
-                    inits = [prior_motion] + inits
-                best, best_cost = None, np.inf
-                for init in inits + [np.eye(4)]:
-                    if best is not None:
-                        break  # rest is only the fallback when nothing else converged
-                    for m in cands:
-                        try:
-                            res = o3d.t.pipelines.odometry.rgbd_odometry_multi_scale(
-                                rgbd, prev, K, o3c.Tensor(init), 1000.0, depth_max,
-                                criteria_list=criteria, method=m,
-                            )
-                        except RuntimeError:  # no correspondences (singular system)
-                            continue
-                        Tm = res.transformation.cpu().numpy()
-                        if not _plausible(Tm, max_step):
-                            continue
-                        if (prior_motion is not None and prior_tolerance is not None
-                                and not _agrees(Tm, prior_motion, *prior_tolerance)):
-                            continue
-                        cost = _misfit(f, prev_frame, Tm, depth_max) if robust else 0.0
-                        if cost < best_cost:
-                            best, best_cost = Tm, cost
-                if best is None:  # tracking lost: the prior's motion, else constant velocity
-                    lost.append(getattr(f, "index", i))
-                    best = inits[-1] if prior_motion is None else prior_motion
-                T = T_prev @ best  # best = T_prev_cur
-                # per-frame motion for the constant-velocity guesses (the step's rotation and
-                # translation spread over the frames of a gap)
-                motion = best if gap == 1 else _fractional_motion(best, gap)
-            prev, prev_frame = rgbd, f
-        T_prev, i_prev = T.copy(), i
-        poses.append(T.copy())
+        poses.append(tracker.step(i, f, d_mm))
     if not poses:
         raise ValueError(f"{name}: the sequence has no frames")
-    if T_prev is None:
+    if tracker.T_prev is None:
         raise ValueError(f"{name}: none of its {len(poses)} frame(s) has usable depth (all empty or out of range)")
-    if dropped:
-        import warnings
-
-        warnings.warn(f"{name}: {len(dropped)} of {len(poses)} frame(s) had (almost) no valid depth and were not "
-                      f"tracked (sensor dropouts; first: {dropped[:5]}); their poses follow the "
-                      + ("prior" if prior is not None else "motion of the frames before"), UserWarning, stacklevel=2)
-    if lost:
-        import warnings
-
-        warnings.warn(
-            f"{name}: RGB-D odometry found no solution for {len(lost)} frame(s) (first: {lost[:5]}); "
-            + ("their motion was taken from the prior" if prior is not None
-               else "their motion was extrapolated from the previous frame"),
-            UserWarning,
-            stacklevel=2,
-        )
+    tracker.warn(name, len(poses))
     out = np.stack(poses)
     if pose_graph and len(out) > 2:
         out = refine_pose_graph(depths_mm, intrinsics, out, depth_max=depth_max, device=device,
                                 progress=progress, name=name)
     return out
+
+
+class _Tracker:
+    """Frame-to-frame RGB-D tracking (the steps of :func:`estimate_poses`).
+
+    It keeps the last tracked frame (the reference of the next one), its pose and index, and the
+    per-frame motion used for constant-velocity guesses; frames without usable depth
+    (dropouts) and frames where nothing converged (lost) are collected for one warning each.
+    """
+
+    def __init__(self, *, residual: str, robust: bool, max_step: float, prior: np.ndarray | None,
+                 prior_tolerance: tuple[float, float] | None, depth_max: float, device: str | None,
+                 T: np.ndarray) -> None:
+        import open3d as o3d
+        import open3d.core as o3c
+
+        odometry = o3d.t.pipelines.odometry
+        residuals = {"point-to-plane": odometry.Method.PointToPlane, "hybrid": odometry.Method.Hybrid,
+                     "intensity": odometry.Method.Intensity}
+        if residual not in residuals:
+            raise ValueError(f"residual must be one of {tuple(residuals)}, got {residual!r}")
+        # the chosen residual and, for robustness in geometrically degenerate views (a wall and
+        # the floor), the other geometric/photometric one; the smaller photometric + depth misfit wins
+        extra = [residuals["point-to-plane"], residuals["hybrid"]] if robust else []
+        self.methods = [residuals[residual]] + [m for m in extra if m != residuals[residual]]
+        self.criteria = [odometry.OdometryConvergenceCriteria(k) for k in (30, 15, 8)]
+        self.robust, self.max_step, self.depth_max = robust, max_step, depth_max
+        self.prior, self.prior_tolerance = prior, prior_tolerance
+        self.device = o3c.Device(device or default_device())
+        self.T = T
+        self.T_prev: np.ndarray | None = None  # pose of the last tracked frame
+        self.i_prev = -1  # its index
+        self.prev = None  # its Open3D RGB-D image
+        self.prev_frame: Frame | None = None
+        self.motion = np.eye(4)  # per-frame motion (constant-velocity guesses)
+        self.lost: list[int] = []
+        self.dropped: list[int] = []
+
+    def step(self, i: int, f: Frame, d_mm: np.ndarray) -> np.ndarray:
+        """The pose of frame ``i`` (depth ``d_mm`` in millimetres): tracked, or bridged over a dropout."""
+        if np.count_nonzero((d_mm > 0) & (d_mm <= self.depth_max * 1000.0)) < MIN_VALID_DEPTH * d_mm.size:
+            self.dropped.append(getattr(f, "index", i))
+            return self._bridge(i)
+        import open3d as o3d
+        import open3d.core as o3c
+
+        depth = o3d.t.geometry.Image(o3c.Tensor(d_mm)).to(self.device)
+        color = o3d.t.geometry.Image(o3c.Tensor(np.ascontiguousarray(f.rgb, dtype=np.uint8))).to(self.device)
+        rgbd = o3d.t.geometry.RGBDImage(color, depth)
+        if self.prev is not None:
+            gap = i - self.i_prev  # > 1 after dropouts: the motion since the last tracked frame
+            best = self._relative_motion(i, f, rgbd, gap)
+            self.T = self.T_prev @ best  # best = T_prev_cur
+            # per-frame motion for the constant-velocity guesses (the step's rotation and
+            # translation spread over the frames of a gap)
+            self.motion = best if gap == 1 else _fractional_motion(best, gap)
+        self.prev, self.prev_frame = rgbd, f
+        self.T_prev, self.i_prev = self.T.copy(), i
+        return self.T.copy()
+
+    def _bridge(self, i: int) -> np.ndarray:
+        """Pose of an untracked frame: the prior's motion (else constant velocity) from the last
+        tracked frame, which stays the reference of the next one."""
+        if self.T_prev is None:
+            return self.T.copy()
+        if self.prior is not None:
+            return self.T_prev @ np.linalg.inv(self.prior[self.i_prev]) @ self.prior[i]
+        return self.T_prev @ np.linalg.matrix_power(self.motion, i - self.i_prev)
+
+    def _relative_motion(self, i: int, f: Frame, rgbd, gap: int) -> np.ndarray:
+        """``T_prev_cur``: the best plausible odometry result over the initial guesses and residuals."""
+        inits = [self.motion if gap == 1 else np.linalg.matrix_power(self.motion, gap)]
+        prior_motion = None
+        if self.prior is not None:
+            prior_motion = np.linalg.inv(self.prior[self.i_prev]) @ self.prior[i]
+            inits = [prior_motion] + inits
+        K = f.intrinsics.K
+        best = None
+        for init in inits + [np.eye(4)]:  # rest only when nothing else converged
+            best = self._best_candidate(f, rgbd, K, init, prior_motion)
+            if best is not None:
+                return best
+        # tracking lost: the prior's motion, else constant velocity
+        self.lost.append(getattr(f, "index", i))
+        return inits[-1] if prior_motion is None else prior_motion
+
+    def _best_candidate(self, f: Frame, rgbd, K: np.ndarray, init: np.ndarray,
+                        prior_motion: np.ndarray | None) -> np.ndarray | None:
+        """The residual whose plausible result (started at ``init``) fits the previous frame best, or None."""
+        import open3d as o3d
+        import open3d.core as o3c
+
+        best, best_cost = None, np.inf
+        for m in self.methods:
+            try:
+                res = o3d.t.pipelines.odometry.rgbd_odometry_multi_scale(
+                    rgbd, self.prev, o3c.Tensor(K), o3c.Tensor(init), 1000.0, self.depth_max,
+                    criteria_list=self.criteria, method=m,
+                )
+            except RuntimeError:  # no correspondences (singular system)
+                continue
+            Tm = res.transformation.cpu().numpy()
+            if not _plausible(Tm, self.max_step):
+                continue
+            if (prior_motion is not None and self.prior_tolerance is not None
+                    and not _agrees(Tm, prior_motion, *self.prior_tolerance)):
+                continue
+            cost = _misfit(f, self.prev_frame, Tm, self.depth_max) if self.robust else 0.0
+            if cost < best_cost:
+                best, best_cost = Tm, cost
+        return best
+
+    def warn(self, name: str, n_frames: int) -> None:
+        """One warning for the dropouts and one for the frames where tracking was lost."""
+        import warnings
+
+        if self.dropped:
+            warnings.warn(f"{name}: {len(self.dropped)} of {n_frames} frame(s) had (almost) no valid depth and were "
+                          f"not tracked (sensor dropouts; first: {self.dropped[:5]}); their poses follow the "
+                          + ("prior" if self.prior is not None else "motion of the frames before"),
+                          UserWarning, stacklevel=3)
+        if self.lost:
+            warnings.warn(
+                f"{name}: RGB-D odometry found no solution for {len(self.lost)} frame(s) (first: {self.lost[:5]}); "
+                + ("their motion was taken from the prior" if self.prior is not None
+                   else "their motion was extrapolated from the previous frame"),
+                UserWarning,
+                stacklevel=3,
+            )
 
 
 def _fractional_motion(motion: np.ndarray, steps: int) -> np.ndarray:
@@ -594,11 +619,11 @@ def trajectory_errors(est: np.ndarray, gt: np.ndarray, *, delta: int = 1) -> dic
 
 
 def ground_truth_poses(seq) -> np.ndarray | None:
-    """The true poses of a recording, where it has them (for reports, never for estimates).
+    """The true poses of a recording, where it has them (for reports and a known start, never for estimates).
 
-    A simulated sequence folder keeps them in ``poses_gt.txt`` (its ``poses.txt`` may hold a
-    noisy estimate); a TUM RGB-D folder in ``groundtruth.txt`` (its ``poses``). Anything else
-    has none.
+    A simulated real-like sequence folder keeps them in ``poses_gt.txt`` (its ``poses.txt``
+    holds a drifting estimate); any other sequence folder in ``poses.txt`` (the data contract);
+    a TUM RGB-D folder in ``groundtruth.txt`` (its ``poses``). Anything else has none.
 
     Parameters
     ----------
@@ -616,9 +641,27 @@ def ground_truth_poses(seq) -> np.ndarray | None:
     path = getattr(seq, "path", None)
     if path is not None and (Path(path) / "poses_gt.txt").is_file():
         return read_tum(Path(path) / "poses_gt.txt")[1]
-    if getattr(seq, "poses", None) is not None and type(seq).__name__ == "TumRgbdSequence":
+    if getattr(seq, "poses", None) is not None:
         return np.asarray(seq.poses, dtype=np.float64)
     return None
+
+
+def start_pose(true_poses: np.ndarray | None) -> np.ndarray | None:
+    """The known first pose of a recording: its first true pose where that is finite, else None.
+
+    Parameters
+    ----------
+    true_poses : ndarray (N, 4, 4) or None
+        E.g. :func:`ground_truth_poses`.
+
+    Returns
+    -------
+    ndarray (4, 4) or None
+        None: the start is unknown (:func:`estimate_poses` then starts at the identity).
+    """
+    if true_poses is None or len(true_poses) == 0 or not np.isfinite(true_poses[0]).all():
+        return None
+    return np.asarray(true_poses[0], dtype=np.float64).copy()
 
 
 def real_like_chain(
@@ -627,7 +670,6 @@ def real_like_chain(
     labels=None,
     gt_poses: np.ndarray | None = None,
     reference=None,
-    method: str = "frame-to-frame",
     prior: np.ndarray | str | None = None,
     voxel_size: float = 0.04,
     eval_voxel_size: float = 0.05,
@@ -651,8 +693,6 @@ def real_like_chain(
     reference : SemanticMap or path, optional
         Map to evaluate against; default: the same frames and labels fused at the ground-truth
         poses (so the score measures what the pose estimate costs).
-    method : str
-        Tracker of :func:`estimate_poses`.
     prior : (N, 4, 4), "recorded" or None
         Rough poses seeding the tracker (see :func:`estimate_poses`); ``"recorded"``: the
         sequence's own ``poses`` (for a simulated real-like sequence, its noisy drifting
@@ -685,12 +725,12 @@ def real_like_chain(
         gt_poses = np.asarray(gt_poses, dtype=np.float64)
         if len(gt_poses) != len(seq):
             raise ValueError(f"{len(gt_poses)} ground-truth poses for {len(seq)} frames")
-    init = gt_poses[0] if gt_poses is not None and np.isfinite(gt_poses[0]).all() else None
+    init = start_pose(gt_poses)
     if isinstance(prior, str):
         if prior != "recorded" or getattr(seq, "poses", None) is None:
             raise ValueError(f"prior must be an (N,4,4) array, 'recorded' (with a sequence that has poses) or None, got {prior!r}")
         prior = seq.poses
-    est = estimate_poses(seq, method=method, init_pose=init, prior=prior, progress=progress)
+    est = estimate_poses(seq, init_pose=init, prior=prior, progress=progress)
     m = reconstruct(seq, labels=labels, voxel_size=voxel_size, poses=est, progress=progress, **fusion_options)
     errors = trajectory_errors(est, gt_poses) if gt_poses is not None else None
     if reference is None and gt_poses is not None and np.isfinite(gt_poses).all():

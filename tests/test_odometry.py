@@ -77,8 +77,8 @@ def test_estimate_poses_tracks_a_rendered_camera():
     assert np.allclose(est[0], gt[0])
     e = trajectory_errors(est, gt)
     assert e["ate_rmse_unaligned"] < 0.02 and e["rpe_rot_deg"] < 0.5, e
-    with pytest.raises(ValueError, match="method must be one of"):
-        estimate_poses(frames, method="magic")
+    with pytest.raises(ValueError, match="residual must be one of"):
+        estimate_poses(frames, residual="magic")
     bad = [Frame(f.rgb, f.depth * 1000, None, None, intr, index=f.index) for f in frames[:2]]
     with pytest.raises(ValueError, match="frame 0: median depth .* wrong unit"):
         estimate_poses(bad)

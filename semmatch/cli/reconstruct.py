@@ -59,17 +59,13 @@ def run(args: argparse.Namespace) -> int:
     poses = None
     info: dict = {}
     if args.estimate_poses:
-        import numpy as np
 
         from semmatch.io import write_tum
-        from semmatch.odometry import estimate_poses, ground_truth_poses, trajectory_errors
+        from semmatch.odometry import estimate_poses, ground_truth_poses, start_pose, trajectory_errors
 
         gt = ground_truth_poses(seq)  # for the start pose and the report only
-        if gt is None:  # a sequence folder without poses_gt.txt: its poses.txt are the true poses
-            gt = getattr(seq, "poses", None)
-        init = gt[0] if gt is not None and np.isfinite(gt[0]).all() else None
         prior = seq.poses if args.prior and getattr(seq, "poses", None) is not None else None
-        poses = estimate_poses(seq, init_pose=init, prior=prior, progress=not args.quiet)
+        poses = estimate_poses(seq, init_pose=start_pose(gt), prior=prior, progress=not args.quiet)
         if args.poses_out:
             write_tum(args.poses_out, getattr(seq, "timestamps", range(len(poses))), poses)
         if gt is not None and len(gt) == len(poses):
