@@ -7,16 +7,10 @@ import pytest
 
 from semmatch.geometry import DEFAULT_INTRINSICS, look_at
 from semmatch.io import Frame
-from semmatch.odometry import (
-    align_trajectory,
-    ate,
-    estimate_poses,
-    refine_pose_graph,
-    rpe,
-    shrink_frame,
-    trajectory_errors,
-)
+from semmatch.odometry import estimate_poses, shrink_frame
+from semmatch.pose_graph import refine_pose_graph
 from semmatch.sim import Renderer, generate_scene
+from semmatch.trajectory_metrics import align_trajectory, ate, rpe, trajectory_errors
 
 
 def circle_poses(n: int = 20) -> np.ndarray:

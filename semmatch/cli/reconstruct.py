@@ -61,7 +61,8 @@ def run(args: argparse.Namespace) -> int:
     if args.estimate_poses:
 
         from semmatch.io import write_tum
-        from semmatch.odometry import estimate_poses, ground_truth_poses, start_pose, trajectory_errors
+        from semmatch.odometry import estimate_poses, ground_truth_poses, start_pose
+        from semmatch.trajectory_metrics import trajectory_errors
 
         gt = ground_truth_poses(seq)  # for the start pose and the report only
         prior = seq.poses if args.prior and getattr(seq, "poses", None) is not None else None

@@ -201,7 +201,7 @@ def world_alignment(
     """Rigid transform taking a recording's own frame into the world (ground truth: for reporting only).
 
     The rigid alignment of the estimated trajectory onto the true one
-    (:func:`semmatch.odometry.align_trajectory`; frames with a non-finite true pose skipped).
+    (:func:`semmatch.trajectory_metrics.align_trajectory`; frames with a non-finite true pose skipped).
     With ``reconstruction`` and ``scene_mesh`` it is refined by point-to-plane ICP of the
     reconstruction's vertices onto points sampled on the ground-truth mesh (correspondences
     up to 10, 5, then 2.5 cm; about one mesh point per 4 cm^2): where the map actually lies,
@@ -225,7 +225,7 @@ def world_alignment(
     """
     import open3d as o3d
 
-    from ..odometry import align_trajectory
+    from ..trajectory_metrics import align_trajectory
 
     ok = _finite(est, true)
     A = align_trajectory(est[ok], true[ok])
@@ -459,9 +459,9 @@ def _real_like_scene(data_root: str, methods: tuple[str, ...], networks: tuple[s
     trajectory rows and registration row."""
     from ..fusion import reconstruct_many
     from ..metrics import compare
-    from ..odometry import trajectory_errors
     from ..registration import register_maps
     from ..segment import predict_sequence
+    from ..trajectory_metrics import trajectory_errors
     from ..transfer import prepare, transfer_sequence, write_fused_labels
 
     layout = Layout(data_root)
@@ -602,7 +602,8 @@ def select_prior_tolerance(
     FileNotFoundError
         A scene without a recording or its ``poses_gt.txt``.
     """
-    from ..odometry import estimate_poses, trajectory_errors
+    from ..odometry import estimate_poses
+    from ..trajectory_metrics import trajectory_errors
 
     cands = [_check_tolerance(c) for c in candidates]
     if not cands:

@@ -1,0 +1,183 @@
+"""Pose-graph refinement of chained RGB-D odometry (neighbour and loop-closure edges).
+
+Edges to the previous few frames and loop-closure edges to earlier keyframes that see the same
+surfaces, each a point-to-plane RGB-D registration started from the chained estimate and kept
+only when it converged close to it, optimised by Open3D's ``global_optimization``
+(Levenberg-Marquardt with line-process pruning of wrong loop closures), as Open3D's
+reconstruction system does for its fragments.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from .fusion import default_device
+from .trajectory_metrics import rotation_deg
+
+__all__ = ["refine_pose_graph"]
+
+
+def _overlap(points_i: np.ndarray, depth_j: np.ndarray, T_j_i: np.ndarray, intr, tol: float = 0.1) -> float:
+    """Share of frame i's sample points (camera i) that frame j sees at the same depth (within ``tol`` m)."""
+    from .geometry import project
+
+    if len(points_i) == 0:
+        return 0.0
+    uv, z = project(points_i @ T_j_i[:3, :3].T + T_j_i[:3, 3], intr)
+    u = np.rint(uv[:, 0]).astype(np.int64)
+    v = np.rint(uv[:, 1]).astype(np.int64)
+    H, W = intr.shape
+    ok = (z > 0) & (u >= 0) & (u < W) & (v >= 0) & (v < H)
+    dz = depth_j[v[ok], u[ok]]
+    return float(((dz > 0) & (np.abs(dz - z[ok]) < tol)).sum() / len(points_i))
+
+
+def refine_pose_graph(
+    depths: Sequence[np.ndarray],
+    intrinsics,
+    poses: np.ndarray,
+    *,
+    neighbours: int = 3,
+    loop_stride: int = 3,
+    loop_candidates: int = 3,
+    min_overlap: float = 0.3,
+    loop_overlap: float = 0.4,
+    max_correction: tuple[float, float] = (0.1, 5.0),
+    min_fitness: float = 0.3,
+    depth_max: float = 5.0,
+    device: str | None = None,
+    progress: bool = False,
+    name: str = "sequence",
+) -> np.ndarray:
+    """Refine chained poses by a pose graph with neighbour and loop-closure edges (Open3D).
+
+    Edges ``(i, j)``: every consecutive pair (the chained motion, with its information matrix);
+    the ``neighbours`` previous frames whose view
+    overlaps frame i's by ``min_overlap`` (share of i's depth samples that j sees at the same
+    depth under the current poses); every ``loop_stride``-th frame, up to ``loop_candidates``
+    earlier keyframes (every ``loop_stride``-th frame, more than ``neighbours + 5`` frames
+    back) overlapping by ``loop_overlap``, best first. Each edge is a multi-scale point-to-plane
+    RGB-D registration (``open3d.t.pipelines.odometry``) started from the current relative
+    pose, with Open3D's information matrix; an edge whose result moves more than
+    ``max_correction`` from its start, fits fewer than ``min_fitness`` of the pixels, or does not
+    converge is dropped. Non-consecutive
+    edges are "uncertain" (Open3D's line process may prune them). The graph is optimised by
+    Levenberg-Marquardt with frame 0 fixed.
+
+    Parameters
+    ----------
+    depths : sequence of ndarray (H, W) uint16
+        Depth images in millimetres (0 = no measurement), one per pose.
+    intrinsics : Intrinsics
+        Camera intrinsics shared by all frames.
+    poses : (N, 4, 4)
+        Chained ``T_world_camera`` estimates (e.g. frame-to-frame odometry).
+    neighbours : int
+        Previous frames tried as edges of every frame.
+    loop_stride, loop_candidates : int
+        Loop closures: tried from every ``loop_stride``-th frame to at most ``loop_candidates``
+        earlier keyframes.
+    min_overlap, loop_overlap : float
+        Least view overlap (0..1) of a neighbour / loop-closure pair.
+    max_correction : (float, float)
+        Largest change of a relative pose by its registration (metres, degrees).
+    min_fitness : float
+        Least share of matched pixels of a registration.
+    depth_max : float
+        Ignore depth beyond this (metres).
+    device : str, optional
+        Open3D device of the registrations.
+    progress : bool
+        Show a tqdm bar.
+    name : str
+        What the sequence is, for messages.
+
+    Returns
+    -------
+    ndarray (N, 4, 4) float64
+        Refined poses; the first equals ``poses[0]``.
+
+    Raises
+    ------
+    ValueError
+        ``depths`` and ``poses`` of different lengths, fewer than 2 frames, depth of other
+        than the first frame's size.
+    """
+    import open3d as o3d
+    import open3d.core as o3c
+
+    from .geometry import backproject
+    from .progress import tqdm
+
+    reg = o3d.pipelines.registration
+    poses = np.asarray(poses, dtype=np.float64)
+    n = len(poses)
+    if len(depths) != n or n < 2:
+        raise ValueError(f"{name}: need one depth image per pose and at least 2 ({len(depths)} depths, {n} poses)")
+    H, W = intrinsics.shape
+    for i, d in enumerate(depths):
+        if d.shape != (H, W):
+            raise ValueError(f"{name} frame {i}: depth is {d.shape}, the intrinsics say {(H, W)}")
+    dev = o3c.Device(device or default_device())
+    K = o3c.Tensor(intrinsics.K)
+    blank = o3d.t.geometry.Image(o3c.Tensor(np.zeros((H, W, 3), np.uint8))).to(dev)  # point-to-plane: depth only
+    imgs = [o3d.t.geometry.Image(o3c.Tensor(d)).to(dev) for d in depths]
+    metres = [d.astype(np.float32) / 1000.0 for d in depths]
+    samples = [backproject(np.where(m <= depth_max, m, 0), intrinsics, stride=8)[0] for m in metres]
+    criteria = [o3d.t.pipelines.odometry.OdometryConvergenceCriteria(k) for k in (30, 15, 8)]
+    odo = o3d.t.pipelines.odometry
+    max_t, max_r = max_correction
+
+    def register(i: int, j: int) -> tuple[np.ndarray, np.ndarray] | None:
+        init = np.linalg.inv(poses[j]) @ poses[i]  # T_j_i
+        try:
+            res = odo.rgbd_odometry_multi_scale(
+                o3d.t.geometry.RGBDImage(blank, imgs[i]), o3d.t.geometry.RGBDImage(blank, imgs[j]), K,
+                o3c.Tensor(init), 1000.0, depth_max, criteria_list=criteria, method=odo.Method.PointToPlane,
+            )
+        except RuntimeError:  # no correspondences (singular system)
+            return None
+        T = res.transformation.cpu().numpy()
+        D = np.linalg.inv(init) @ T
+        if (not np.isfinite(T).all() or res.fitness < min_fitness or np.linalg.norm(D[:3, 3]) > max_t
+                or rotation_deg(D[:3, :3]) > max_r):
+            return None
+        info = odo.compute_odometry_information_matrix(imgs[i], imgs[j], K, o3c.Tensor(T), 0.07, 1000.0, depth_max)
+        return T, info.cpu().numpy().astype(np.float64)
+
+    graph = reg.PoseGraph()
+    for p in poses:
+        graph.nodes.append(reg.PoseGraphNode(p))
+    for i in tqdm(range(1, n), desc="pose graph", disable=not progress, leave=False):
+        pairs = [j for j in range(max(0, i - neighbours), i - 1)
+                 if _overlap(samples[i], metres[j], np.linalg.inv(poses[j]) @ poses[i], intrinsics) >= min_overlap]
+        if i % loop_stride == 0:
+            loops = [(_overlap(samples[i], metres[j], np.linalg.inv(poses[j]) @ poses[i], intrinsics), j)
+                     for j in range(0, i - neighbours - 5, loop_stride)]
+            pairs += [j for ov, j in sorted(loops, reverse=True)[:loop_candidates] if ov >= loop_overlap]
+        for j in [i - 1] + pairs:
+            if j == i - 1:  # the chained motion itself (chosen robustly by the tracker, not re-registered)
+                T = np.linalg.inv(poses[j]) @ poses[i]
+                info = odo.compute_odometry_information_matrix(imgs[i], imgs[j], K, o3c.Tensor(T), 0.07, 1000.0,
+                                                               depth_max).cpu().numpy().astype(np.float64)
+                edge = (T, info if np.isfinite(info).all() and info.any() else np.eye(6))
+            else:
+                edge = register(i, j)
+            if edge is not None:
+                graph.edges.append(reg.PoseGraphEdge(i, j, edge[0], edge[1], uncertain=j != i - 1))
+    option = reg.GlobalOptimizationOption(max_correspondence_distance=0.03, edge_prune_threshold=0.25,
+                                          preference_loop_closure=1.0, reference_node=0)
+    level = o3d.utility.get_verbosity_level()
+    o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Error)
+    try:
+        reg.global_optimization(graph, reg.GlobalOptimizationLevenbergMarquardt(),
+                                reg.GlobalOptimizationConvergenceCriteria(), option)
+    finally:
+        o3d.utility.set_verbosity_level(level)
+    out = np.stack([np.asarray(node.pose) for node in graph.nodes])
+    out = poses[0] @ np.linalg.inv(out[0]) @ out  # frame 0 stays where it was
+    if not np.isfinite(out).all():
+        raise RuntimeError(f"{name}: the pose graph optimisation returned non-finite poses")
+    return out
