@@ -9,11 +9,10 @@ import pandas as pd
 import pytest
 
 from semmatch.experiments.layout import GT, Layout
-from semmatch.experiments.real import (
+from semmatch.experiments.real import evaluate_real_like, real_like_lower_map
+from semmatch.experiments.real_poses import (
     estimate_or_load_poses,
-    evaluate_real_like,
     pose_cache_name,
-    real_like_lower_map,
     registration_errors,
     select_prior_tolerance,
 )

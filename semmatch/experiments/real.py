@@ -31,9 +31,7 @@ ground-truth-mesh reference (``compare(ref, pred, transform=lower_to_world)``).
 
 from __future__ import annotations
 
-import time
 from collections.abc import Sequence
-from collections.abc import Sequence as _SequenceABC
 from dataclasses import replace
 from pathlib import Path
 
@@ -41,226 +39,24 @@ import numpy as np
 import pandas as pd
 
 from ..io import (
-    Frame,
-    InMemorySequence,
-    SequenceReader,
     read_map,
     read_sequence,
-    read_tum,
     write_json,
-    write_tum,
 )
-from ..progress import tqdm
 from .layout import GT, Layout, model_name, source_dir
+from .real_poses import (
+    DEFAULT_PRIOR_TOLERANCE,
+    PosedSequence,
+    check_tolerance,
+    estimate_or_load_poses,
+    finite_frames,
+    pose_cache_name,
+    registration_errors,
+    world_alignment,
+)
 from .synthetic import MEASURE_COLUMNS, eval_grid_origin
 
-__all__ = [
-    "PosedSequence",
-    "ODOMETRY_DOWNSAMPLE",
-    "DEFAULT_PRIOR_TOLERANCE",
-    "gate_name",
-    "pose_cache_name",
-    "estimate_or_load_poses",
-    "world_alignment",
-    "registration_errors",
-    "real_like_lower_map",
-    "evaluate_real_like",
-    "select_prior_tolerance",
-    "score_real_like_against_mesh",
-]
-
-
-class PosedSequence(_SequenceABC):
-    """A sequence whose frames carry other poses (e.g. estimated ones) than the recorded ones."""
-
-    def __init__(self, seq: SequenceReader | InMemorySequence, poses: np.ndarray) -> None:
-        if len(poses) != len(seq):
-            raise ValueError(f"{seq.path}: {len(poses)} poses for {len(seq)} frames")
-        self.seq, self.poses, self.intrinsics, self.path = seq, np.asarray(poses), seq.intrinsics, seq.path
-
-    def __len__(self) -> int:
-        return len(self.seq)
-
-    def __getitem__(self, i: int) -> Frame:  # type: ignore[override]
-        return replace(self.seq[i], pose=self.poses[i].copy())
-
-    def read_labels(self, i: int):
-        return self.seq.read_labels(i)
-
-
-#: the pipeline tracks on frames shrunk by this factor (:func:`semmatch.odometry.estimate_poses`):
-#: on a 640x480 real-like lower sequence 0.17 s instead of 0.75 s a frame, ATE 0.2 cm instead of 0.04 cm
-ODOMETRY_DOWNSAMPLE = 2
-
-#: the odometry gate of :func:`semmatch.odometry.estimate_poses` (its default); set it from
-#: validation scenes with :func:`select_prior_tolerance`
-DEFAULT_PRIOR_TOLERANCE: tuple[float, float] | None = (0.1, 10.0)
-
-
-def _check_tolerance(prior_tolerance) -> tuple[float, float] | None:
-    if prior_tolerance is None:
-        return None
-    try:
-        t, r = (float(v) for v in prior_tolerance)
-    except (TypeError, ValueError):
-        raise ValueError(f"prior_tolerance must be (metres, degrees) or None, got {prior_tolerance!r}") from None
-    if not (t > 0 and r > 0 and np.isfinite(t) and np.isfinite(r)):
-        raise ValueError(f"prior_tolerance must be positive (metres, degrees), got {prior_tolerance!r}")
-    return t, r
-
-
-def gate_name(prior_tolerance: tuple[float, float] | None) -> str:
-    """File-name tag of an odometry gate: ``gate0.1m10deg`` or ``ungated``."""
-    tol = _check_tolerance(prior_tolerance)
-    return "ungated" if tol is None else f"gate{tol[0]:g}m{tol[1]:g}deg"
-
-
-def pose_cache_name(recording: str, prior_tolerance: tuple[float, float] | None) -> str:
-    """Cache file name of a recording's estimated poses under the chain's settings.
-
-    ``<recording>_poses_ownframe_posegraph_ds<ODOMETRY_DOWNSAMPLE>_<gate>.txt``: poses in the
-    recording's own frame (first pose = identity), pose graph on, tracked at
-    :data:`ODOMETRY_DOWNSAMPLE`, gated by ``prior_tolerance`` (:func:`gate_name`); a cache of
-    other settings is never reused.
-    """
-    return f"{recording}_poses_ownframe_posegraph_ds{ODOMETRY_DOWNSAMPLE}_{gate_name(prior_tolerance)}.txt"
-
-
-def estimate_or_load_poses(
-    seq_dir: Path,
-    out: Path,
-    *,
-    seq: _SequenceABC | None = None,
-    prior_tolerance: tuple[float, float] | None = DEFAULT_PRIOR_TOLERANCE,
-    progress: bool = True,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Estimated poses of a noisy recording in its own frame (cached in ``out``), and its true poses.
-
-    The poses are :func:`semmatch.odometry.estimate_poses` from the identity (no known start
-    pose) with the pose graph on, tracked on frames shrunk by :data:`ODOMETRY_DOWNSAMPLE`,
-    seeded by the frame-to-frame motions of the recording's ``poses.txt`` and gated by
-    ``prior_tolerance``. Name ``out`` with :func:`pose_cache_name` so that caches of other
-    settings are not reused. The true poses (``poses_gt.txt``) are only returned, for the
-    report; the estimate does not depend on them.
-
-    Parameters
-    ----------
-    seq_dir : path
-        The noisy sequence folder (with ``poses.txt`` and ``poses_gt.txt``).
-    out : path
-        Cache file (TUM format, written atomically; the poses returned are those it holds).
-    seq : sequence, optional
-        The frames of ``seq_dir`` when already read (e.g. an :class:`~semmatch.io.InMemorySequence`).
-    prior_tolerance : (metres, degrees) or None
-        The odometry gate of :func:`~semmatch.odometry.estimate_poses`.
-    progress : bool
-
-    Returns
-    -------
-    estimated, true : ndarray (N,4,4)
-        ``estimated[0]`` is the identity.
-
-    Raises
-    ------
-    FileNotFoundError
-        ``seq_dir`` has no ``poses_gt.txt``.
-    """
-    from ..odometry import estimate_poses
-
-    seq_dir, out = Path(seq_dir), Path(out)
-    tol = _check_tolerance(prior_tolerance)
-    seq = read_sequence(seq_dir) if seq is None else seq
-    gt_file = seq_dir / "poses_gt.txt"
-    if not gt_file.is_file():
-        raise FileNotFoundError(f"{gt_file}: no true poses to report the trajectory errors against")
-    _, true = read_tum(gt_file)
-    if out.is_file():
-        _, est = read_tum(out)
-        if len(est) == len(seq):
-            return est, true
-    est = estimate_poses(seq, init_pose=np.eye(4), prior=seq.poses, prior_tolerance=tol,
-                         downsample=ODOMETRY_DOWNSAMPLE, progress=progress)
-    write_tum(out, np.arange(len(est), dtype=np.float64), est)  # atomic
-    # the poses as the cache holds them, so that a fresh and a cached run use the same numbers
-    return read_tum(out)[1], true
-
-
-def _finite(*arrays: np.ndarray) -> np.ndarray:
-    """Rows (frames) where every pose array is finite."""
-    return np.logical_and.reduce([np.isfinite(a).all(axis=(1, 2)) for a in arrays])
-
-
-def world_alignment(
-    est: np.ndarray,
-    true: np.ndarray,
-    *,
-    reconstruction=None,
-    scene_mesh=None,
-    seed: int = 0,
-) -> np.ndarray:
-    """Rigid transform taking a recording's own frame into the world (ground truth: for reporting only).
-
-    The rigid alignment of the estimated trajectory onto the true one
-    (:func:`semmatch.trajectory_metrics.align_trajectory`; frames with a non-finite true pose skipped).
-    With ``reconstruction`` and ``scene_mesh`` it is refined by point-to-plane ICP of the
-    reconstruction's vertices onto points sampled on the ground-truth mesh (correspondences
-    up to 10, 5, then 2.5 cm; about one mesh point per 4 cm^2): where the map actually lies,
-    which can differ from the trajectory alignment by about the trajectory's ATE (6 cm on a
-    scene whose upper ATE was 4 cm).
-
-    Parameters
-    ----------
-    est, true : ndarray (N, 4, 4)
-        Estimated (own frame) and true (world) poses.
-    reconstruction : SemanticMap, optional
-        The recording fused at ``est``.
-    scene_mesh : SemanticMap, optional
-        The ground-truth mesh (``scene.ply``), in the world frame.
-    seed : int
-        Seed of the mesh sampling.
-
-    Returns
-    -------
-    ndarray (4, 4)
-    """
-    import open3d as o3d
-
-    from ..trajectory_metrics import align_trajectory
-
-    ok = _finite(est, true)
-    A = align_trajectory(est[ok], true[ok])
-    if reconstruction is None or scene_mesh is None:
-        return A
-    reg = o3d.pipelines.registration
-    target = _mesh_samples(scene_mesh, seed)
-    src = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(reconstruction.points.astype(np.float64)))
-    src = src.voxel_down_sample(0.02)
-    for dist in (0.1, 0.05, 0.025):
-        A = np.asarray(reg.registration_icp(src, target, dist, A, reg.TransformationEstimationPointToPlane(),
-                                            reg.ICPConvergenceCriteria(max_iteration=50)).transformation).copy()
-    return A
-
-
-_MESH_SAMPLES: list = []  # (key, mesh, Open3D point cloud) of the last scene mesh sampled
-
-
-def _mesh_samples(scene_mesh, seed: int, spacing: float = 0.02):
-    """Points (with the triangles' normals) sampled on a mesh, about one per ``spacing**2``; the last one cached."""
-    import open3d as o3d
-
-    key = (id(scene_mesh), int(seed), float(spacing))
-    if _MESH_SAMPLES and _MESH_SAMPLES[0][0] == key and _MESH_SAMPLES[0][1] is scene_mesh:
-        return _MESH_SAMPLES[0][2]
-    if not scene_mesh.is_mesh:
-        raise ValueError(f"{scene_mesh.source}: the scene's ground truth must be a mesh (triangles)")
-    mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(scene_mesh.points.astype(np.float64)),
-                                     o3d.utility.Vector3iVector(scene_mesh.faces))
-    mesh.compute_triangle_normals()
-    o3d.utility.random.seed(int(seed))
-    n = int(np.clip(mesh.get_surface_area() / spacing**2, 10_000, 2_000_000))
-    pc = mesh.sample_points_uniformly(n, use_triangle_normal=True)
-    _MESH_SAMPLES[:] = [(key, scene_mesh, pc)]
-    return pc
+__all__ = ["real_like_lower_map", "evaluate_real_like", "score_real_like_against_mesh"]
 
 
 def _moved(m, T: np.ndarray):
@@ -286,48 +82,6 @@ def _compact_frame(m) -> np.ndarray:
     U[:3, :3] = np.asarray(box.R).T
     U[:3, 3] = -U[:3, :3] @ np.asarray(box.center)
     return U
-
-
-def registration_errors(
-    T_reg: np.ndarray,
-    upper_to_world: np.ndarray,
-    lower_to_world: np.ndarray,
-    est_lower: np.ndarray,
-    true_lower: np.ndarray,
-) -> dict:
-    """Errors of a lower-to-upper registration against the ground truth (for reporting only).
-
-    The true relative transform is ``inv(upper_to_world) @ lower_to_world``
-    (:func:`world_alignment` of each recording).
-
-    Parameters
-    ----------
-    T_reg : (4, 4)
-        Estimated transform taking the lower recording's frame into the upper one's.
-    upper_to_world, lower_to_world : (4, 4)
-        Each recording's frame placed in the world.
-    est_lower, true_lower : (N, 4, 4)
-        Estimated (own frame) and true (world) lower poses; frames with a non-finite true
-        pose are skipped.
-
-    Returns
-    -------
-    dict
-        ``trans_err_m``, ``rot_err_deg`` (:func:`semmatch.registration.transform_error` of
-        ``T_reg`` against the truth: the displacement of the lower frame's origin, the first
-        lower camera, and the rotation angle), ``lower_in_upper_rmse_m`` (RMSE of the lower
-        camera positions mapped into the upper frame, ``T_reg @ est_lower``, against their true
-        positions there, ``inv(upper_to_world) @ true_lower``), ``true_transform`` (4, 4).
-    """
-    from ..registration import transform_error
-
-    truth = np.linalg.inv(upper_to_world) @ lower_to_world
-    dt, dr = transform_error(T_reg, truth)
-    ok = _finite(est_lower, true_lower)
-    mapped = (np.asarray(T_reg) @ est_lower[ok])[:, :3, 3]
-    there = (np.linalg.inv(upper_to_world) @ true_lower[ok])[:, :3, 3]
-    rmse = float(np.sqrt(np.mean(np.sum((mapped - there) ** 2, axis=1))))
-    return dict(trans_err_m=dt, rot_err_deg=dr, lower_in_upper_rmse_m=rmse, true_transform=truth)
 
 
 def real_like_lower_map(data_root: str | Path, scene_id: str, source: str, method: str) -> Path:
@@ -428,7 +182,7 @@ def evaluate_real_like(
     ValueError
         ``fused_base`` not among ``methods`` (with networks), a bad ``prior_tolerance``.
     """
-    tol = _check_tolerance(prior_tolerance)
+    tol = check_tolerance(prior_tolerance)
     if fused_base is not None and networks and fused_base not in methods:
         raise ValueError(f"fused_base {fused_base!r} is not among the methods {list(methods)}")
     layout = Layout(data_root)
@@ -483,7 +237,7 @@ def _real_like_scene(data_root: str, methods: tuple[str, ...], networks: tuple[s
         est[name], true[name] = estimate_or_load_poses(sd / f"{name}_noisy", work / pose_cache_name(name, tol),
                                                        seq=noisy, prior_tolerance=tol, progress=progress)
         for what, poses in (("recorded (drifting prior)", noisy.poses), ("estimated (RGB-D odometry)", est[name])):
-            ok = _finite(poses, true[name])
+            ok = finite_frames(poses, true[name])
             first = int(np.flatnonzero(ok)[0])
             # placed at the true pose of the first frame: the unaligned errors are the drift
             anchored = true[name][first] @ np.linalg.inv(poses[first]) @ poses
@@ -555,87 +309,6 @@ def _real_like_scene(data_root: str, methods: tuple[str, ...], networks: tuple[s
         rows.append(dict(scene=sid, model=model_name(source), method=method,
                          **{k: float(s[k]) for k in MEASURE_COLUMNS}))
     return rows, traj_rows, reg_row
-
-
-def select_prior_tolerance(
-    scene_dirs: Sequence[str | Path],
-    candidates: Sequence[tuple[float, float] | None] = ((0.1, 10.0), None),
-    *,
-    recordings: Sequence[str] = ("upper_noisy", "lower_noisy"),
-    progress: bool = True,
-) -> tuple[tuple[float, float] | None, pd.DataFrame]:
-    """Choose the odometry gate on validation scenes: the candidate with the lowest mean ATE.
-
-    Every noisy recording of every scene is tracked as :func:`estimate_or_load_poses` does
-    (own frame, pose graph, :data:`ODOMETRY_DOWNSAMPLE`, the recorded motions as prior) once per
-    candidate, and its ATE (after rigid alignment) is measured against ``poses_gt.txt``; the
-    candidate with the lowest mean ATE over all recordings wins (ties: the first listed).
-    Pass *validation* scenes (``Layout(root).scene_dirs("val")``), never evaluation scenes.
-
-    Cost: ``len(candidates) * len(scene_dirs) * len(recordings)`` odometry runs and nothing
-    else (no fusion, no transfer). One run of a 60-frame 320x240 noisy recording (pose graph
-    included) took 5-18 s on the 2-core development machine under load (16 recordings of eight
-    scenes), so two candidates on four validation scenes cost about 16 runs, 1.5-5 minutes there.
-
-    Parameters
-    ----------
-    scene_dirs : sequence of path
-        Scene folders with the noisy recordings (``upper_noisy/``, ``lower_noisy/``).
-    candidates : sequence of (metres, degrees) or None
-        Gates to compare (None: no gate, the prior only seeds the tracker).
-    recordings : sequence of str
-        Recording folders of each scene to track.
-    progress : bool
-
-    Returns
-    -------
-    chosen : (metres, degrees) or None
-    table : DataFrame
-        One row per scene, recording and candidate: scene, recording, prior_tolerance
-        (:func:`gate_name`), ate_rmse (m), rpe_trans (m/frame), rpe_rot_deg (deg/frame),
-        n_frames, seconds (odometry wall time).
-
-    Raises
-    ------
-    ValueError
-        No scenes or no candidates, a bad candidate.
-    FileNotFoundError
-        A scene without a recording or its ``poses_gt.txt``.
-    """
-    from ..odometry import estimate_poses
-    from ..trajectory_metrics import trajectory_errors
-
-    cands = [_check_tolerance(c) for c in candidates]
-    if not cands:
-        raise ValueError("no candidate gates to choose from")
-    dirs = [Path(d) for d in scene_dirs]
-    if not dirs:
-        raise ValueError("no validation scenes to choose the gate on")
-    for d in dirs:
-        for rec in recordings:
-            if not (d / rec / "poses_gt.txt").is_file():
-                raise FileNotFoundError(f"{d / rec}: no noisy recording with poses_gt.txt")
-    rows = []
-    bar = tqdm(total=len(dirs) * len(recordings) * len(cands), desc="odometry gate", disable=not progress)
-    for d in dirs:
-        for rec in recordings:
-            seq = read_sequence(d / rec).load()
-            _, true = read_tum(d / rec / "poses_gt.txt")
-            for c in cands:
-                t0 = time.perf_counter()
-                est = estimate_poses(seq, init_pose=np.eye(4), prior=seq.poses, prior_tolerance=c,
-                                     downsample=ODOMETRY_DOWNSAMPLE)
-                err = trajectory_errors(est, true)
-                rows.append(dict(scene=d.name, recording=rec, prior_tolerance=gate_name(c),
-                                 ate_rmse=float(err["ate_rmse"]), rpe_trans=float(err["rpe_trans"]),
-                                 rpe_rot_deg=float(err["rpe_rot_deg"]), n_frames=int(err["n_frames"]),
-                                 seconds=time.perf_counter() - t0))
-                bar.update()
-    bar.close()
-    table = pd.DataFrame(rows)
-    means = table.groupby("prior_tolerance", sort=False)["ate_rmse"].mean()
-    chosen = min(cands, key=lambda c: (means[gate_name(c)], cands.index(c)))
-    return chosen, table
 
 
 def score_real_like_against_mesh(
