@@ -21,6 +21,9 @@ References
 .. [1] A. Rosinol, M. Abate, Y. Chang, L. Carlone, "Kimera: an open-source library for
    real-time metric-semantic localization and mapping", ICRA 2020.
 .. [2] Open3D tensor reconstruction system, ``open3d.t.geometry.VoxelBlockGrid``.
+
+One module (over 500 lines): the volume class, its integration and extraction and the drivers that
+fuse sequences share the voxel-block layout and the Open3D state it holds.
 """
 
 from __future__ import annotations

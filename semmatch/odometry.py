@@ -7,6 +7,8 @@ chosen per frame by photometric and depth misfit), chained, then refined by a po
 default; pass the known start pose, :func:`start_pose`, to build maps in the world frame).
 Trajectory errors against ground truth are :mod:`semmatch.trajectory_metrics`; how much drift
 the pose graph removes is measured in docs/protocol.md ("Odometry").
+
+One module (just over 500 lines): the tracker and the one-recording chain that runs it.
 """
 
 from __future__ import annotations

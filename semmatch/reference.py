@@ -21,6 +21,9 @@ Score a lower-view map against it with :func:`semmatch.metrics.compare`::
 Everything is vectorised NumPy. The samples are sorted into spatial blocks; for each frame,
 only the blocks whose bounding box meets the frame's viewing frustum (between the nearest and
 the farthest valid depth) and only the points not yet observed are projected.
+
+One module (over 500 lines): surface sampling, the block store of observed points and the reference
+built from them share one sampling of the mesh.
 """
 
 from __future__ import annotations
@@ -444,9 +447,8 @@ def observed_reference(
     -----
     The reference is exact geometry, so the voxel measures of :func:`semmatch.metrics.compare`
     now count every geometric error of a reconstruction, including the TSDF's own: Open3D's
-    fusion places surfaces seen at oblique angles up to ~1 cm off (measured: a floor seen at
-    60-75 deg from its normal comes out 1 cm low at 4 cm voxels), so a planar surface lying
-    within ~1 cm of a voxel boundary (axis-aligned walls at round coordinates) is split between
+    fusion places surfaces seen at oblique angles up to about a centimetre off (docs/metrics.md),
+    so a planar surface lying within that distance of a voxel boundary (axis-aligned walls at round coordinates) is split between
     two voxel layers and even the ground-truth-labelled fusion scores well below 1.
 
     Examples

@@ -25,15 +25,8 @@ The same inputs and seed give the same transform up to the rounding of Open3D's 
 The two maps of this project overlap only partly (the robot at 0.2 m sees under tables, the
 person at 1.6 m sees the tops; often 30-70 % of either map), so ``fitness`` is a share of the
 *source* points that found a target surface, not a proof of success; ``agreement`` (how many
-restarts reached the kept transform) is a better sign of a unique solution. Measured with the
-defaults on eight simulated validation scenes (seeds 501-502, four kinds, 60 Kinect-like noisy
-frames of 320x240 per recording, each fused at 4 cm in its recording's own frame, lower map
-onto upper map): all three restarts agreed on every scene; the transform was within 0.2-3.5 cm
-and 0.1-0.5 degrees of the truth (each map fitted onto the ground-truth mesh) on seven, and
-17 cm / 1.7 degrees off on a 10.8 x 8.1 m apartment whose two maps drift differently (ICP
-started at the truth stays there, with a better fine fitness, 0.20 against 0.16: a local
-minimum); 3-25 s per registration on two loaded cores. With ``voxel_size = 0.05`` a living
-room was registered turned by 180 degrees.
+restarts reached the kept transform) is a better sign of a unique solution. How it fares on the validation scenes:
+docs/protocol.md ("Registration").
 
 References
 ----------

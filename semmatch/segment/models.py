@@ -2,8 +2,8 @@
 
 ``compact``
     An LR-ASPP head (Howard et al., "Searching for MobileNetV3", ICCV 2019) on a small
-    MobileNetV2-style encoder of inverted residual blocks: fast enough for >= 10 FPS at
-    320x240 on two CPU cores. Stands in for the paper's Mask R-CNN.
+    MobileNetV2-style encoder of inverted residual blocks, small enough for CPU inference at
+    camera rate (`semmatch bench segment`). Stands in for the paper's Mask R-CNN.
 ``strong``
     A deeper residual encoder with atrous spatial pyramid pooling and a DeepLabV3+-style
     decoder (Chen et al., ECCV 2018) fed by skip connections at 1/4 and 1/2 resolution.
@@ -87,7 +87,7 @@ def normalise_inputs(rgb: torch.Tensor, depth: torch.Tensor | None) -> torch.Ten
 
     RGB is centred on 0 (``x - 0.5``); depth is divided by :data:`DEPTH_NORM` and clipped to
     [0, 2] (0 = no measurement). The result is channels-last in memory, the layout the networks
-    run in (their depthwise convolutions are ~1.6x faster so on CPU).
+    run in (their depthwise convolutions are faster so on CPU).
     """
     x = rgb - 0.5
     if depth is not None:

@@ -6,6 +6,9 @@ scale/crop window (depth rescaled with the zoom). The loss is cross-entropy with
 square-root median-frequency class weights (void ignored). The best validation checkpoint (mIoU over
 classes 1..10) is kept. Everything is seeded: the same config gives the same weights on the
 same machine (``torch.use_deterministic_algorithms``; data rendered single-threaded).
+
+One module (over 500 lines): the configuration, augmentation and training loop form one recipe, and
+the checkpoint records them together.
 """
 
 from __future__ import annotations

@@ -9,6 +9,9 @@ Albedo comes from materials (:mod:`semmatch.sim.materials`), not from categories
 
 ``scene.meta`` holds what the trajectories and the renderer need: ``rooms`` (list of
 ``[xmin, ymin, xmax, ymax]``), ``ceiling_height``, ``floor_z``, ``lights`` and ``kind``.
+
+One module (over 500 lines): the room and furniture builders share the box helpers and one seeded
+random stream per scene, whose order of draws defines each scene.
 """
 
 from __future__ import annotations

@@ -12,6 +12,9 @@ For a noise-free sequence ``poses.txt`` and ``poses_gt.txt`` are equal. With pos
 while RGB, depth, labels and instances are rendered from the *true* poses of
 ``poses_gt.txt``: labels stay aligned with the images, and a method using ``poses.txt``
 sees realistic pose error.
+
+One module (over 500 lines): writing one sequence and laying out a whole data set share the
+sequence folder format, its completeness check and its handling of partial writes.
 """
 
 from __future__ import annotations

@@ -15,6 +15,9 @@ Two carriers can share a route: :func:`route_waypoints` gives the waypoints a tr
 one kind visits, and ``make_trajectory(..., waypoints=...)`` flies them at another height (the
 robot follows the person's route through the room, so that the upper map covers what the
 lower camera sees).
+
+One module (over 500 lines): free space, route planning, coverage and the camera paths are one
+planner working on the same free-space grid.
 """
 
 from __future__ import annotations

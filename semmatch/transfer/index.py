@@ -19,6 +19,9 @@ wherever the answer can differ inside a voxel and the grid answer elsewhere; wit
 ``exact=False`` it returns the voxel-centre answer everywhere (one gather per point: the fast
 path of ``3d-neighborhood``; a point within about one voxel of a class edge may take the
 neighbouring class).
+
+One module (over 500 lines): the sparse grid's builder, its block store, the lookups and the on-
+disk cache all depend on one block layout, which no other module needs to know.
 """
 
 from __future__ import annotations

@@ -38,8 +38,8 @@ def superpixels(
         SLIC/SEEDS iterations.
     scale : float
         The ``cv2-slic``/``cv2-slico`` backends run on the image resized by ``scale`` and the
-        labels are resized back (nearest): 0.5 makes them 4x faster with superpixel boundaries
-        at 2-pixel precision. 1 = full resolution. Ignored by the other backends.
+        labels are resized back (nearest): 0.5 segments a quarter of the pixels, with superpixel
+        boundaries at 2-pixel precision. 1 = full resolution. Ignored by the other backends.
     mask : bool (H,W), optional
         Only ``skimage-slic``: segment only these pixels (maskSLIC); others get -1.
 
