@@ -37,7 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from .geometry import Intrinsics, check_pose, pixel_rays
-from .io import Frame, SemanticMap, read_label_image, read_labels_folder, write_map
+from .io import Frame, SemanticMap, depth_to_uint16, read_label_image, read_labels_folder, write_map
 from .labels import NUM_CLASSES
 
 __all__ = ["SemanticTSDF", "EvidencePixels", "fuse", "extract", "reconstruct", "reconstruct_many", "check_depth_units",
@@ -315,7 +315,7 @@ class SemanticTSDF:
             K = self._K[intrinsics] = o3c.Tensor(intrinsics.K)
         dev = self.device
         # Open3D integrates (uint16 depth, uint8 colour) without float conversions: depth in mm
-        depth_mm = np.minimum(np.rint(depth * 1000.0), 65535).astype(np.uint16)
+        depth_mm = depth_to_uint16(depth)
         d_img = o3d.t.geometry.Image(_as_o3d(depth_mm, dev))
         c_img = o3d.t.geometry.Image(_as_o3d(color, dev))
         ext = o3c.Tensor(np.linalg.inv(T))

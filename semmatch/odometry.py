@@ -20,7 +20,7 @@ import numpy as np
 
 from .fusion import check_depth_units, default_device
 from .geometry import check_pose
-from .io import Frame
+from .io import Frame, depth_to_uint16
 from .pose_graph import refine_pose_graph
 from .trajectory_metrics import align_trajectory, rotation_deg, trajectory_errors
 
@@ -32,8 +32,7 @@ MIN_VALID_DEPTH = 0.001
 
 def _depth_mm(depth: np.ndarray, where: str) -> np.ndarray:
     check_depth_units(depth, where=where)
-    d = np.where(np.isfinite(depth) & (depth > 0), depth, 0.0) * 1000.0
-    return np.clip(np.rint(d), 0, 65535).astype(np.uint16)
+    return depth_to_uint16(depth)
 
 
 def estimate_poses(

@@ -21,7 +21,15 @@ from .files import (
     save_figure,
     write_json,
 )
-from .images import read_depth, read_image, read_label_image, write_depth, write_image, write_label_image
+from .images import (
+    depth_to_uint16,
+    read_depth,
+    read_image,
+    read_label_image,
+    write_depth,
+    write_image,
+    write_label_image,
+)
 from .maps import INSTANCE_MAX, SemanticMap, check_ply_header, read_map, write_map
 from .sequences import (
     Frame,
@@ -60,6 +68,7 @@ __all__ = [
     "write_label_image",
     "read_depth",
     "write_depth",
+    "depth_to_uint16",
     "read_labels_folder",
     "write_labels_folder",
     "OUTPUT_MARKER",

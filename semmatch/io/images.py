@@ -10,7 +10,8 @@ import numpy as np
 
 from .files import atomic_path
 
-__all__ = ['read_image', 'write_image', 'read_label_image', 'write_label_image', 'read_depth', 'write_depth']
+__all__ = ['read_image', 'write_image', 'read_label_image', 'write_label_image', 'read_depth', 'write_depth',
+           'depth_to_uint16']
 
 PathLike = str | os.PathLike
 
@@ -90,11 +91,29 @@ def read_image(path: PathLike, *, flags: int = cv2.IMREAD_UNCHANGED) -> np.ndarr
     return img
 
 
+def depth_to_uint16(depth: np.ndarray, depth_scale: float = 1000.0) -> np.ndarray:
+    """Metric depth as 16-bit integers: ``rint(metres * depth_scale)`` clipped to 65535; 0 = none.
+
+    Non-finite and non-positive depths become 0. The arithmetic is done in ``depth``'s float type.
+
+    Parameters
+    ----------
+    depth : float array
+        Metres.
+    depth_scale : float
+        Units per metre (1000: millimetres).
+
+    Returns
+    -------
+    uint16 array
+    """
+    d = np.where(np.isfinite(depth) & (depth > 0), depth, 0.0) * depth_scale
+    return np.clip(np.rint(d), 0, 65535).astype(np.uint16)
+
+
 def write_depth(path: PathLike, depth: np.ndarray, depth_scale: float = 1000.0) -> None:
     """Write metric depth as a 16-bit PNG (``value = metres * depth_scale``, 0 = none)."""
-    d = np.asarray(depth, dtype=np.float64)
-    d = np.where(np.isfinite(d) & (d > 0), d, 0.0) * depth_scale
-    write_image(path, np.clip(np.rint(d), 0, 65535).astype(np.uint16))
+    write_image(path, depth_to_uint16(np.asarray(depth, dtype=np.float64), depth_scale))
 
 
 def read_depth(path: PathLike, depth_scale: float = 1000.0) -> np.ndarray:
