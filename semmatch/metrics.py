@@ -48,6 +48,7 @@ __all__ = [
     "compare_dict_loop",
     "pixel_confusion",
     "pixel_metrics",
+    "class_iou",
     "MEASURES",
 ]
 
@@ -417,6 +418,30 @@ def pixel_confusion(
     return conf
 
 
+def class_iou(conf: np.ndarray, classes: Iterable[int]) -> np.ndarray:
+    """Intersection over union of each class from a confusion matrix (rows: ground truth).
+
+    Parameters
+    ----------
+    conf : (C, C) array
+        Counts, e.g. :func:`pixel_confusion`.
+    classes : iterable of int
+        The classes to score.
+
+    Returns
+    -------
+    float64 array
+        ``tp / (ground truth + predicted - tp)`` per class; NaN where the class is absent from
+        both.
+    """
+    cls = np.asarray(list(classes), dtype=np.int64)
+    conf = np.asarray(conf)
+    tp = conf[cls, cls].astype(np.float64)
+    den = conf[cls].sum(1) + conf[:, cls].sum(0) - tp
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(den > 0, tp / den, np.nan)
+
+
 def pixel_metrics(
     gt_labels: np.ndarray | Iterable[np.ndarray],
     pred_labels: np.ndarray | Iterable[np.ndarray],
@@ -449,10 +474,7 @@ def pixel_metrics(
     rows = conf[cls]
     n_pix = int(rows.sum())
     correct = int(conf[cls, cls].sum())
-    tp = conf[cls, cls].astype(np.float64)
-    den = conf[cls].sum(1) + conf[:, cls].sum(0) - tp
-    with np.errstate(invalid="ignore", divide="ignore"):
-        iou = np.where(den > 0, tp / den, np.nan)
+    iou = class_iou(conf, cls)
     if n_pix == 0:
         warnings.warn("pixel_metrics: no ground-truth pixel of the evaluated classes", stacklevel=2)
     return {

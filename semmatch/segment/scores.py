@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..labels import EVAL_CLASSES, NUM_CLASSES, VOID
+from ..metrics import class_iou
 
 __all__ = ["confusion", "scores"]
 
@@ -57,9 +58,7 @@ def scores(conf: np.ndarray, classes: tuple[int, ...] = EVAL_CLASSES) -> dict:
     tp = conf[cls, cls]
     gt_n = conf[cls].sum(axis=1)
     pred_n = conf[:, cls].sum(axis=0)
-    union = gt_n + pred_n - tp
-    with np.errstate(invalid="ignore", divide="ignore"):
-        iou = np.where(union > 0, tp / union, np.nan)
+    iou = class_iou(conf, cls)
     G = gt_n.sum()
     P = pred_n.sum()
     C = tp.sum()

@@ -18,6 +18,7 @@ import pandas as pd
 
 from ..geometry import DEFAULT_INTRINSICS, Intrinsics
 from ..io import read_sequence
+from ..metrics import MEASURES
 from ..progress import tqdm
 from .scores import confusion, scores
 
@@ -30,7 +31,7 @@ __all__ = [
 
 #: the paper's camera heights (metres)
 HEIGHTS: tuple[float, ...] = (0.2, 0.4, 0.6, 0.8, 1.0, 1.2, 1.4, 1.6)
-_COLUMNS = ["miou", "pixel_acc", "jaccard", "sorensen", "color_acc", "mean_acc"]
+_COLUMNS = ["miou", "pixel_acc", *MEASURES]
 
 
 def _predict_labels(model, rgb: np.ndarray, depth: np.ndarray) -> np.ndarray:
