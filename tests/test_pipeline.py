@@ -122,6 +122,15 @@ def test_readme_results_section_is_generated_from_figures(tmp_path):
     text = r.read_text()
     assert "old" not in text and "| 1 |" in text and "](figures/full/table2_synthetic.png)" in text
     assert text.endswith("rest\n") and not readme.update_readme(r, fig)
+    assert "Training variance" not in text
+    var = tmp_path / "figures" / "variance"
+    var.mkdir()
+    (var / "table2_training_seeds.md").write_text("| arch | mean |\n|---|---|\n")  # header only: not shown
+    assert not readme.update_readme(r, fig)
+    (var / "fig3_training_seeds.md").write_text("| arch | height | mean |\n|---|---|---|\n| compact | 0.2 | 0.5 |\n")
+    assert readme.update_readme(r, fig)
+    text = r.read_text()
+    assert "Training variance" in text and "| compact | 0.2 | 0.5 |" in text and "arch | mean" not in text
 
 
 def test_protocol_refuses_bad_splits_before_any_work(tmp_path):
