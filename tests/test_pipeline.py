@@ -131,6 +131,14 @@ def test_readme_results_section_is_generated_from_figures(tmp_path):
     assert readme.update_readme(r, fig)
     text = r.read_text()
     assert "Training variance" in text and "| compact | 0.2 | 0.5 |" in text and "arch | mean" not in text
+    import pandas as pd
+
+    pd.DataFrame({"claim": ["C1"] * 2 + ["C2"] * 2, "data": "synthetic", "measure": "mean_acc",
+                  "comparison": ["a - b"] * 2 + ["c - d"] * 2, "model": ["compact", "compact@1"] * 2,
+                  "verdict": ["holds", "holds", "holds", "not resolved"]}).to_csv(var / "claims_synthetic.csv")
+    assert readme.update_readme(r, fig)
+    assert "1 of 2 comparisons get the same verdict with every seed; they differ for C2 c - d (mean_acc: holds, " \
+           "not resolved)." in r.read_text()
 
 
 def test_protocol_refuses_bad_splits_before_any_work(tmp_path):

@@ -66,7 +66,31 @@ def variance_markdown(variance_dir: str | Path, readme_dir: str | Path) -> str:
     for md, caption in _VARIANCE_SECTIONS:
         if _has_rows(variance_dir / md):
             parts += [caption + "\n", (variance_dir / md).read_text().strip() + "\n"]
+    agreement = _verdict_agreement(variance_dir)
+    if agreement:
+        parts.append(agreement + "\n")
     return "\n".join(parts)
+
+
+def _verdict_agreement(variance_dir: Path) -> str:
+    """One sentence: how many claim comparisons get the same verdict with every training seed."""
+    import pandas as pd
+
+    frames = [pd.read_csv(f) for f in sorted(variance_dir.glob("claims_*.csv")) if f.stat().st_size]
+    if not frames:
+        return ""
+    d = pd.concat(frames, ignore_index=True)
+    d = d[d["model"].astype(str).str.startswith("compact")]
+    key = ["claim", "data", "measure", "comparison"]
+    if d.empty or not set(key + ["verdict"]) <= set(d.columns):
+        return ""
+    verdicts = d.groupby(key, sort=False)["verdict"].agg(lambda v: ", ".join(dict.fromkeys(v)))
+    differ = verdicts[d.groupby(key, sort=False)["verdict"].nunique() > 1]
+    text = (f"Claim verdicts with each training seed (`claims_*.csv` there): {len(verdicts) - len(differ)} of "
+            f"{len(verdicts)} comparisons get the same verdict with every seed")
+    if len(differ):
+        text += "; they differ for " + "; ".join(f"{c} {cmp} ({m}: {v})" for (c, _, m, cmp), v in differ.items())
+    return text + "."
 
 
 def results_markdown(figures_dir: str | Path, readme_dir: str | Path) -> str:
