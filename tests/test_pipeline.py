@@ -410,3 +410,15 @@ def test_a_notebook_run_with_another_parameter_file_reads_that_file(tmp_path):
     (tmp_path / "params.yaml").write_text("profile: mine\nprofiles:\n  mine:\n    common: {seed: 41}\n    simulate: {}\n")
     pipeline.run_notebook("01_simulate", "mine", notebooks_dir=tmp_path / "nb", params_file=tmp_path / "params.yaml",
                           reports_dir=tmp_path / "rep", cwd=tmp_path)
+
+
+def test_layout_scene_dir_by_index(tmp_path):
+    from semmatch.experiments.layout import Layout
+
+    for sid in ("office_7002", "bedroom_7001"):
+        (tmp_path / "scenes" / "eval" / sid).mkdir(parents=True)
+        (tmp_path / "scenes" / "eval" / sid / "scene.ply").write_text("ply")
+    layout = Layout(tmp_path)
+    assert layout.scene_dir(0).name == "bedroom_7001" and layout.scene_dir(1).name == "office_7002"
+    with pytest.raises(ValueError, match="scene index 2 out of range: 2 eval scenes"):
+        layout.scene_dir(2)

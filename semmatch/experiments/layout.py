@@ -70,6 +70,19 @@ class Layout:
             raise FileNotFoundError(f"{d}: no {split} scenes; run 01_simulate first")
         return sorted(p for p in d.iterdir() if (p / "scene.ply").is_file())
 
+    def scene_dir(self, index: int, split: str = "eval") -> Path:
+        """The ``index``-th scene folder of a split (sorted as :meth:`scene_dirs`).
+
+        Raises
+        ------
+        ValueError
+            ``index`` outside the split's scenes (the message gives their number).
+        """
+        scenes = self.scene_dirs(split)
+        if not 0 <= index < len(scenes):
+            raise ValueError(f"scene index {index} out of range: {len(scenes)} {split} scenes")
+        return scenes[index]
+
     def model(self, network: str) -> Path:
         return self.root / "models" / f"{network}.pt"
 

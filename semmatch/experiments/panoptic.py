@@ -264,10 +264,10 @@ def panoptic_figure(
     from ..geometry import Intrinsics
     from ..panoptic import instance_colors
     from ..plots import image_grid
-    from .qualitative import _eval_scene, overview_pose, render_map
+    from .qualitative import overview_pose, render_map
 
     layout = Layout(data_root)
-    sid = _eval_scene(layout, scene).name
+    sid = layout.scene_dir(scene).name
     base = layout.panoptic(sid)
     panels = [("reference", base / "reference.ply")] + [
         (f"{s}\n{method}", base / _folder(s) / f"{method}.ply") for s in (ORACLE, GT_CLUSTERED, *networks)

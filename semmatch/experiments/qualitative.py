@@ -61,14 +61,6 @@ def render_map(
     return rgb
 
 
-def _eval_scene(layout: Layout, scene: int):
-    """The folder of evaluation scene number ``scene`` (a clear error when out of range)."""
-    scenes = layout.scene_dirs("eval")
-    if not 0 <= scene < len(scenes):
-        raise ValueError(f"scene index {scene} out of range: {len(scenes)} evaluation scenes")
-    return scenes[scene]
-
-
 def qualitative_figure(
     data_root: str | Path,
     methods: Sequence[str],
@@ -86,7 +78,7 @@ def qualitative_figure(
     from ..plots import image_grid
 
     layout = Layout(data_root)
-    sid = _eval_scene(layout, scene).name
+    sid = layout.scene_dir(scene).name
     ref = read_map(layout.lower_reference(sid))
     pose = overview_pose(ref)
     w, h = size
@@ -123,7 +115,7 @@ def transferred_frames_figure(
     from ..plots import image_grid
 
     layout = Layout(data_root)
-    sd = _eval_scene(layout, scene)
+    sd = layout.scene_dir(scene)
     seq = read_sequence(layout.lower_sequence(sd))
     idx = np.linspace(0, len(seq) - 1, max(1, int(frames))).round().astype(int)
     images, seen = [], set()
