@@ -78,7 +78,7 @@ stages = {
     params=["profile", *common("kinds", "train_seeds", "voxel_size", "eval_voxel_size", "fused_base", "seed"),
             f"profiles.{P}.adapt_robot_view"],
     outs=[f"data/{P}/adapted"],
-    figs=[*tbl("adapt_label_quality", "adapt_height_per_scene", "adapt_height", "adapt_gap",
+    figs=[*tbl("adapt_label_quality", "validation_adapt_recipe", "adapt_height_per_scene", "adapt_height", "adapt_gap",
                "table2_adapted_per_scene", "table2_adapted"), "adapt_height.png"]),
  "panoptic": dict(
     nb="10_panoptic", deps=[f"data/{P}/scenes", f"data/{P}/upper", f"data/{P}/lower_maps"],

@@ -203,6 +203,7 @@ def fine_tune(
     lr: float = 1e-3,
     upper_share: float = 0.5,
     seed: int = 0,
+    min_coverage: float = 0.005,
     progress: bool = True,
 ) -> Path:
     """Fine-tune a network on the robot's frames labelled by ``source``; write the checkpoint.
@@ -211,6 +212,25 @@ def fine_tune(
     training views (ground truth) and the rest from the robot's frames (``source`` labels, 0
     ignored), with the network's training augmentation and class weights; AdamW with a one-cycle
     schedule peaking at ``lr``. The final weights are kept (no selection on any scene).
+
+    Parameters
+    ----------
+    checkpoint : path
+        The network to adapt (:func:`semmatch.segment.load_model`: a checkpoint of another
+        category table is refused).
+    robot : RobotViews
+        :func:`robot_training_views`, prepared with ``source``.
+    source : str
+        Label source (:data:`LABEL_SOURCES`).
+    out : path
+        Where the adapted checkpoint goes (written to a temporary file, then renamed).
+    steps, batch_size, lr, upper_share, seed
+        The schedule (AdamW, one-cycle peaking at ``lr``) and the share of each batch from the
+        network's human-height training views.
+    min_coverage : float
+        Smallest share of the robot's pixels with depth that ``source`` must label: below it the
+        person's map barely overlaps the robot's view and there is nothing to learn from.
+    progress : bool
 
     Returns
     -------
@@ -222,7 +242,8 @@ def fine_tune(
     Raises
     ------
     ValueError
-        Unknown source (or one ``robot`` was not prepared with), bad schedule.
+        Unknown source (or one ``robot`` was not prepared with), bad schedule, labels covering
+        less than ``min_coverage`` of the robot's pixels, a checkpoint of another category table.
     """
     import torch
 
@@ -236,6 +257,11 @@ def fine_tune(
     if int(steps) < 1 or int(batch_size) < 2 or not 0.0 <= upper_share < 1.0:
         raise ValueError(f"need steps >= 1, batch_size >= 2 and 0 <= upper_share < 1, got {steps}, {batch_size}, "
                          f"{upper_share}")
+    coverage = robot.coverage.get(source)
+    if coverage is not None and coverage < min_coverage:
+        raise ValueError(f"{source}: its labels cover {coverage:.2%} of the robot's pixels with depth (fewer than "
+                         f"{min_coverage:.2%}): the person's map barely overlaps the robot's view of the adaptation "
+                         f"scenes ({', '.join(robot.scenes)}); use longer tours, more scenes or another source")
     checkpoint = Path(checkpoint)
     seg = load_model(checkpoint, device="cpu", flip=False)
     info = seg.info

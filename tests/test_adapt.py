@@ -82,3 +82,111 @@ def test_gap_table_on_a_hand_made_sweep():
     assert t.loc["net~x", "change_high"] == pytest.approx(-0.02)
     assert t.loc["net~x", "gap_closed"] == pytest.approx(0.5)
     assert t.loc["net", "source"] == "none (unadapted)"
+
+
+def test_ground_truth_adaptation_raises_lower_view_accuracy(tiny_network, robot, tmp_path):
+    """On a tiny generated set: fine-tuning on the robot's frames with their true labels makes the
+    network better on other robot frames of the scene (another tour) than it was."""
+    from semmatch.segment.scores import confusion, scores
+
+    held_out = robot_training_views(tiny_network, kinds=["living_room"], seeds=[1], n_frames=3, seed=7,
+                                    sources=["ground-truth"], progress=False)
+
+    def accuracy(ckpt) -> float:
+        m = load_model(ckpt, flip=False)
+        pred = np.stack([m.predict_labels(rgb) for rgb in held_out.views.rgb])
+        return scores(confusion(held_out.views.labels, pred))["pixel_acc"]
+
+    adapted = fine_tune(tiny_network, robot, "ground-truth", tmp_path / "gt.pt", steps=40, batch_size=4, lr=3e-3,
+                        upper_share=0.25, progress=False)
+    assert accuracy(adapted) > accuracy(tiny_network) + 0.05
+
+
+def test_ignored_pixels_do_not_contribute_to_the_adaptation_loss():
+    """The loss fine_tune optimises (optimisation_step) ignores pixels labelled 0: any logits
+    there change neither the loss nor the gradients."""
+    import torch
+
+    from semmatch.labels import NUM_CLASSES
+    from semmatch.segment.training import optimisation_step
+
+    torch.manual_seed(0)
+    conv = torch.nn.Conv2d(3, NUM_CLASSES, 3, padding=1)
+    x = torch.randn(2, 3, 8, 8)
+    y = torch.randint(1, NUM_CLASSES, (2, 8, 8))
+    y[:, :, :4] = 0  # left half ignored
+    noise = torch.randn(2, NUM_CLASSES, 8, 8) * 50
+
+    class Scrambled(torch.nn.Module):  # wild logits on the ignored pixels only
+        def __init__(self, inner):
+            super().__init__()
+            self.inner = inner
+
+        def forward(self, x):
+            return self.inner(x) + noise * (y == 0).unsqueeze(1)
+
+    w = torch.ones(NUM_CLASSES)
+    results = []
+    for wrap in (False, True):
+        net = torch.nn.Conv2d(3, NUM_CLASSES, 3, padding=1)
+        net.load_state_dict(conv.state_dict())
+        opt = torch.optim.SGD(net.parameters(), lr=0.1)
+        sched = torch.optim.lr_scheduler.LambdaLR(opt, lambda _: 1.0)
+        loss = optimisation_step(Scrambled(net) if wrap else net, x, y, w, opt, sched)
+        results.append((loss, [p.detach().clone() for p in net.parameters()]))
+    assert results[0][0] == pytest.approx(results[1][0], rel=1e-6)
+    for p, q in zip(results[0][1], results[1][1], strict=True):
+        torch.testing.assert_close(p, q)
+
+
+def test_adaptation_refuses_a_source_that_labels_almost_nothing(tiny_network, robot, tmp_path):
+    from dataclasses import replace
+
+    thin = replace(robot, coverage={**robot.coverage, "3d-neighborhood": 0.001})
+    with pytest.raises(ValueError, match=r"3d-neighborhood: its labels cover 0\.10% .*living_room_0001"):
+        fine_tune(tiny_network, thin, "3d-neighborhood", tmp_path / "x.pt", steps=1, progress=False)
+    assert not (tmp_path / "x.pt").exists()
+
+
+def test_adaptation_refuses_a_checkpoint_of_another_category_table(tiny_network, robot, tmp_path):
+    import torch
+
+    ckpt = torch.load(tiny_network, weights_only=True)
+    ckpt["categories"] = [list(c) for c in ckpt["categories"]]
+    ckpt["categories"][3][1] = "not-a-ceiling"
+    other = tmp_path / "other_table.pt"
+    torch.save(ckpt, other)
+    with pytest.raises(ValueError, match="another category table"):
+        fine_tune(other, robot, "ground-truth", tmp_path / "x.pt", steps=1, progress=False)
+    assert not (tmp_path / "x.pt").exists()
+
+
+def test_recipe_candidates_are_the_grid_in_order():
+    from semmatch.experiments.adapt import recipe_candidates
+
+    assert recipe_candidates({"lr": [1e-3, 1e-4], "upper_share": [0.5, 0.75]}) == [
+        {"lr": 1e-3, "upper_share": 0.5}, {"lr": 1e-3, "upper_share": 0.75},
+        {"lr": 1e-4, "upper_share": 0.5}, {"lr": 1e-4, "upper_share": 0.75}]
+    assert recipe_candidates({"lr": 3e-4}) == [{"lr": 3e-4}]
+    for bad, msg in (({}, "empty"), ({"momentum": [0.9]}, "unknown"), ({"lr": []}, "no values")):
+        with pytest.raises(ValueError, match=msg):
+            recipe_candidates(bad)
+
+
+def test_recipe_rule_on_hand_made_tables():
+    import pandas as pd
+
+    from semmatch.experiments.adapt import pick_recipe
+
+    # within the forgetting bound: the largest gain at 0.2 m wins, not the overall largest gain
+    t = pick_recipe(pd.DataFrame({"gain_low": [0.10, 0.08, 0.12], "change_high": [-0.01, 0.0, -0.05]}), 0.02)
+    assert t["chosen"].tolist() == [True, False, False]
+    assert t["within_forgetting"].tolist() == [True, True, False]
+    # none within: the least forgetting wins
+    t = pick_recipe(pd.DataFrame({"gain_low": [0.10, 0.05], "change_high": [-0.05, -0.03]}), 0.02)
+    assert t["chosen"].tolist() == [False, True]
+    # ties: the first listed
+    t = pick_recipe(pd.DataFrame({"gain_low": [0.1, 0.1], "change_high": [0.0, 0.0]}), 0.02)
+    assert t["chosen"].tolist() == [True, False]
+    with pytest.raises(ValueError, match="non-finite"):
+        pick_recipe(pd.DataFrame({"gain_low": [float("nan")], "change_high": [0.0]}))

@@ -56,7 +56,8 @@ def test_smoke_run_writes_every_table_and_figure(smoke_run):
                  "table1_speed.png", "table2_synthetic.md", "table2_synthetic.png", "findings_synthetic.md",
                  "fig3_height.png", "table3_real.md", "findings_real.md", "trajectory_error.csv",
                  "fig4_qualitative.png", "routes.png", "misregistration.png", "validation_flip.csv",
-                 "validation_odometry_gate.csv", "findings_height.md"):
+                 "validation_odometry_gate.csv", "findings_height.md", "adapt_label_quality.md",
+                 "validation_adapt_recipe.md", "adapt_gap.md", "table2_adapted.md"):
         assert (fig / name).is_file(), name
     # the protocol's per-scene numbers, beside every table
     for name in ("table2_per_scene.csv", "fig3_height_per_scene.csv", "table3_per_scene.csv", "support_per_scene.csv"):

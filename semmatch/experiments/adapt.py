@@ -16,21 +16,22 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ..adapt import adapted_name, fine_tune, robot_training_views
+from ..adapt import RobotViews, adapted_name, fine_tune, robot_training_views
 from ..io import read_map, read_sequence
 from ..metrics import MEASURES, compare
 from ..stats import bootstrap_ci, paired_difference_ci
 from .layout import Layout
 from .synthetic import eval_grid_origin
 
-__all__ = ["adapt_networks", "load_adapted", "adapted_height_study", "gap_table", "adapted_lower_maps"]
+__all__ = ["robot_views", "adapt_networks", "recipe_candidates", "choose_adaptation_recipe", "pick_recipe",
+           "load_adapted", "adapted_height_study", "gap_table", "adapted_lower_maps"]
 
 
 def _adapt_dir(data_root: str | Path) -> Path:
     return Path(data_root) / "adapted"
 
 
-def adapt_networks(
+def robot_views(
     data_root: str | Path,
     network: str,
     sources: Sequence[str],
@@ -38,22 +39,18 @@ def adapt_networks(
     kinds: Sequence[str],
     seeds: Sequence[int],
     n_frames: int = 40,
-    steps: int = 500,
-    batch_size: int = 16,
-    lr: float = 1e-3,
-    upper_share: float = 0.5,
     voxel_size: float = 0.04,
     fused_base: str = "3d-neighborhood",
     seed: int = 0,
     progress: bool = True,
-) -> tuple[dict[str, Path], pd.DataFrame]:
-    """Fine-tune ``network`` once per label source on the robot's frames of training scenes.
+) -> tuple[RobotViews, pd.DataFrame]:
+    """The robot's frames of the adaptation (training) scenes, labelled by every source.
 
     Returns
     -------
-    checkpoints : dict
-        ``{adapted name: checkpoint path}`` (under ``data/<profile>/adapted/``).
-    coverage : DataFrame
+    robot : RobotViews
+        :func:`semmatch.adapt.robot_training_views` of ``network``.
+    quality : DataFrame
         ``source``, ``coverage`` (share of the robot's pixels with depth that carry a label),
         ``agreement`` (share of the labelled pixels that match the ground truth).
     """
@@ -68,12 +65,194 @@ def adapt_networks(
         on = lab > 0
         rows.append({"source": s, "coverage": robot.coverage[s],
                      "agreement": float((lab[on] == gt[on]).mean()) if on.any() else float("nan")})
+    return robot, pd.DataFrame(rows)
+
+
+def adapt_networks(
+    data_root: str | Path,
+    network: str,
+    robot: RobotViews,
+    sources: Sequence[str],
+    *,
+    steps: int = 400,
+    batch_size: int = 16,
+    lr: float = 1e-3,
+    upper_share: float = 0.5,
+    seed: int = 0,
+    progress: bool = True,
+) -> dict[str, Path]:
+    """Fine-tune ``network`` once per label source on the robot's frames (:func:`robot_views`).
+
+    Returns
+    -------
+    dict
+        ``{adapted name: checkpoint path}`` (under ``data/<profile>/adapted/``).
+    """
+    layout = Layout(data_root)
     out = {}
     for s in sources:
         name = adapted_name(network, s)
         out[name] = fine_tune(layout.model(network), robot, s, _adapt_dir(data_root) / f"{name}.pt", steps=steps,
                               batch_size=batch_size, lr=lr, upper_share=upper_share, seed=seed, progress=progress)
-    return out, pd.DataFrame(rows)
+    return out
+
+
+def recipe_candidates(grid: dict) -> list[dict]:
+    """Every combination of a recipe grid (``{"lr": [...], "upper_share": [...], "steps": [...]}``),
+    in the grid's order (the first key varies slowest).
+
+    Raises
+    ------
+    ValueError
+        An empty grid, a key :func:`semmatch.adapt.fine_tune` does not take, or an empty list.
+    """
+    import itertools
+
+    known = ("lr", "upper_share", "steps", "batch_size")
+    if not grid:
+        raise ValueError("the adaptation recipe grid is empty")
+    bad = [k for k in grid if k not in known]
+    if bad:
+        raise ValueError(f"recipe grid keys {bad} unknown; allowed: {', '.join(known)}")
+    values = {k: list(v) if isinstance(v, list | tuple) else [v] for k, v in grid.items()}
+    empty = [k for k, v in values.items() if not v]
+    if empty:
+        raise ValueError(f"recipe grid key(s) {empty} have no values")
+    return [dict(zip(values, combo, strict=True)) for combo in itertools.product(*values.values())]
+
+
+def choose_adaptation_recipe(
+    data_root: str | Path,
+    network: str,
+    robot: RobotViews,
+    candidates: Sequence[dict],
+    *,
+    source: str = "3d-neighborhood",
+    defaults: dict | None = None,
+    max_forgetting: float = 0.02,
+    low: float = 0.2,
+    high: float = 1.6,
+    seed: int = 0,
+    jobs: int = 1,
+    scheduler: str | None = None,
+    progress: bool = True,
+) -> tuple[dict, pd.DataFrame]:
+    """Choose the fine-tuning recipe on the **validation** scenes' height sweeps.
+
+    Each candidate fine-tunes ``network`` with ``source`` labels of the robot's training frames;
+    the adapted network and the unadapted one label the validation sweeps at ``low`` and
+    ``high``; per candidate, the paired per-scene mIoU differences to the unadapted network give
+    ``gain_low`` and ``change_high`` (:func:`gap_table`). The rule, fixed before any run: among
+    the candidates that lose at most ``max_forgetting`` mIoU at ``high`` on average, the one with
+    the largest gain at ``low``; when none does, the one that loses least at ``high``. Ties: the
+    first listed. No evaluation scene takes part.
+
+    Parameters
+    ----------
+    data_root : path
+        The pipeline's data root (validation sweeps ``scenes/val/<scene>/h020 ..``).
+    network : str
+    robot : RobotViews
+        :func:`robot_views` (must carry ``source``).
+    candidates : sequence of dict
+        Keyword sets of :func:`semmatch.adapt.fine_tune` (``lr``, ``upper_share``, ``steps``,
+        ``batch_size``), e.g. :func:`recipe_candidates`.
+    source : str
+        The label source the recipe is chosen with (one recipe for every source).
+    defaults : dict, optional
+        Keywords every candidate starts from (the profile's ``steps``, ``batch_size`` ...).
+    max_forgetting : float
+        Largest acceptable mean mIoU loss at ``high``.
+    low, high : float
+        The robot's and the person's camera heights (m); both must be in the sweeps.
+    seed, jobs, scheduler, progress
+        As for :func:`adapted_height_study`.
+
+    Returns
+    -------
+    chosen : dict
+        The chosen candidate merged into ``defaults``.
+    table : DataFrame
+        One row per candidate: its keywords, ``miou@low``/``miou@high`` with intervals, ``gain_low``,
+        ``change_high`` (with intervals), ``gap_closed``, ``within_forgetting``, ``chosen``.
+
+    Raises
+    ------
+    ValueError
+        No candidates, or ``max_forgetting`` < 0.
+    FileNotFoundError
+        The validation scenes have no sweep at ``low`` or ``high``.
+    """
+    from ..segment.viewpoint import viewpoint_gap_sequences
+    from .height import sweep_sequences
+
+    if not candidates:
+        raise ValueError("no adaptation recipes to choose from")
+    if not max_forgetting >= 0:
+        raise ValueError(f"max_forgetting must be >= 0, got {max_forgetting}")
+    layout = Layout(data_root)
+    sweeps = sweep_sequences(data_root, "val")
+    heights = {h: p for h, p in sweeps.items() if np.isclose(h, low) or np.isclose(h, high)}
+    if len(heights) != 2:
+        raise FileNotFoundError(f"{layout.scenes / 'val'}: the validation sweeps have heights {sorted(sweeps)}; "
+                                f"choosing the recipe needs {low:g} m and {high:g} m")
+    base = dict(defaults or {})
+    trials = [base | dict(c) for c in candidates]
+    recipe_dir = _adapt_dir(data_root) / "recipe"
+    models = {network: layout.load_network(network)}
+    flip = layout.inference_flip(network)
+    from ..segment import load_model
+
+    for i, kw in enumerate(trials):
+        ckpt = fine_tune(layout.model(network), robot, source, recipe_dir / f"candidate{i}.pt", seed=seed,
+                         progress=progress, **kw)
+        models[f"candidate{i}"] = load_model(ckpt) if flip is None else load_model(ckpt, flip=flip)
+    per_scene = viewpoint_gap_sequences(models, heights, per_scene=True, jobs=jobs, scheduler=scheduler,
+                                        progress=progress)
+    gaps = gap_table(per_scene, network, low=low, high=high).set_index("model")
+    rows = []
+    for i, kw in enumerate(trials):
+        g = gaps.loc[f"candidate{i}"]
+        # lr as text: a table's fixed decimals would print 1e-4 as 0.000
+        rows.append({"candidate": i, **{k: (f"{kw[k]:g}" if k == "lr" else kw[k]) for k in sorted(kw)}, "source": source,
+                     **{k: float(g[k]) for k in g.index if k not in ("source",)}})
+    table = pick_recipe(pd.DataFrame(rows), max_forgetting)
+    return trials[int(np.flatnonzero(table["chosen"])[0])], table
+
+
+def pick_recipe(table: pd.DataFrame, max_forgetting: float = 0.02) -> pd.DataFrame:
+    """The rule of :func:`choose_adaptation_recipe` on a table of candidates.
+
+    Among the rows whose ``change_high`` is >= ``-max_forgetting``, the largest ``gain_low``;
+    when no row is, the largest ``change_high``. Ties: the first row.
+
+    Parameters
+    ----------
+    table : DataFrame
+        One row per candidate with ``gain_low`` and ``change_high``.
+    max_forgetting : float
+
+    Returns
+    -------
+    DataFrame
+        ``table`` (index reset) with ``within_forgetting`` and ``chosen`` (exactly one True).
+
+    Raises
+    ------
+    ValueError
+        An empty table, or non-finite ``gain_low`` / ``change_high``.
+    """
+    t = table.reset_index(drop=True).copy()
+    if t.empty:
+        raise ValueError("no adaptation recipes to choose from")
+    vals = t[["gain_low", "change_high"]].to_numpy(dtype=np.float64)
+    if not np.isfinite(vals).all():
+        raise ValueError("recipe table has non-finite gain_low/change_high (a candidate scored no validation scene)")
+    t["within_forgetting"] = t["change_high"] >= -max_forgetting
+    ok = t[t["within_forgetting"]]
+    best = int(ok["gain_low"].idxmax()) if len(ok) else int(t["change_high"].idxmax())
+    t["chosen"] = t.index == best
+    return t
 
 
 def load_adapted(data_root: str | Path, network: str, checkpoints: dict[str, Path]) -> dict:
