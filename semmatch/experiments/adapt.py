@@ -199,14 +199,9 @@ def choose_adaptation_recipe(
     base = dict(defaults or {})
     trials = [base | dict(c) for c in candidates]
     recipe_dir = _adapt_dir(data_root) / "recipe"
-    models = {network: layout.load_network(network)}
-    flip = layout.inference_flip(network)
-    from ..segment import load_model
-
-    for i, kw in enumerate(trials):
-        ckpt = fine_tune(layout.model(network), robot, source, recipe_dir / f"candidate{i}.pt", seed=seed,
-                         progress=progress, **kw)
-        models[f"candidate{i}"] = load_model(ckpt) if flip is None else load_model(ckpt, flip=flip)
+    checkpoints = {f"candidate{i}": fine_tune(layout.model(network), robot, source, recipe_dir / f"candidate{i}.pt",
+                                              seed=seed, progress=progress, **kw) for i, kw in enumerate(trials)}
+    models = {network: layout.load_network(network), **load_adapted(data_root, network, checkpoints)}
     per_scene = viewpoint_gap_sequences(models, heights, per_scene=True, jobs=jobs, scheduler=scheduler,
                                         progress=progress)
     gaps = gap_table(per_scene, network, low=low, high=high).set_index("model")
