@@ -323,3 +323,20 @@ def test_network_names_carry_architecture_and_seed():
     assert list(spread["arch"]) == ["compact"] and spread["seeds"].iloc[0] == 3
     assert spread["mean"].iloc[0] == pytest.approx(0.8) and spread["sd"].iloc[0] == pytest.approx(0.1)
     assert spread_over_training_seeds(summary[summary["model"] == "strong"]).empty
+
+
+def test_cli_bench_train(capsys):
+    import json
+
+    from semmatch.cli import main
+
+    assert main(["bench", "train", "--json", "--profile", "smoke", "--arch", "compact", "--steps", "1",
+                 "--schedule", "compact=600"]) == 0
+    res = json.loads(capsys.readouterr().out)["networks"]["compact"]
+    assert res["seconds_per_step"] > 0 and res["schedule_steps"] == 600 and res["batch_size"] == 8
+    assert abs(res["projected_minutes"] - res["seconds_per_step"] * 600 / 60.0) <= 0.06
+    assert main(["bench", "train", "--profile", "smoke", "--arch", "compact", "--steps", "1",
+                 "--schedule", "strong=10"]) == 2
+    assert "not timed" in capsys.readouterr().err
+    assert main(["bench", "train", "--profile", "smoke", "--arch", "compact", "--schedule", "compact=x"]) == 2
+    assert "ARCH=STEPS" in capsys.readouterr().err

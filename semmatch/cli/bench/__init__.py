@@ -1,4 +1,4 @@
-"""``semmatch bench {render,transfer,fusion,metrics,segment} [--json]``.
+"""``semmatch bench {render,transfer,fusion,metrics,segment,train} [--json]``.
 
 Each benchmark lives in ``semmatch/cli/bench/<what>.py`` with ``register(subparsers)``; it
 prints a human table, or one JSON object with ``--json``.
@@ -10,7 +10,7 @@ import importlib
 import json
 import sys
 
-WHATS = ("render", "transfer", "fusion", "metrics", "segment")
+WHATS = ("render", "transfer", "fusion", "metrics", "segment", "train")
 
 
 def register(sub) -> None:
