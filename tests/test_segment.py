@@ -328,11 +328,15 @@ def test_network_names_carry_architecture_and_seed():
 def test_cli_bench_train(capsys):
     import json
 
+    import torch
+
     from semmatch.cli import main
 
+    before = torch.are_deterministic_algorithms_enabled()
     assert main(["bench", "train", "--json", "--profile", "smoke", "--arch", "compact", "--steps", "1",
                  "--schedule", "compact=600"]) == 0
     res = json.loads(capsys.readouterr().out)["networks"]["compact"]
+    assert torch.are_deterministic_algorithms_enabled() == before  # the benchmark restores the setting
     assert res["seconds_per_step"] > 0 and res["schedule_steps"] == 600 and res["batch_size"] == 8
     assert abs(res["projected_minutes"] - res["seconds_per_step"] * 600 / 60.0) <= 0.06
     assert main(["bench", "train", "--profile", "smoke", "--arch", "compact", "--steps", "1",

@@ -62,21 +62,40 @@ def time_training_steps(arch: str, profile: str = "full", steps: int = 20, *, wa
     ValueError
         ``steps`` < 1, unknown architecture or profile.
     """
+    import torch
+
+    from semmatch.segment.training import make_config
+
+    if int(steps) < 1 or int(warmup) < 0:
+        raise ValueError(f"need steps >= 1 and warmup >= 0, got {steps}, {warmup}")
+    cfg = make_config(profile, arch=arch)
+    # training's settings, restored afterwards (the benchmark leaves the process as it found it)
+    was = torch.are_deterministic_algorithms_enabled(), torch.utils.deterministic.fill_uninitialized_memory
+    torch.manual_seed(seed)
+    torch.use_deterministic_algorithms(True)
+    torch.utils.deterministic.fill_uninitialized_memory = False
+    try:
+        per_step = _timed_steps(cfg, arch, int(steps), int(warmup), seed)
+    finally:
+        torch.use_deterministic_algorithms(was[0])
+        torch.utils.deterministic.fill_uninitialized_memory = was[1]
+    planned = int(schedule if schedule is not None else cfg.steps)
+    return {"seconds_per_step": round(per_step, 4), "batch_size": int(cfg.batch_size),
+            "crop": f"{cfg.crop_size[0]}x{cfg.crop_size[1]}", "schedule_steps": planned,
+            "projected_minutes": round(per_step * planned / 60.0, 1)}
+
+
+def _timed_steps(cfg, arch: str, steps: int, warmup: int, seed: int) -> float:
+    """Seconds per step of ``steps`` training steps after ``warmup`` untimed ones."""
     import numpy as np
     import torch
 
     from semmatch.labels import NUM_CLASSES
     from semmatch.segment.models import build_network
-    from semmatch.segment.training import augment, make_config, optimisation_step
+    from semmatch.segment.training import augment, optimisation_step
 
-    if int(steps) < 1 or int(warmup) < 0:
-        raise ValueError(f"need steps >= 1 and warmup >= 0, got {steps}, {warmup}")
-    cfg = make_config(profile, arch=arch)
-    torch.manual_seed(seed)
-    torch.use_deterministic_algorithms(True)
-    torch.utils.deterministic.fill_uninitialized_memory = False
     net = build_network(cfg.model_config()).to(memory_format=torch.channels_last)
-    total = int(steps) + int(warmup)
+    total = steps + warmup
     opt = torch.optim.AdamW(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay, foreach=True)
     sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=cfg.lr, total_steps=total, pct_start=0.1)
     weights = torch.ones(NUM_CLASSES, dtype=torch.float32)
@@ -95,11 +114,7 @@ def time_training_steps(arch: str, profile: str = "full", steps: int = 20, *, wa
                        jitter=cfg.jitter, base_zoom=cfg.width / cfg.net_size[0], use_depth=cfg.use_depth)
         optimisation_step(net, x.contiguous(memory_format=torch.channels_last), y, weights, opt, sched,
                           what=f"benchmark loss ({arch})")
-    per_step = (time.perf_counter() - t0) / int(steps)
-    planned = int(schedule if schedule is not None else cfg.steps)
-    return {"seconds_per_step": round(per_step, 4), "batch_size": int(cfg.batch_size),
-            "crop": f"{cfg.crop_size[0]}x{cfg.crop_size[1]}", "schedule_steps": planned,
-            "projected_minutes": round(per_step * planned / 60.0, 1)}
+    return (time.perf_counter() - t0) / steps
 
 
 def parse_schedule(items: list[str]) -> dict[str, int]:
