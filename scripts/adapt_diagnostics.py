@@ -1,0 +1,137 @@
+"""Validation-only diagnostics of the robot-view adaptation recipe (docs/adapt.md).
+
+Run ``python scripts/adapt_diagnostics.py OUT --which steps [--profile full]`` after the
+profile's stages 01-02 (trained networks, validation sweeps at 0.2 m and 1.6 m). Each variant
+fine-tunes a network on the robot's frames of the profile's adaptation (training) scenes, as
+notebook 09 does, with the variant's recipe, and scores the adapted and the unadapted network on
+the **validation** sweeps only (paired per-scene mIoU differences, 95 % intervals:
+``semmatch.experiments.adapt.gap_table``). Checkpoints and ``<variant>_<network>.csv`` go to
+``OUT``; nothing under the profile's data root is written. Variants (docs/adapt.md, 2026-11-25):
+
+- ``steps``: compact, 400 vs 1600 steps, ground-truth and ``3d-neighborhood`` labels;
+- ``strong``: the strong network, 400 steps, ground-truth and ``3d-neighborhood`` labels;
+- ``bn-frozen``: compact with batch-norm statistics frozen during fine-tuning;
+- ``strong-lr``: the strong network at a smaller learning rate;
+- ``distill``: compact with a per-pixel KL term to the unadapted network (weight 1) on the
+  human-height part of each batch.
+
+The last two recipe changes are not options of :func:`semmatch.adapt.fine_tune`: this script
+swaps the optimisation step it uses for the length of one run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import time
+from pathlib import Path
+
+import numpy as np
+
+#: variant -> runs: (network, label source, steps, lr, upper_share, mode)
+VARIANTS = {
+    "steps": [("compact", "ground-truth", 400, 3e-4, 0.75, "plain"),
+              ("compact", "ground-truth", 1600, 3e-4, 0.75, "plain"),
+              ("compact", "3d-neighborhood", 1600, 3e-4, 0.75, "plain")],
+    "strong": [("strong", "ground-truth", 400, 3e-4, 0.75, "plain"),
+               ("strong", "3d-neighborhood", 400, 3e-4, 0.75, "plain")],
+    "bn-frozen": [("compact", "3d-neighborhood", 400, 1e-3, 0.5, "bn-frozen"),
+                  ("compact", "3d-neighborhood", 400, 3e-4, 0.75, "bn-frozen")],
+    "strong-lr": [("strong", "3d-neighborhood", 400, 1e-4, 0.75, "plain")],
+    "distill": [("compact", "3d-neighborhood", 400, 1e-3, 0.5, "distill"),
+                ("compact", "3d-neighborhood", 400, 3e-4, 0.75, "distill")],
+}
+
+
+@contextlib.contextmanager
+def recipe_mode(mode: str, teacher, n_upper: int):
+    """Swap ``semmatch.segment.training.optimisation_step`` (used by ``fine_tune``) for ``mode``."""
+    import torch
+    import torch.nn.functional as F
+
+    import semmatch.segment.training as training
+
+    original = training.optimisation_step
+
+    def bn_frozen(net, *args, **kwargs):
+        for m in net.modules():
+            if isinstance(m, torch.nn.modules.batchnorm._BatchNorm):
+                m.eval()
+        return original(net, *args, **kwargs)
+
+    def distill(net, x, y, weights, opt, sched, *, what="loss"):
+        logits = net(x)
+        loss = F.cross_entropy(logits, y, weight=weights, ignore_index=0)
+        with torch.no_grad():
+            t = F.log_softmax(teacher(x[:n_upper]), 1)
+        kd = (t.exp() * (t - F.log_softmax(logits[:n_upper], 1))).sum(1).mean()
+        total = loss + kd
+        if not torch.isfinite(total):
+            raise FloatingPointError(f"{what} became {total.item()}")
+        opt.zero_grad(set_to_none=True)
+        total.backward()
+        opt.step()
+        sched.step()
+        return float(loss.item())
+
+    training.optimisation_step = {"plain": original, "bn-frozen": bn_frozen, "distill": distill}[mode]
+    try:
+        yield
+    finally:
+        training.optimisation_step = original
+
+
+def main() -> None:
+    from semmatch.adapt import fine_tune
+    from semmatch.experiments.adapt import gap_table, load_adapted, robot_views
+    from semmatch.experiments.height import sweep_sequences
+    from semmatch.experiments.layout import Layout
+    from semmatch.experiments.pipeline import notebook_parameters
+    from semmatch.segment import load_model
+    from semmatch.segment.viewpoint import viewpoint_gap_sequences
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("out", type=Path, help="folder for the checkpoints and tables")
+    ap.add_argument("--which", choices=sorted(VARIANTS), required=True)
+    ap.add_argument("--profile", default=None, help="profile of params.yaml (default: its 'profile')")
+    ap.add_argument("--max-steps", type=int, help="cap every run's steps (a quick check, not the documented runs)")
+    args = ap.parse_args()
+
+    p = notebook_parameters("09_adapt_robot_view", args.profile)
+    root = p["data_root"]
+    layout = Layout(root)
+    sweeps = sweep_sequences(root, "val")
+    heights = {h: q for h, q in sweeps.items() if np.isclose(h, 0.2) or np.isclose(h, 1.6)}
+    if len(heights) != 2:
+        raise SystemExit(f"{layout.scenes / 'val'}: the validation sweeps have heights {sorted(sweeps)}; "
+                         f"need 0.2 m and 1.6 m")
+    args.out.mkdir(parents=True, exist_ok=True)
+    runs = VARIANTS[args.which]
+    for network in dict.fromkeys(r[0] for r in runs):
+        mine = [r for r in runs if r[0] == network]
+        t0 = time.time()
+        robot, _ = robot_views(root, network, sorted({r[1] for r in mine}), kinds=p["kinds"],
+                               seeds=p["train_seeds"][:p["adapt_scenes"]], n_frames=p["n_frames"],
+                               voxel_size=p["voxel_size"], fused_base=p["fused_base"], seed=p["seed"],
+                               progress=False)
+        print(f"{network}: robot views {time.time() - t0:.0f} s", flush=True)
+        teacher = load_model(layout.model(network), device="cpu", flip=False).net.eval()
+        ckpts = {}
+        for _, source, steps, lr, share, mode in mine:
+            steps = min(steps, args.max_steps or steps)
+            name = f"{network}_{source}_{steps}_lr{lr:g}_s{share:g}_{mode}"
+            t0 = time.time()
+            with recipe_mode(mode, teacher, int(round(p["batch_size"] * share))):
+                ckpts[name] = fine_tune(layout.model(network), robot, source, args.out / f"{name}.pt", steps=steps,
+                                        batch_size=p["batch_size"], lr=lr, upper_share=share, seed=p["seed"],
+                                        progress=False)
+            print(f"fine-tuned {name}: {time.time() - t0:.0f} s", flush=True)
+        models = {network: layout.load_network(network), **load_adapted(root, network, ckpts)}
+        per_scene = viewpoint_gap_sequences(models, heights, per_scene=True, jobs=p["jobs"], progress=False)
+        table = gap_table(per_scene, network, low=0.2, high=1.6).drop(columns=["source"])
+        table.to_csv(args.out / f"{args.which}_{network}.csv", index=False)
+        print(table.round(3).to_string(), flush=True)
+
+
+if __name__ == "__main__":
+    main()
