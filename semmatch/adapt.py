@@ -249,7 +249,7 @@ def fine_tune(
 
     from .progress import tqdm
     from .segment import load_model
-    from .segment.training import TrainConfig, augment, build_views, optimisation_step
+    from .segment.training import TrainConfig, augment, build_views, make_optimiser, optimisation_step
 
     _check_sources([source])
     if source not in robot.pseudo:
@@ -273,8 +273,7 @@ def fine_tune(
     torch.manual_seed(seed)
     torch.use_deterministic_algorithms(True)
     net = seg.net
-    opt = torch.optim.AdamW(net.parameters(), lr=lr, weight_decay=cfg.weight_decay, foreach=True)
-    sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=lr, total_steps=int(steps), pct_start=0.1)
+    opt, sched = make_optimiser(net, lr, cfg.weight_decay, steps)
     w_t = torch.tensor(info["class_weights"], dtype=torch.float32)
     rng = np.random.default_rng(seed)
     n_up = int(round(batch_size * upper_share))

@@ -183,7 +183,6 @@ def choose_adaptation_recipe(
     FileNotFoundError
         The validation scenes have no sweep at ``low`` or ``high``.
     """
-    from ..segment.viewpoint import viewpoint_gap_sequences
     from .height import sweep_sequences
 
     if not candidates:
@@ -201,9 +200,8 @@ def choose_adaptation_recipe(
     recipe_dir = _adapt_dir(data_root) / "recipe"
     checkpoints = {f"candidate{i}": fine_tune(layout.model(network), robot, source, recipe_dir / f"candidate{i}.pt",
                                               seed=seed, progress=progress, **kw) for i, kw in enumerate(trials)}
-    models = {network: layout.load_network(network), **load_adapted(data_root, network, checkpoints)}
-    per_scene = viewpoint_gap_sequences(models, heights, per_scene=True, jobs=jobs, scheduler=scheduler,
-                                        progress=progress)
+    per_scene = _score_on_sweeps(data_root, network, checkpoints, heights, jobs=jobs, scheduler=scheduler,
+                                 progress=progress)
     gaps = gap_table(per_scene, network, low=low, high=high).set_index("model")
     rows = []
     for i, kw in enumerate(trials):
@@ -264,12 +262,20 @@ def adapted_height_study(data_root: str | Path, network: str, checkpoints: dict[
     """Per-scene pixel scores of the unadapted and every adapted network on the evaluation
     scenes' height sweeps (:func:`semmatch.segment.viewpoint.viewpoint_gap_sequences`; the scenes
     are engine tasks on ``jobs`` local worker processes or the cluster at ``scheduler``)."""
-    from ..segment.viewpoint import viewpoint_gap_sequences
     from .height import sweep_sequences
 
+    return _score_on_sweeps(data_root, network, checkpoints, sweep_sequences(data_root), jobs=jobs,
+                            scheduler=scheduler, progress=progress)
+
+
+def _score_on_sweeps(data_root: str | Path, network: str, checkpoints: dict[str, Path], sweeps: dict, *,
+                     jobs: int, scheduler: str | None, progress: bool) -> pd.DataFrame:
+    """Per-scene scores of ``network`` and its adapted ``checkpoints`` on ``sweeps`` ({height: sequences})."""
+    from ..segment.viewpoint import viewpoint_gap_sequences
+
     models = {network: Layout(data_root).load_network(network), **load_adapted(data_root, network, checkpoints)}
-    return viewpoint_gap_sequences(models, sweep_sequences(data_root), per_scene=True, jobs=jobs,
-                                   scheduler=scheduler, progress=progress)
+    return viewpoint_gap_sequences(models, sweeps, per_scene=True, jobs=jobs, scheduler=scheduler,
+                                   progress=progress)
 
 
 def gap_table(per_scene: pd.DataFrame, network: str, *, low: float = 0.2, high: float = 1.6,

@@ -40,8 +40,26 @@ def save_table(df: pd.DataFrame, figures_dir: str | Path, name: str, *, floatfmt
     figures_dir.mkdir(parents=True, exist_ok=True)
     csv, md = figures_dir / f"{name}.csv", figures_dir / f"{name}.md"
     atomic_write_text(csv, df.to_csv(index=False, float_format="%.4f"))
-    atomic_write_text(md, df.to_markdown(index=False, floatfmt=floatfmt) + "\n")
+    atomic_write_text(md, markdown_table(df, floatfmt=floatfmt) + "\n")
     return csv, md
+
+
+def markdown_table(df: pd.DataFrame, *, floatfmt: str = ".3f") -> str:
+    """``df`` as a markdown table: float columns with ``floatfmt``, text exactly as it is.
+
+    ``DataFrame.to_markdown`` re-reads text cells that look like numbers and prints them with
+    ``floatfmt`` too (a learning rate kept as the text ``"0.0003"`` came out as ``0.000``);
+    here only float columns are formatted, numbers are right-aligned and text left-aligned.
+    """
+    shown = df.copy()
+    align = []
+    for c in df.columns:
+        col = df[c]
+        numeric = pd.api.types.is_numeric_dtype(col) and not pd.api.types.is_bool_dtype(col)
+        if pd.api.types.is_float_dtype(col):
+            shown[c] = col.map(lambda v: format(v, floatfmt))
+        align.append("right" if numeric else "left")
+    return shown.to_markdown(index=False, disable_numparse=True, colalign=align)
 
 
 def save_interval_table(summary: pd.DataFrame, figures_dir: str | Path, name: str, *,

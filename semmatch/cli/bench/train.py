@@ -92,12 +92,11 @@ def _timed_steps(cfg, arch: str, steps: int, warmup: int, seed: int) -> float:
 
     from semmatch.labels import NUM_CLASSES
     from semmatch.segment.models import build_network
-    from semmatch.segment.training import augment, optimisation_step
+    from semmatch.segment.training import augment, make_optimiser, optimisation_step
 
     net = build_network(cfg.model_config()).to(memory_format=torch.channels_last)
     total = steps + warmup
-    opt = torch.optim.AdamW(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay, foreach=True)
-    sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=cfg.lr, total_steps=total, pct_start=0.1)
+    opt, sched = make_optimiser(net, cfg.lr, cfg.weight_decay, total)
     weights = torch.ones(NUM_CLASSES, dtype=torch.float32)
     rng = np.random.default_rng(seed)
     n = 2 * cfg.batch_size
