@@ -285,3 +285,17 @@ def test_summarize_keeps_references_apart_and_formats():
     assert list(f.columns) == ["model", "method", "reference", "scenes", "mean_acc"]
     r = s.iloc[0]
     assert f.loc[0, "mean_acc"] == f"{r['mean_acc']:.3f} [{r['mean_acc_lo']:.3f}, {r['mean_acc_hi']:.3f}]"
+
+
+def test_markdown_table_keeps_text_cells_and_formats_floats(tmp_path):
+    from semmatch.experiments.tables import markdown_table, save_table
+
+    df = pd.DataFrame({"lr": ["0.0003", "0.001"], "miou": [0.12345, np.nan], "steps": [400, 400],
+                       "chosen": [True, False]})
+    md = markdown_table(df)
+    lines = md.splitlines()
+    assert "| 0.0003 |" in lines[2] and "0.123" in lines[2] and "nan" in lines[3]
+    # numbers right-aligned, text and flags left-aligned
+    assert lines[1].split("|")[1:-1] == [":-------", "-------:", "--------:", ":---------"]
+    _, path = save_table(df, tmp_path, "t")
+    assert path.read_text() == md + "\n"
