@@ -13,10 +13,10 @@ the **validation** sweeps only (paired per-scene mIoU differences, 95 % interval
 - ``bn-frozen``: compact with batch-norm statistics frozen during fine-tuning;
 - ``strong-lr``: the strong network at a smaller learning rate;
 - ``distill``: compact with a per-pixel KL term to the unadapted network (weight 1) on the
-  human-height part of each batch.
+  human-height part of each batch (``fine_tune(distill=1.0)``).
 
-The last two recipe changes are not options of :func:`semmatch.adapt.fine_tune`: this script
-swaps the optimisation step it uses for the length of one run.
+Frozen batch-norm statistics are not an option of :func:`semmatch.adapt.fine_tune`: for that
+variant this script swaps the optimisation step it uses for the length of one run.
 """
 
 from __future__ import annotations
@@ -44,10 +44,9 @@ VARIANTS = {
 
 
 @contextlib.contextmanager
-def recipe_mode(mode: str, teacher, n_upper: int):
+def recipe_mode(mode: str):
     """Swap ``semmatch.segment.training.optimisation_step`` (used by ``fine_tune``) for ``mode``."""
     import torch
-    import torch.nn.functional as F
 
     import semmatch.segment.training as training
 
@@ -59,22 +58,7 @@ def recipe_mode(mode: str, teacher, n_upper: int):
                 m.eval()
         return original(net, *args, **kwargs)
 
-    def distill(net, x, y, weights, opt, sched, *, what="loss"):
-        logits = net(x)
-        loss = F.cross_entropy(logits, y, weight=weights, ignore_index=0)
-        with torch.no_grad():
-            t = F.log_softmax(teacher(x[:n_upper]), 1)
-        kd = (t.exp() * (t - F.log_softmax(logits[:n_upper], 1))).sum(1).mean()
-        total = loss + kd
-        if not torch.isfinite(total):
-            raise FloatingPointError(f"{what} became {total.item()}")
-        opt.zero_grad(set_to_none=True)
-        total.backward()
-        opt.step()
-        sched.step()
-        return float(loss.item())
-
-    training.optimisation_step = {"plain": original, "bn-frozen": bn_frozen, "distill": distill}[mode]
+    training.optimisation_step = {"plain": original, "distill": original, "bn-frozen": bn_frozen}[mode]
     try:
         yield
     finally:
@@ -87,7 +71,6 @@ def main() -> None:
     from semmatch.experiments.height import sweep_sequences
     from semmatch.experiments.layout import Layout
     from semmatch.experiments.pipeline import notebook_parameters
-    from semmatch.segment import load_model
     from semmatch.segment.viewpoint import viewpoint_gap_sequences
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -115,16 +98,15 @@ def main() -> None:
                                voxel_size=p["voxel_size"], fused_base=p["fused_base"], seed=p["seed"],
                                progress=False)
         print(f"{network}: robot views {time.time() - t0:.0f} s", flush=True)
-        teacher = load_model(layout.model(network), device="cpu", flip=False).net.eval()
         ckpts = {}
         for _, source, steps, lr, share, mode in mine:
             steps = min(steps, args.max_steps or steps)
             name = f"{network}_{source}_{steps}_lr{lr:g}_s{share:g}_{mode}"
             t0 = time.time()
-            with recipe_mode(mode, teacher, int(round(p["batch_size"] * share))):
+            with recipe_mode(mode):
                 ckpts[name] = fine_tune(layout.model(network), robot, source, args.out / f"{name}.pt", steps=steps,
-                                        batch_size=p["batch_size"], lr=lr, upper_share=share, seed=p["seed"],
-                                        progress=False)
+                                        batch_size=p["batch_size"], lr=lr, upper_share=share,
+                                        distill=1.0 if mode == "distill" else 0.0, seed=p["seed"], progress=False)
             print(f"fine-tuned {name}: {time.time() - t0:.0f} s", flush=True)
         models = {network: layout.load_network(network), **load_adapted(root, network, ckpts)}
         per_scene = viewpoint_gap_sequences(models, heights, per_scene=True, jobs=p["jobs"], progress=False)

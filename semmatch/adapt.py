@@ -202,6 +202,7 @@ def fine_tune(
     batch_size: int = 16,
     lr: float = 1e-3,
     upper_share: float = 0.5,
+    distill: float = 0.0,
     seed: int = 0,
     min_coverage: float = 0.005,
     progress: bool = True,
@@ -211,7 +212,10 @@ def fine_tune(
     Each step takes ``round(batch_size * upper_share)`` of the network's own human-height
     training views (ground truth) and the rest from the robot's frames (``source`` labels, 0
     ignored), with the network's training augmentation and class weights; AdamW with a one-cycle
-    schedule peaking at ``lr``. The final weights are kept (no selection on any scene).
+    schedule peaking at ``lr``. With ``distill`` > 0 the loss also has ``distill`` times the
+    per-pixel KL divergence from the unadapted network's class distribution to the adapted one's
+    on the human-height part of each batch (distillation, a guard against forgetting the human
+    view besides the mix itself). The final weights are kept (no selection on any scene).
 
     Parameters
     ----------
@@ -227,6 +231,8 @@ def fine_tune(
     steps, batch_size, lr, upper_share, seed
         The schedule (AdamW, one-cycle peaking at ``lr``) and the share of each batch from the
         network's human-height training views.
+    distill : float
+        Weight of the distillation term (0: none; needs ``upper_share`` > 0).
     min_coverage : float
         Smallest share of the robot's pixels with depth that ``source`` must label: below it the
         person's map barely overlaps the robot's view and there is nothing to learn from.
@@ -257,6 +263,9 @@ def fine_tune(
     if int(steps) < 1 or int(batch_size) < 2 or not 0.0 <= upper_share < 1.0:
         raise ValueError(f"need steps >= 1, batch_size >= 2 and 0 <= upper_share < 1, got {steps}, {batch_size}, "
                          f"{upper_share}")
+    if not distill >= 0 or (distill > 0 and int(round(batch_size * upper_share)) == 0):
+        raise ValueError(f"distill must be >= 0 and needs human-height views in the batch (upper_share > 0), "
+                         f"got distill={distill}, upper_share={upper_share}")
     coverage = robot.coverage.get(source)
     if coverage is not None and coverage < min_coverage:
         raise ValueError(f"{source}: its labels cover {coverage:.2%} of the robot's pixels with depth (fewer than "
@@ -278,6 +287,7 @@ def fine_tune(
     rng = np.random.default_rng(seed)
     n_up = int(round(batch_size * upper_share))
     n_lo = int(batch_size) - n_up
+    aux = _distillation(checkpoint, n_up, float(distill)) if distill > 0 else None
     lab_lo = robot.pseudo[source]
     usable = np.flatnonzero((lab_lo > 0).reshape(len(lab_lo), -1).any(axis=1))
     if len(usable) == 0:
@@ -299,7 +309,8 @@ def fine_tune(
         xs.append(x)
         ys.append(y)
         x = torch.cat(xs).contiguous(memory_format=torch.channels_last)
-        losses.append(optimisation_step(net, x, torch.cat(ys), w_t, opt, sched, what=f"adaptation loss ({source})"))
+        losses.append(optimisation_step(net, x, torch.cat(ys), w_t, opt, sched, what=f"adaptation loss ({source})",
+                                        aux_loss=None if aux is None else aux(x)))
     net.eval()
     ckpt = {k: copy.deepcopy(v) for k, v in info.items()}
     ckpt["state_dict"] = {k: v.detach().cpu() for k, v in net.state_dict().items()}
@@ -307,9 +318,32 @@ def fine_tune(
         "from": str(checkpoint), "from_sha256": _file_digest(checkpoint), "label_source": source,
         "scenes": list(robot.scenes), "frames": int(len(robot.views)), "label_coverage": robot.coverage.get(source),
         "steps": int(steps), "batch_size": int(batch_size), "lr": float(lr), "upper_share": float(upper_share),
-        "seed": int(seed), "final_loss": float(np.mean(losses[-20:])), "seconds": time.perf_counter() - t0,
+        "distill": float(distill), "seed": int(seed), "final_loss": float(np.mean(losses[-20:])), "seconds": time.perf_counter() - t0,
     }
     out = Path(out)
     with atomic_path(out) as tmp:
         torch.save(ckpt, tmp)
     return out
+
+
+def _distillation(checkpoint: Path, n_upper: int, weight: float):
+    """``aux(x)`` for :func:`fine_tune`: the distillation term of batch ``x`` as a function of the
+    adapted network's logits (KL from the frozen unadapted network, first ``n_upper`` images)."""
+    import torch
+    import torch.nn.functional as F
+
+    from .segment import load_model
+
+    teacher = load_model(checkpoint, device="cpu", flip=False).net.eval()
+    for p in teacher.parameters():
+        p.requires_grad_(False)
+
+    def aux(x):
+        with torch.no_grad():
+            t = F.log_softmax(teacher(x[:n_upper]), 1)
+
+        def term(logits):
+            kl = (t.exp() * (t - F.log_softmax(logits[:n_upper], 1))).sum(1).mean()
+            return weight * kl
+        return term
+    return aux

@@ -168,6 +168,7 @@ def test_recipe_candidates_are_the_grid_in_order():
         {"lr": 1e-3, "upper_share": 0.5}, {"lr": 1e-3, "upper_share": 0.75},
         {"lr": 1e-4, "upper_share": 0.5}, {"lr": 1e-4, "upper_share": 0.75}]
     assert recipe_candidates({"lr": 3e-4}) == [{"lr": 3e-4}]
+    assert recipe_candidates({"distill": [0.0, 1.0]}) == [{"distill": 0.0}, {"distill": 1.0}]
     for bad, msg in (({}, "empty"), ({"momentum": [0.9]}, "unknown"), ({"lr": []}, "no values")):
         with pytest.raises(ValueError, match=msg):
             recipe_candidates(bad)
@@ -190,3 +191,28 @@ def test_recipe_rule_on_hand_made_tables():
     assert t["chosen"].tolist() == [True, False]
     with pytest.raises(ValueError, match="non-finite"):
         pick_recipe(pd.DataFrame({"gain_low": [float("nan")], "change_high": [0.0]}))
+
+
+def test_distillation_term_is_zero_at_the_teacher_and_changes_the_weights(tiny_network, robot, tmp_path):
+    import torch
+
+    from semmatch.adapt import _distillation
+
+    teacher = load_model(tiny_network, flip=False).net.eval()
+    cin = next(m for m in teacher.modules() if isinstance(m, torch.nn.Conv2d)).in_channels
+    x = torch.rand(4, cin, 48, 64)
+    term = _distillation(tiny_network, 2, 0.5)(x)
+    with torch.no_grad():
+        same = teacher(x)
+    assert abs(float(term(same))) < 1e-6  # the adapted network still agrees with the unadapted one
+    assert float(term(torch.randn_like(same) * 5)) > 0
+    plain = load_model(fine_tune(tiny_network, robot, "3d-neighborhood", tmp_path / "p.pt", steps=2, batch_size=4,
+                                 progress=False))
+    kd = load_model(fine_tune(tiny_network, robot, "3d-neighborhood", tmp_path / "d.pt", steps=2, batch_size=4,
+                              distill=1.0, progress=False))
+    assert kd.info["adapted"]["distill"] == 1.0 and plain.info["adapted"]["distill"] == 0.0
+    assert any(not np.array_equal(p.detach().numpy(), q.detach().numpy())
+               for p, q in zip(plain.net.parameters(), kd.net.parameters(), strict=True))
+    with pytest.raises(ValueError, match="distill"):
+        fine_tune(tiny_network, robot, "3d-neighborhood", tmp_path / "x.pt", steps=1, upper_share=0.0, distill=1.0,
+                  progress=False)

@@ -78,6 +78,7 @@ def adapt_networks(
     batch_size: int = 16,
     lr: float = 1e-3,
     upper_share: float = 0.5,
+    distill: float = 0.0,
     seed: int = 0,
     progress: bool = True,
 ) -> dict[str, Path]:
@@ -93,12 +94,14 @@ def adapt_networks(
     for s in sources:
         name = adapted_name(network, s)
         out[name] = fine_tune(layout.model(network), robot, s, _adapt_dir(data_root) / f"{name}.pt", steps=steps,
-                              batch_size=batch_size, lr=lr, upper_share=upper_share, seed=seed, progress=progress)
+                              batch_size=batch_size, lr=lr, upper_share=upper_share, distill=distill, seed=seed,
+                              progress=progress)
     return out
 
 
 def recipe_candidates(grid: dict) -> list[dict]:
-    """Every combination of a recipe grid (``{"lr": [...], "upper_share": [...], "steps": [...]}``),
+    """Every combination of a recipe grid (``{"lr": [...], "upper_share": [...], "steps": [...],
+    "distill": [...]}``),
     in the grid's order (the first key varies slowest).
 
     Raises
@@ -108,7 +111,7 @@ def recipe_candidates(grid: dict) -> list[dict]:
     """
     import itertools
 
-    known = ("lr", "upper_share", "steps", "batch_size")
+    known = ("lr", "upper_share", "steps", "batch_size", "distill")
     if not grid:
         raise ValueError("the adaptation recipe grid is empty")
     bad = [k for k in grid if k not in known]

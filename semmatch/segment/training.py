@@ -352,24 +352,36 @@ def make_optimiser(net: torch.nn.Module, lr: float, weight_decay: float, steps: 
 
 
 def optimisation_step(net, x: torch.Tensor, y: torch.Tensor, weights: torch.Tensor, opt, sched, *,
-                      what: str = "loss") -> float:
+                      what: str = "loss", aux_loss=None) -> float:
     """One step: class-weighted cross-entropy (void ignored), backward, optimiser and schedule.
+
+    Parameters
+    ----------
+    net, x, y, weights, opt, sched
+        Network, batch (images, labels), class weights, optimiser and schedule.
+    what : str
+        Names the loss in the error message.
+    aux_loss : callable, optional
+        ``aux_loss(logits) -> scalar tensor`` added to the cross-entropy before the backward pass
+        (a regulariser, e.g. distillation in :func:`semmatch.adapt.fine_tune`).
 
     Returns
     -------
     float
-        The loss.
+        The cross-entropy (without ``aux_loss``).
 
     Raises
     ------
     FloatingPointError
         The loss is not finite (``what`` names it in the message).
     """
-    loss = F.cross_entropy(net(x), y, weight=weights, ignore_index=0)
-    if not torch.isfinite(loss):
-        raise FloatingPointError(f"{what} became {loss.item()}")
+    logits = net(x)
+    loss = F.cross_entropy(logits, y, weight=weights, ignore_index=0)
+    total = loss if aux_loss is None else loss + aux_loss(logits)
+    if not torch.isfinite(total):
+        raise FloatingPointError(f"{what} became {total.item()}")
     opt.zero_grad(set_to_none=True)
-    loss.backward()
+    total.backward()
     opt.step()
     sched.step()
     return float(loss.item())

@@ -23,7 +23,7 @@ def register(sub) -> None:
                                                     "(default %(default)s)")
     p.add_argument("--steps", type=int, default=20, help="timed steps per network (default 20, after 3 warm-up)")
     p.add_argument("--schedule", nargs="*", default=[], metavar="ARCH=STEPS",
-                   help="steps to project the training time for, e.g. compact=4000 strong=2400 (the pipeline's "
+                   help="steps to project the training time for, e.g. compact=2000 strong=1000 (the pipeline's "
                         "full profile; default: the training profile's steps)")
     p.add_argument("--threads", type=int, help="torch threads (default: torch's choice)")
     add_json_flag(p)
