@@ -546,3 +546,25 @@ def test_short_trajectory_tilts_both_up_and_down():
     poses = make_trajectory(generate_scene("bedroom", 3), 0.2, 24, tilt_deg=20.0, seed=3)
     el = camera_elevation_deg(poses)
     assert el.max() > 15 and el.min() < -15
+
+
+def test_fewer_frames_at_a_larger_camera_step_fly_the_same_tour(tmp_path):
+    """``camera_step``: half the frames at twice the step keep the tour's length and its room coverage."""
+    from semmatch.sim import carrier_poses, free_space, tour_coverage
+
+    scene = generate_scene("bedroom", 12)
+    dense = carrier_poses(scene, 1.6, 61, carrier="upper", seed=12)
+    sparse = carrier_poses(scene, 1.6, 31, carrier="upper", seed=12, camera_step=0.3)
+    short = carrier_poses(scene, 1.6, 31, carrier="upper", seed=12)
+
+    def length(p):
+        return float(np.linalg.norm(np.diff(p[:, :2, 3], axis=0), axis=1).sum())
+
+    assert length(sparse) == pytest.approx(length(dense), rel=0.1)
+    assert length(short) < 0.7 * length(dense)
+    steps = np.linalg.norm(np.diff(sparse[:, :2, 3], axis=0), axis=1)
+    assert steps.max() <= 0.3 + 1e-6
+    fs = free_space(scene, 1.6)
+    assert tour_coverage(fs, sparse) >= tour_coverage(fs, short)
+    with pytest.raises(ValueError, match="camera_step"):
+        generate_dataset(tmp_path, eval_seeds=[4], kinds=["office"], camera_step=0.0)

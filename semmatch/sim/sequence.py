@@ -39,7 +39,7 @@ from .procedural import SCENE_KINDS, generate_scene
 from .raster import make_renderer
 from .render import Renderer
 from .scene import Scene
-from .trajectory import make_sweep_trajectories, make_trajectory, route_waypoints
+from .trajectory import DEFAULT_CAMERA_STEP, make_sweep_trajectories, make_trajectory, route_waypoints
 
 __all__ = ["simulate_sequence", "simulate_sequences", "simulate_pair", "carrier_poses", "generate_dataset",
            "sweep_name", "DEFAULT_SWEEP", "check_seed_splits"]
@@ -211,7 +211,8 @@ def simulate_sequences(
 
 
 def carrier_poses(scene: Scene, height: float, n: int, *, carrier: str = "upper", routes: str = "own",
-                  route: np.ndarray | None = None, tilt_deg: float = 20.0, seed: int = 0) -> np.ndarray:
+                  route: np.ndarray | None = None, tilt_deg: float = 20.0, seed: int = 0,
+                  camera_step: float = DEFAULT_CAMERA_STEP) -> np.ndarray:
     """The poses of one carrier (person or robot) through a scene, as the protocol plans them.
 
     Parameters
@@ -230,6 +231,9 @@ def carrier_poses(scene: Scene, height: float, n: int, *, carrier: str = "upper"
         Waypoints to follow instead (the robot replaying the person's route).
     tilt_deg : float
     seed : int
+    camera_step : float
+        Largest camera step between frames (m; ``make_trajectory``'s ``max_step``): a tour is at
+        most ``(n - 1) * camera_step`` long, so fewer frames at a larger step fly the same tour.
 
     Returns
     -------
@@ -238,11 +242,12 @@ def carrier_poses(scene: Scene, height: float, n: int, *, carrier: str = "upper"
     if routes not in ("own", "shared"):
         raise ValueError(f"routes must be 'own' or 'shared', got {routes!r}")
     if route is not None:
-        return make_trajectory(scene, height, n, tilt_deg=tilt_deg, seed=seed, kind="lower", waypoints=route)
+        return make_trajectory(scene, height, n, tilt_deg=tilt_deg, seed=seed, kind="lower", waypoints=route,
+                               max_step=camera_step)
     if routes == "shared":
-        return make_trajectory(scene, height, n, tilt_deg=tilt_deg, seed=seed, kind=carrier)
+        return make_trajectory(scene, height, n, tilt_deg=tilt_deg, seed=seed, kind=carrier, max_step=camera_step)
     return make_trajectory(scene, height, n, tilt_deg=tilt_deg, seed=seed, kind=carrier, cover=True,
-                           there_and_back=False)
+                           there_and_back=False, max_step=camera_step)
 
 
 def simulate_pair(
@@ -260,6 +265,7 @@ def simulate_pair(
     overwrite: bool = False,
     progress: bool = True,
     backend: str = "raycast",
+    camera_step: float = DEFAULT_CAMERA_STEP,
 ) -> tuple[Path, Path]:
     """The person's and the robot's sequences of one scene: ``<out_dir>/upper`` and ``/lower``.
 
@@ -277,6 +283,8 @@ def simulate_pair(
         visits the person's route waypoints, there and back.
     tilt_deg, seed, intrinsics, noise, overwrite, progress, backend
         As :func:`simulate_sequence`.
+    camera_step : float
+        Largest camera step between frames (m, :func:`carrier_poses`).
 
     Returns
     -------
@@ -284,7 +292,7 @@ def simulate_pair(
         The upper and the lower sequence folders.
     """
     out_dir = Path(out_dir)
-    kw = dict(tilt_deg=tilt_deg, seed=seed)
+    kw = dict(tilt_deg=tilt_deg, seed=seed, camera_step=camera_step)
     up = carrier_poses(scene, upper_height, n_frames, carrier="upper", routes=routes, **kw)
     route = route_waypoints(scene, upper_height, seed=seed, kind="upper") if routes == "shared" else None
     low = carrier_poses(scene, lower_height, n_frames, carrier="lower", routes=routes, route=route, **kw)
@@ -436,8 +444,8 @@ def _write_scene(root: Path, o: dict, split: str, seed: int, kind: str,
     if any(t[3] == "lower" for t in pending) and shared:
         route = route_waypoints(scene, o["upper_height"], seed=seed, kind="upper")
     elif any(t[3] == "lower_shared" for t in pending):  # the ablation replays the person's actual tour
-        up = make_trajectory(scene, o["upper_height"], o["n_frames_upper"], tilt_deg=tilt_deg, seed=seed,
-                             kind="upper", cover=True, there_and_back=False)
+        up = carrier_poses(scene, o["upper_height"], o["n_frames_upper"], carrier="upper", tilt_deg=tilt_deg,
+                           seed=seed, camera_step=o["camera_step"])
         route = _path_waypoints(up[:, :2, 3])
     # a clean sequence and its noisy copy follow one trajectory: render it once for both
     paths: dict[tuple[float, int, str], list[tuple[str, NoiseConfig | None]]] = {}
@@ -448,7 +456,7 @@ def _write_scene(root: Path, o: dict, split: str, seed: int, kind: str,
             _drop_partials(sdir, name)
         follow = tkind == "lower_shared" or (shared and tkind == "lower")
         poses = carrier_poses(scene, height, n, carrier=tkind, routes=o["routes"], route=route if follow else None,
-                              tilt_deg=tilt_deg, seed=seed)
+                              tilt_deg=tilt_deg, seed=seed, camera_step=o["camera_step"])
         route_meta = {"route": "upper route, there and back" if follow else
                       ("own tour" if shared else "own coverage-matched tour")}
         simulate_sequences(scene, poses, [(sdir / name, cfg, {"trajectory": name, "seed": seed, "tilt_deg": tilt_deg,
@@ -490,6 +498,7 @@ def generate_dataset(
     dev_seeds: Sequence[int] = (),
     renderer: str = "raycast",
     scheduler: str | None = None,
+    camera_step: float = DEFAULT_CAMERA_STEP,
 ) -> dict:
     """Write the generated data layout of docs/data.md (resumable).
 
@@ -551,6 +560,11 @@ def generate_dataset(
     scheduler : str, optional
         Dask scheduler address to run the scenes on (default ``SEMMATCH_SCHEDULER``; none: ``jobs``
         local worker processes, see :func:`semmatch.engine.map_tasks`).
+    camera_step : float
+        Largest camera step between frames of the upper and lower tours (m,
+        :func:`carrier_poses`): the tours are at most ``(frames - 1) * camera_step`` long. Fewer
+        frames at a proportionally larger step keep the tours (and so the room they see) as long.
+        A resumed dataset does not re-render sequences written at another step.
 
     Returns
     -------
@@ -562,7 +576,7 @@ def generate_dataset(
     ------
     ValueError
         Overlapping seeds, an empty evaluation seed list, an unknown kind or route mode, or
-        bad frame counts.
+        bad frame counts or camera step.
     """
     check_seed_splits(train_seeds, val_seeds, eval_seeds, dev_seeds=dev_seeds)
     if routes not in ("own", "shared"):
@@ -574,6 +588,8 @@ def generate_dataset(
                     ("n_frames_sweep", n_frames_sweep)):
         if int(n) < 1:
             raise ValueError(f"{name} must be >= 1, got {n}")
+    if not 0 < float(camera_step) <= 1.0:
+        raise ValueError(f"camera_step must lie in (0, 1] m, got {camera_step}")
     if isinstance(noise, dict):
         noise = NoiseConfig.from_dict(noise)
     n_train = int(n_frames_train or n_frames_upper)
@@ -589,7 +605,8 @@ def generate_dataset(
     opts = dict(n_train=n_train, n_frames_upper=int(n_frames_upper), n_frames_lower=int(n_frames_lower),
                 heights_sweep=tuple(heights_sweep or ()), n_frames_sweep=int(n_frames_sweep),
                 upper_height=upper_height, lower_height=lower_height, tilt_deg=tilt_deg, noise=noise,
-                intrinsics=intrinsics, routes=routes, route_ablation=bool(route_ablation), renderer=str(renderer))
+                intrinsics=intrinsics, routes=routes, route_ablation=bool(route_ablation), renderer=str(renderer),
+                camera_step=float(camera_step))
     from functools import partial
 
     from ..engine import map_tasks, resolve_scheduler
@@ -611,7 +628,7 @@ def generate_dataset(
                    "n_frames_train": n_train, "heights_sweep": list(heights_sweep or []),
                    "n_frames_sweep": n_frames_sweep, "upper_height": upper_height,
                    "lower_height": lower_height, "tilt_deg": tilt_deg, "routes": routes,
-                   "route_ablation": bool(route_ablation),
+                   "route_ablation": bool(route_ablation), "camera_step": float(camera_step),
                    "noise": noise.to_dict() if noise is not None else None,
                    "intrinsics": intrinsics.to_dict()},
     })

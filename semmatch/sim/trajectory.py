@@ -433,6 +433,10 @@ def _kind_seed(kind: str) -> int:
     return zlib.crc32(kind.encode()) & 0x7FFFFFFF
 
 
+#: largest camera step between frames (m) of a tour, unless told otherwise
+DEFAULT_CAMERA_STEP = 0.15
+
+
 def make_trajectory(
     scene: Scene,
     height: float,
@@ -446,7 +450,7 @@ def make_trajectory(
     spacing: float = 1.2,
     plan_height: float | None = None,
     free: FreeSpace | None = None,
-    max_step: float | None = 0.15,
+    max_step: float | None = DEFAULT_CAMERA_STEP,
     max_turn_deg: float | None = 30.0,
     waypoints: np.ndarray | None = None,
     there_and_back: bool = True,
