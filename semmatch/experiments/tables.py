@@ -50,6 +50,17 @@ def markdown_table(df: pd.DataFrame, *, floatfmt: str = ".3f") -> str:
     ``DataFrame.to_markdown`` re-reads text cells that look like numbers and prints them with
     ``floatfmt`` too (a learning rate kept as the text ``"0.0003"`` came out as ``0.000``);
     here only float columns are formatted, numbers are right-aligned and text left-aligned.
+
+    Parameters
+    ----------
+    df : DataFrame
+    floatfmt : str
+        Format of the float columns' cells (``format(value, floatfmt)``).
+
+    Returns
+    -------
+    str
+        The table, without a trailing newline.
     """
     shown = df.copy()
     align = []
