@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 
+import numpy as np
 import pytest
 
 from semmatch.cli import build_parser, main
@@ -49,3 +50,19 @@ def test_the_sequence_is_positional_with_the_old_flag_as_an_alias(argv):
 def test_missing_sequence_is_a_clear_error(capsys):
     assert main(["transfer", "--map", "m.ply", "--method", "dbscan", "--out", "o"]) == 2
     assert "SEQ is required" in capsys.readouterr().err
+
+
+def test_simulate_camera_step(tmp_path, capsys):
+    """``--camera-step``: the robot's steps between frames stay within it; a bad step is refused."""
+    from semmatch.cli import main
+    from semmatch.io import read_sequence
+
+    assert main(["simulate", "--kind", "office", "--seed", "2", "--pair", "--frames", "6", "--camera-step", "0.4",
+                 "--size", "32x24", "--out", str(tmp_path / "pair"), "--quiet"]) == 0
+    for name in ("upper", "lower"):
+        xy = np.stack([f.pose[:2, 3] for f in read_sequence(tmp_path / "pair" / name)])
+        steps = np.linalg.norm(np.diff(xy, axis=0), axis=1)
+        assert steps.max() <= 0.4 + 1e-6 and steps.max() > 0.15  # longer than the default step allows
+    assert main(["simulate", "--kind", "office", "--camera-step", "0", "--frames", "3",
+                 "--out", str(tmp_path / "x"), "--quiet"]) == 2
+    assert "--camera-step" in capsys.readouterr().err

@@ -91,6 +91,9 @@ def register(sub) -> None:
                    help="with --out DIR: write the person's and the robot's sequences DIR/upper (--height) and "
                         "DIR/lower (--lower-height) of one scene, routes as --routes")
     p.add_argument("--lower-height", type=float, default=0.2, help="robot camera height for --pair (m)")
+    p.add_argument("--camera-step", type=float, default=0.15,
+                   help="largest camera step between frames (m, default %(default)s): a tour is at most "
+                        "(frames - 1) x this long, so fewer frames at a larger step fly the same tour")
     p.add_argument("--overwrite", action="store_true", help="replace an existing sequence at --out")
     add_quiet(p)
     dst = p.add_mutually_exclusive_group(required=True)
@@ -128,6 +131,8 @@ def run(args) -> int:
     intr = _intrinsics(args)
     noise = _noise(args.noise)
     progress = not args.quiet
+    if not 0 < args.camera_step <= 1.0:
+        raise ValueError(f"--camera-step must lie in (0, 1] m, got {args.camera_step}")
     if args.dataset is not None:
         sweep = sim.DEFAULT_SWEEP if args.sweep is None else (tuple(args.sweep) or None)
         res = sim.generate_dataset(
@@ -136,7 +141,7 @@ def run(args) -> int:
             heights_sweep=sweep, n_frames_sweep=args.frames_sweep, tilt_deg=args.tilt, noise=noise,
             intrinsics=intr, progress=progress, jobs=args.jobs, routes=args.routes,
             route_ablation=args.route_ablation, val_seeds=args.val_seeds, renderer=args.renderer,
-            scheduler=args.scheduler,
+            scheduler=args.scheduler, camera_step=args.camera_step,
         )
         print(f"{args.dataset}: wrote {len(res['written'])}, skipped {len(res['skipped'])} complete item(s)")
         return 0
@@ -153,7 +158,7 @@ def run(args) -> int:
             up, low = sim.simulate_pair(scene, args.out, n_frames=args.frames, upper_height=args.height,
                                         lower_height=args.lower_height, routes=args.routes, tilt_deg=args.tilt,
                                         seed=args.seed, intrinsics=intr, noise=noise, overwrite=args.overwrite,
-                                        progress=progress, backend=args.renderer)
+                                        progress=progress, backend=args.renderer, camera_step=args.camera_step)
         except ValueError as e:
             where = args.ply if args.ply is not None else f"{args.kind} seed {args.seed}"
             raise ValueError(f"{where}: {e}") from None
@@ -163,7 +168,7 @@ def run(args) -> int:
     kind = args.trajectory or ("upper" if args.height > 1.0 else "lower")
     try:
         poses = sim.make_trajectory(scene, args.height, args.frames, tilt_deg=args.tilt, seed=args.seed,
-                                    kind=kind, margin=args.margin)
+                                    kind=kind, margin=args.margin, max_step=args.camera_step)
     except ValueError as e:
         where = args.ply if args.ply is not None else f"{args.kind} seed {args.seed}"
         raise ValueError(f"{where}: {e}") from None
