@@ -26,8 +26,6 @@ import contextlib
 import time
 from pathlib import Path
 
-import numpy as np
-
 #: variant -> runs: (network, label source, steps, lr, upper_share, mode)
 VARIANTS = {
     "steps": [("compact", "ground-truth", 400, 3e-4, 0.75, "plain"),
@@ -67,11 +65,9 @@ def recipe_mode(mode: str):
 
 def main() -> None:
     from semmatch.adapt import fine_tune
-    from semmatch.experiments.adapt import gap_table, load_adapted, robot_views
-    from semmatch.experiments.height import sweep_sequences
+    from semmatch.experiments.adapt import gap_table, robot_views, score_on_sweeps, validation_gap_sweeps
     from semmatch.experiments.layout import Layout
     from semmatch.experiments.pipeline import notebook_parameters
-    from semmatch.segment.viewpoint import viewpoint_gap_sequences
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("out", type=Path, help="folder for the checkpoints and tables")
@@ -83,11 +79,7 @@ def main() -> None:
     p = notebook_parameters("09_adapt_robot_view", args.profile)
     root = p["data_root"]
     layout = Layout(root)
-    sweeps = sweep_sequences(root, "val")
-    heights = {h: q for h, q in sweeps.items() if np.isclose(h, 0.2) or np.isclose(h, 1.6)}
-    if len(heights) != 2:
-        raise SystemExit(f"{layout.scenes / 'val'}: the validation sweeps have heights {sorted(sweeps)}; "
-                         f"need 0.2 m and 1.6 m")
+    heights = validation_gap_sweeps(root, 0.2, 1.6)
     args.out.mkdir(parents=True, exist_ok=True)
     runs = VARIANTS[args.which]
     for network in dict.fromkeys(r[0] for r in runs):
@@ -108,8 +100,7 @@ def main() -> None:
                                         batch_size=p["batch_size"], lr=lr, upper_share=share,
                                         distill=1.0 if mode == "distill" else 0.0, seed=p["seed"], progress=False)
             print(f"fine-tuned {name}: {time.time() - t0:.0f} s", flush=True)
-        models = {network: layout.load_network(network), **load_adapted(root, network, ckpts)}
-        per_scene = viewpoint_gap_sequences(models, heights, per_scene=True, jobs=p["jobs"], progress=False)
+        per_scene = score_on_sweeps(root, network, ckpts, heights, jobs=p["jobs"], progress=False)
         table = gap_table(per_scene, network, low=0.2, high=1.6).drop(columns=["source"])
         table.to_csv(args.out / f"{args.which}_{network}.csv", index=False)
         print(table.round(3).to_string(), flush=True)

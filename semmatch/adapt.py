@@ -287,7 +287,7 @@ def fine_tune(
     rng = np.random.default_rng(seed)
     n_up = int(round(batch_size * upper_share))
     n_lo = int(batch_size) - n_up
-    aux = _distillation(checkpoint, n_up, float(distill)) if distill > 0 else None
+    aux = _distillation(copy.deepcopy(net), n_up, float(distill)) if distill > 0 else None
     lab_lo = robot.pseudo[source]
     usable = np.flatnonzero((lab_lo > 0).reshape(len(lab_lo), -1).any(axis=1))
     if len(usable) == 0:
@@ -310,7 +310,7 @@ def fine_tune(
         ys.append(y)
         x = torch.cat(xs).contiguous(memory_format=torch.channels_last)
         losses.append(optimisation_step(net, x, torch.cat(ys), w_t, opt, sched, what=f"adaptation loss ({source})",
-                                        aux_loss=None if aux is None else aux(x)))
+                                        aux_loss=aux))
     net.eval()
     ckpt = {k: copy.deepcopy(v) for k, v in info.items()}
     ckpt["state_dict"] = {k: v.detach().cpu() for k, v in net.state_dict().items()}
@@ -326,24 +326,19 @@ def fine_tune(
     return out
 
 
-def _distillation(checkpoint: Path, n_upper: int, weight: float):
-    """``aux(x)`` for :func:`fine_tune`: the distillation term of batch ``x`` as a function of the
-    adapted network's logits (KL from the frozen unadapted network, first ``n_upper`` images)."""
+def _distillation(teacher, n_upper: int, weight: float):
+    """``loss(x, logits)`` for :func:`fine_tune`: ``weight`` times the per-pixel KL divergence
+    from the frozen ``teacher`` (the unadapted network) to the adapted network's ``logits`` on
+    the first ``n_upper`` images of batch ``x``."""
     import torch
     import torch.nn.functional as F
 
-    from .segment import load_model
-
-    teacher = load_model(checkpoint, device="cpu", flip=False).net.eval()
+    teacher.eval()
     for p in teacher.parameters():
         p.requires_grad_(False)
 
-    def aux(x):
+    def loss(x, logits):
         with torch.no_grad():
             t = F.log_softmax(teacher(x[:n_upper]), 1)
-
-        def term(logits):
-            kl = (t.exp() * (t - F.log_softmax(logits[:n_upper], 1))).sum(1).mean()
-            return weight * kl
-        return term
-    return aux
+        return weight * (t.exp() * (t - F.log_softmax(logits[:n_upper], 1))).sum(1).mean()
+    return loss

@@ -201,11 +201,11 @@ def test_distillation_term_is_zero_at_the_teacher_and_changes_the_weights(tiny_n
     teacher = load_model(tiny_network, flip=False).net.eval()
     cin = next(m for m in teacher.modules() if isinstance(m, torch.nn.Conv2d)).in_channels
     x = torch.rand(4, cin, 48, 64)
-    term = _distillation(tiny_network, 2, 0.5)(x)
+    term = _distillation(load_model(tiny_network, flip=False).net, 2, 0.5)
     with torch.no_grad():
         same = teacher(x)
-    assert abs(float(term(same))) < 1e-6  # the adapted network still agrees with the unadapted one
-    assert float(term(torch.randn_like(same) * 5)) > 0
+    assert abs(float(term(x, same))) < 1e-6  # the adapted network still agrees with the unadapted one
+    assert float(term(x, torch.randn_like(same) * 5)) > 0
     plain = load_model(fine_tune(tiny_network, robot, "3d-neighborhood", tmp_path / "p.pt", steps=2, batch_size=4,
                                  progress=False))
     kd = load_model(fine_tune(tiny_network, robot, "3d-neighborhood", tmp_path / "d.pt", steps=2, batch_size=4,

@@ -186,25 +186,19 @@ def choose_adaptation_recipe(
     FileNotFoundError
         The validation scenes have no sweep at ``low`` or ``high``.
     """
-    from .height import sweep_sequences
-
     if not candidates:
         raise ValueError("no adaptation recipes to choose from")
     if not max_forgetting >= 0:
         raise ValueError(f"max_forgetting must be >= 0, got {max_forgetting}")
     layout = Layout(data_root)
-    sweeps = sweep_sequences(data_root, "val")
-    heights = {h: p for h, p in sweeps.items() if np.isclose(h, low) or np.isclose(h, high)}
-    if len(heights) != 2:
-        raise FileNotFoundError(f"{layout.scenes / 'val'}: the validation sweeps have heights {sorted(sweeps)}; "
-                                f"choosing the recipe needs {low:g} m and {high:g} m")
+    heights = validation_gap_sweeps(data_root, low, high)
     base = dict(defaults or {})
     trials = [base | dict(c) for c in candidates]
     recipe_dir = _adapt_dir(data_root) / "recipe"
     checkpoints = {f"candidate{i}": fine_tune(layout.model(network), robot, source, recipe_dir / f"candidate{i}.pt",
                                               seed=seed, progress=progress, **kw) for i, kw in enumerate(trials)}
-    per_scene = _score_on_sweeps(data_root, network, checkpoints, heights, jobs=jobs, scheduler=scheduler,
-                                 progress=progress)
+    per_scene = score_on_sweeps(data_root, network, checkpoints, heights, jobs=jobs, scheduler=scheduler,
+                                progress=progress)
     gaps = gap_table(per_scene, network, low=low, high=high).set_index("model")
     rows = []
     for i, kw in enumerate(trials):
@@ -267,13 +261,32 @@ def adapted_height_study(data_root: str | Path, network: str, checkpoints: dict[
     are engine tasks on ``jobs`` local worker processes or the cluster at ``scheduler``)."""
     from .height import sweep_sequences
 
-    return _score_on_sweeps(data_root, network, checkpoints, sweep_sequences(data_root), jobs=jobs,
-                            scheduler=scheduler, progress=progress)
+    return score_on_sweeps(data_root, network, checkpoints, sweep_sequences(data_root), jobs=jobs,
+                           scheduler=scheduler, progress=progress)
 
 
-def _score_on_sweeps(data_root: str | Path, network: str, checkpoints: dict[str, Path], sweeps: dict, *,
-                     jobs: int, scheduler: str | None, progress: bool) -> pd.DataFrame:
-    """Per-scene scores of ``network`` and its adapted ``checkpoints`` on ``sweeps`` ({height: sequences})."""
+def validation_gap_sweeps(data_root: str | Path, low: float = 0.2, high: float = 1.6) -> dict:
+    """The validation scenes' sweeps at ``low`` and ``high`` (``{height: sequences}``).
+
+    Raises
+    ------
+    FileNotFoundError
+        The validation sweeps lack one of the two heights.
+    """
+    from .height import sweep_sequences
+
+    sweeps = sweep_sequences(data_root, "val")
+    heights = {h: p for h, p in sweeps.items() if np.isclose(h, low) or np.isclose(h, high)}
+    if len(heights) != 2:
+        raise FileNotFoundError(f"{Layout(data_root).scenes / 'val'}: the validation sweeps have heights "
+                                f"{sorted(sweeps)}; need {low:g} m and {high:g} m")
+    return heights
+
+
+def score_on_sweeps(data_root: str | Path, network: str, checkpoints: dict[str, Path], sweeps: dict, *,
+                    jobs: int = 1, scheduler: str | None = None, progress: bool = True) -> pd.DataFrame:
+    """Per-scene pixel scores of ``network`` and its adapted ``checkpoints`` on ``sweeps``
+    (``{height: sequences}``; :func:`semmatch.segment.viewpoint.viewpoint_gap_sequences`)."""
     from ..segment.viewpoint import viewpoint_gap_sequences
 
     models = {network: Layout(data_root).load_network(network), **load_adapted(data_root, network, checkpoints)}

@@ -362,8 +362,8 @@ def optimisation_step(net, x: torch.Tensor, y: torch.Tensor, weights: torch.Tens
     what : str
         Names the loss in the error message.
     aux_loss : callable, optional
-        ``aux_loss(logits) -> scalar tensor`` added to the cross-entropy before the backward pass
-        (a regulariser, e.g. distillation in :func:`semmatch.adapt.fine_tune`).
+        ``aux_loss(x, logits) -> scalar tensor`` added to the cross-entropy before the backward
+        pass (a regulariser, e.g. distillation in :func:`semmatch.adapt.fine_tune`).
 
     Returns
     -------
@@ -377,7 +377,7 @@ def optimisation_step(net, x: torch.Tensor, y: torch.Tensor, weights: torch.Tens
     """
     logits = net(x)
     loss = F.cross_entropy(logits, y, weight=weights, ignore_index=0)
-    total = loss if aux_loss is None else loss + aux_loss(logits)
+    total = loss if aux_loss is None else loss + aux_loss(x, logits)
     if not torch.isfinite(total):
         raise FloatingPointError(f"{what} became {total.item()}")
     opt.zero_grad(set_to_none=True)
