@@ -24,7 +24,7 @@ from .layout import Layout
 from .synthetic import eval_grid_origin
 
 __all__ = ["robot_views", "adapt_networks", "recipe_candidates", "choose_adaptation_recipe", "pick_recipe",
-           "load_adapted", "adapted_height_study", "gap_table", "adapted_lower_maps"]
+           "chosen_recipe_checkpoint", "load_adapted", "adapted_height_study", "gap_table", "adapted_lower_maps"]
 
 
 def _adapt_dir(data_root: str | Path) -> Path:
@@ -80,23 +80,82 @@ def adapt_networks(
     upper_share: float = 0.5,
     distill: float = 0.0,
     seed: int = 0,
+    reuse: dict[str, Path] | None = None,
     progress: bool = True,
 ) -> dict[str, Path]:
     """Fine-tune ``network`` once per label source on the robot's frames (:func:`robot_views`).
+
+    Parameters
+    ----------
+    data_root, network, robot, sources
+        The pipeline's data root, the network to adapt, :func:`robot_views` and the label sources.
+    steps, batch_size, lr, upper_share, distill, seed
+        The recipe (:func:`semmatch.adapt.fine_tune`).
+    reuse : dict, optional
+        ``{source: checkpoint}`` already fine-tuned with this very recipe from the same network
+        (e.g. :func:`chosen_recipe_checkpoint`): copied instead of trained again.
+    progress : bool
 
     Returns
     -------
     dict
         ``{adapted name: checkpoint path}`` (under ``data/<profile>/adapted/``).
+
+    Raises
+    ------
+    ValueError
+        A checkpoint in ``reuse`` was adapted from another network, with another label source or
+        with another recipe.
     """
     layout = Layout(data_root)
+    recipe = dict(steps=int(steps), batch_size=int(batch_size), lr=float(lr), upper_share=float(upper_share),
+                  distill=float(distill), seed=int(seed))
     out = {}
     for s in sources:
         name = adapted_name(network, s)
-        out[name] = fine_tune(layout.model(network), robot, s, _adapt_dir(data_root) / f"{name}.pt", steps=steps,
-                              batch_size=batch_size, lr=lr, upper_share=upper_share, distill=distill, seed=seed,
-                              progress=progress)
+        target = _adapt_dir(data_root) / f"{name}.pt"
+        if reuse and s in reuse:
+            out[name] = _reuse_checkpoint(Path(reuse[s]), target, layout.model(network), s, recipe, robot)
+            continue
+        out[name] = fine_tune(layout.model(network), robot, s, target, progress=progress, **recipe)
     return out
+
+
+def _reuse_checkpoint(path: Path, target: Path, source_net: Path, source: str, recipe: dict,
+                      robot: RobotViews) -> Path:
+    """Copy an adapted checkpoint to ``target`` after checking that its provenance is the request's."""
+    import shutil
+
+    import torch
+
+    from ..adapt import _file_digest
+    from ..io.files import atomic_path
+
+    got = (torch.load(path, map_location="cpu", weights_only=False).get("adapted") or {})
+    want = {**recipe, "label_source": source, "from_sha256": _file_digest(Path(source_net)),
+            "scenes": list(robot.scenes), "frames": int(len(robot.views))}
+    diff = {k: (got.get(k), v) for k, v in want.items() if got.get(k) != v}
+    if diff:
+        raise ValueError(f"{path}: cannot reuse it as the {source!r} adaptation; it differs in "
+                         + ", ".join(f"{k} (has {a!r}, asked {b!r})" for k, (a, b) in diff.items()))
+    with atomic_path(target) as tmp:
+        shutil.copyfile(path, tmp)
+    return target
+
+
+def chosen_recipe_checkpoint(data_root: str | Path, table: pd.DataFrame) -> Path:
+    """The checkpoint :func:`choose_adaptation_recipe` fine-tuned with the chosen recipe (its
+    ``source``'s labels): ``reuse`` for :func:`adapt_networks`.
+
+    Raises
+    ------
+    ValueError
+        ``table`` has not exactly one chosen row.
+    """
+    chosen = table[table["chosen"].astype(bool)]
+    if len(chosen) != 1:
+        raise ValueError(f"the recipe table has {len(chosen)} chosen rows; need exactly one")
+    return _adapt_dir(data_root) / "recipe" / f"candidate{int(chosen['candidate'].iloc[0])}.pt"
 
 
 def recipe_candidates(grid: dict) -> list[dict]:
@@ -254,15 +313,16 @@ def load_adapted(data_root: str | Path, network: str, checkpoints: dict[str, Pat
     return {name: load_model(p) if flip is None else load_model(p, flip=flip) for name, p in checkpoints.items()}
 
 
-def adapted_height_study(data_root: str | Path, network: str, checkpoints: dict[str, Path], *, jobs: int = 1,
-                         scheduler: str | None = None, progress: bool = True) -> pd.DataFrame:
+def adapted_height_study(data_root: str | Path, network: str, checkpoints: dict[str, Path], *, frame_step: int = 1,
+                         jobs: int = 1, scheduler: str | None = None, progress: bool = True) -> pd.DataFrame:
     """Per-scene pixel scores of the unadapted and every adapted network on the evaluation
-    scenes' height sweeps (:func:`semmatch.segment.viewpoint.viewpoint_gap_sequences`; the scenes
-    are engine tasks on ``jobs`` local worker processes or the cluster at ``scheduler``)."""
+    scenes' height sweeps (:func:`semmatch.segment.viewpoint.viewpoint_gap_sequences`, every
+    ``frame_step``-th frame of each sweep; the scenes are engine tasks on ``jobs`` local worker
+    processes or the cluster at ``scheduler``)."""
     from .height import sweep_sequences
 
-    return score_on_sweeps(data_root, network, checkpoints, sweep_sequences(data_root), jobs=jobs,
-                           scheduler=scheduler, progress=progress)
+    return score_on_sweeps(data_root, network, checkpoints, sweep_sequences(data_root), frame_step=frame_step,
+                           jobs=jobs, scheduler=scheduler, progress=progress)
 
 
 def validation_gap_sweeps(data_root: str | Path, low: float = 0.2, high: float = 1.6) -> dict:
@@ -284,14 +344,16 @@ def validation_gap_sweeps(data_root: str | Path, low: float = 0.2, high: float =
 
 
 def score_on_sweeps(data_root: str | Path, network: str, checkpoints: dict[str, Path], sweeps: dict, *,
-                    jobs: int = 1, scheduler: str | None = None, progress: bool = True) -> pd.DataFrame:
+                    frame_step: int = 1, jobs: int = 1, scheduler: str | None = None,
+                    progress: bool = True) -> pd.DataFrame:
     """Per-scene pixel scores of ``network`` and its adapted ``checkpoints`` on ``sweeps``
-    (``{height: sequences}``; :func:`semmatch.segment.viewpoint.viewpoint_gap_sequences`)."""
+    (``{height: sequences}``, every ``frame_step``-th frame;
+    :func:`semmatch.segment.viewpoint.viewpoint_gap_sequences`)."""
     from ..segment.viewpoint import viewpoint_gap_sequences
 
     models = {network: Layout(data_root).load_network(network), **load_adapted(data_root, network, checkpoints)}
-    return viewpoint_gap_sequences(models, sweeps, per_scene=True, jobs=jobs, scheduler=scheduler,
-                                   progress=progress)
+    return viewpoint_gap_sequences(models, sweeps, per_scene=True, frame_step=frame_step, jobs=jobs,
+                                   scheduler=scheduler, progress=progress)
 
 
 def gap_table(per_scene: pd.DataFrame, network: str, *, low: float = 0.2, high: float = 1.6,

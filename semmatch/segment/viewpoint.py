@@ -152,6 +152,7 @@ def viewpoint_gap_sequences(
     *,
     batch_size: int = 8,
     per_scene: bool = False,
+    frame_step: int = 1,
     progress: bool = True,
     jobs: int = 1,
     scheduler: str | None = None,
@@ -165,6 +166,8 @@ def viewpoint_gap_sequences(
         E.g. ``{0.2: ["data/full/scenes/eval/s1001/h020", ...], ...}``; every frame needs
         ground-truth labels. The scene name is the folder's parent name.
     batch_size, per_scene, progress : see :func:`viewpoint_gap`.
+    frame_step : int
+        Every ``frame_step``-th frame of each sequence (1: all), the first included.
     jobs : int
         Scenes (all their heights) run as tasks of :func:`semmatch.engine.map_tasks` on ``jobs``
         local worker processes (1: in this process; the models are pickled to the workers). The
@@ -183,11 +186,13 @@ def viewpoint_gap_sequences(
 
     if not models:
         raise ValueError("viewpoint gap: no models given")
+    if int(frame_step) < 1:
+        raise ValueError(f"viewpoint gap: frame_step must be >= 1, got {frame_step}")
     by_scene: dict[str, list[tuple[float, str]]] = {}
     for h, paths in sweeps.items():
         for path in paths:
             by_scene.setdefault(Path(path).parent.name, []).append((float(h), str(path)))
-    task = partial(_sweep_counts, dict(models), int(batch_size), bool(per_scene))
+    task = partial(_sweep_counts, dict(models), int(batch_size), bool(per_scene), int(frame_step))
     parts = map_tasks(task, list(by_scene.values()), jobs=jobs, scheduler=scheduler, desc="viewpoint gap (scenes)",
                       progress=progress)
     conf: dict = {}
@@ -201,7 +206,8 @@ def viewpoint_gap_sequences(
     return _rows(conf, frames)
 
 
-def _sweep_counts(models: dict, batch_size: int, per_scene: bool, sweeps: list[tuple[float, str]]) -> tuple[dict, dict]:
+def _sweep_counts(models: dict, batch_size: int, per_scene: bool, frame_step: int,
+                  sweeps: list[tuple[float, str]]) -> tuple[dict, dict]:
     """Confusions and frame counts of one scene's height sweeps (a task of :func:`viewpoint_gap_sequences`)."""
 
     def batches() -> Iterator:
@@ -209,8 +215,9 @@ def _sweep_counts(models: dict, batch_size: int, per_scene: bool, sweeps: list[t
             seq = read_sequence(path)
             if not seq.has_labels:
                 raise ValueError(f"{path}: the sequence has no ground-truth labels")
-            for j in range(0, len(seq), batch_size):
-                fr = seq[j : j + batch_size]
+            keep = range(0, len(seq), frame_step)
+            for j in range(0, len(keep), batch_size):
+                fr = [seq[i] for i in keep[j : j + batch_size]]
                 yield (h, Path(path).parent.name, np.stack([f.rgb for f in fr]),
                        np.stack([f.depth for f in fr]), np.stack([f.labels for f in fr]))
 
