@@ -216,3 +216,26 @@ def test_distillation_term_is_zero_at_the_teacher_and_changes_the_weights(tiny_n
     with pytest.raises(ValueError, match="distill"):
         fine_tune(tiny_network, robot, "3d-neighborhood", tmp_path / "x.pt", steps=1, upper_share=0.0, distill=1.0,
                   progress=False)
+
+
+def test_adapt_networks_reuses_a_checkpoint_of_the_same_recipe_and_refuses_another(tiny_network, robot, tmp_path):
+    import shutil
+
+    from semmatch.experiments.adapt import adapt_networks
+    from semmatch.experiments.layout import Layout
+
+    root = tmp_path / "data"
+    Layout(root).model("compact").parent.mkdir(parents=True)
+    shutil.copyfile(tiny_network, Layout(root).model("compact"))
+    recipe = dict(steps=2, batch_size=4, lr=1e-3, upper_share=0.5, seed=0)
+    done = fine_tune(Layout(root).model("compact"), robot, "3d-neighborhood", tmp_path / "candidate.pt",
+                     progress=False, **recipe)
+    out = adapt_networks(root, "compact", robot, ["3d-neighborhood"], reuse={"3d-neighborhood": done},
+                         progress=False, **recipe)
+    assert out["compact~3d-neighborhood"].read_bytes() == done.read_bytes()  # copied, not trained again
+    with pytest.raises(ValueError, match="cannot reuse.*steps"):
+        adapt_networks(root, "compact", robot, ["3d-neighborhood"], reuse={"3d-neighborhood": done},
+                       progress=False, **{**recipe, "steps": 3})
+    with pytest.raises(ValueError, match="cannot reuse.*label_source"):
+        adapt_networks(root, "compact", robot, ["ground-truth"], reuse={"ground-truth": done}, progress=False,
+                       **recipe)

@@ -222,3 +222,9 @@ def test_height_sweep_scores_on_a_local_cluster_equal_the_serial_ones(tmp_path):
         cluster_rows = viewpoint_gap_sequences({"reddish": _ReddishNet()}, sweeps, per_scene=per_scene, jobs=2,
                                                progress=False)
         assert len(serial_rows) == (8 if per_scene else 2) and serial_rows.equals(cluster_rows)
+    every = viewpoint_gap_sequences({"reddish": _ReddishNet()}, sweeps, per_scene=True, progress=False)
+    every_2nd = viewpoint_gap_sequences({"reddish": _ReddishNet()}, sweeps, per_scene=True, frame_step=2,
+                                        progress=False)
+    assert set(every["n_frames"]) == {3} and set(every_2nd["n_frames"]) == {2}  # frames 0 and 2 of 3
+    with pytest.raises(ValueError, match="frame_step"):
+        viewpoint_gap_sequences({"reddish": _ReddishNet()}, sweeps, frame_step=0, progress=False)
