@@ -13,7 +13,10 @@ the **validation** sweeps only (paired per-scene mIoU differences, 95 % interval
 - ``bn-frozen``: compact with batch-norm statistics frozen during fine-tuning;
 - ``strong-lr``: the strong network at a smaller learning rate;
 - ``distill``: compact with a per-pixel KL term to the unadapted network (weight 1) on the
-  human-height part of each batch (``fine_tune(distill=1.0)``).
+  human-height part of each batch (``fine_tune(distill=1.0)``);
+- ``scenes``: compact, the chosen recipe, ground-truth and ``3d-neighborhood`` labels of the
+  profile's adaptation scenes (8 in the full profile) against three times as many training
+  scenes (is the amount of robot data the limit?).
 
 Frozen batch-norm statistics are not an option of :func:`semmatch.adapt.fine_tune`: for that
 variant this script swaps the optimisation step it uses for the length of one run.
@@ -26,7 +29,8 @@ import contextlib
 import time
 from pathlib import Path
 
-#: variant -> runs: (network, label source, steps, lr, upper_share, mode)
+#: variant -> runs: (network, label source, steps, lr, upper_share, mode[, adaptation scenes as a
+#: multiple of the profile's adapt_scenes])
 VARIANTS = {
     "steps": [("compact", "ground-truth", 400, 3e-4, 0.75, "plain"),
               ("compact", "ground-truth", 1600, 3e-4, 0.75, "plain"),
@@ -38,6 +42,10 @@ VARIANTS = {
     "strong-lr": [("strong", "3d-neighborhood", 400, 1e-4, 0.75, "plain")],
     "distill": [("compact", "3d-neighborhood", 400, 1e-3, 0.5, "distill"),
                 ("compact", "3d-neighborhood", 400, 3e-4, 0.75, "distill")],
+    "scenes": [("compact", "ground-truth", 400, 3e-4, 0.75, "plain", 1),
+               ("compact", "3d-neighborhood", 400, 3e-4, 0.75, "plain", 1),
+               ("compact", "ground-truth", 400, 3e-4, 0.75, "plain", 3),
+               ("compact", "3d-neighborhood", 400, 3e-4, 0.75, "plain", 3)],
 }
 
 
@@ -81,25 +89,31 @@ def main() -> None:
     layout = Layout(root)
     heights = validation_gap_sweeps(root, 0.2, 1.6)
     args.out.mkdir(parents=True, exist_ok=True)
-    runs = VARIANTS[args.which]
+    runs = [(*r, 1)[:7] for r in VARIANTS[args.which]]  # the profile's adaptation scenes unless a multiple is given
+    need = p["adapt_scenes"] * max(r[6] for r in runs)
+    if need > len(p["train_seeds"]):
+        raise ValueError(f"{args.which}: needs {need} training scenes, the profile has {len(p['train_seeds'])}")
     for network in dict.fromkeys(r[0] for r in runs):
-        mine = [r for r in runs if r[0] == network]
-        t0 = time.time()
-        robot, _ = robot_views(root, network, sorted({r[1] for r in mine}), kinds=p["kinds"],
-                               seeds=p["train_seeds"][:p["adapt_scenes"]], n_frames=p["n_frames"],
-                               voxel_size=p["voxel_size"], fused_base=p["fused_base"], seed=p["seed"],
-                               progress=False)
-        print(f"{network}: robot views {time.time() - t0:.0f} s", flush=True)
         ckpts = {}
-        for _, source, steps, lr, share, mode in mine:
-            steps = min(steps, args.max_steps or steps)
-            name = f"{network}_{source}_{steps}_lr{lr:g}_s{share:g}_{mode}"
+        for mult in dict.fromkeys(r[6] for r in runs if r[0] == network):
+            mine = [r for r in runs if r[0] == network and r[6] == mult]
+            seeds = p["train_seeds"][:p["adapt_scenes"] * mult]
             t0 = time.time()
-            with recipe_mode(mode):
-                ckpts[name] = fine_tune(layout.model(network), robot, source, args.out / f"{name}.pt", steps=steps,
-                                        batch_size=p["batch_size"], lr=lr, upper_share=share,
-                                        distill=1.0 if mode == "distill" else 0.0, seed=p["seed"], progress=False)
-            print(f"fine-tuned {name}: {time.time() - t0:.0f} s", flush=True)
+            robot, _ = robot_views(root, network, sorted({r[1] for r in mine}), kinds=p["kinds"], seeds=seeds,
+                                   n_frames=p["n_frames"], voxel_size=p["voxel_size"], fused_base=p["fused_base"],
+                                   seed=p["seed"], progress=False)
+            print(f"{network}: robot views of {len(robot.scenes)} scenes {time.time() - t0:.0f} s", flush=True)
+            for _, source, steps, lr, share, mode, _ in mine:
+                steps = min(steps, args.max_steps or steps)
+                name = f"{network}_{source}_{steps}_lr{lr:g}_s{share:g}_{mode}" + (f"_{len(robot.scenes)}scenes"
+                                                                                   if mult != 1 else "")
+                t0 = time.time()
+                with recipe_mode(mode):
+                    ckpts[name] = fine_tune(layout.model(network), robot, source, args.out / f"{name}.pt",
+                                            steps=steps, batch_size=p["batch_size"], lr=lr, upper_share=share,
+                                            distill=1.0 if mode == "distill" else 0.0, seed=p["seed"],
+                                            progress=False)
+                print(f"fine-tuned {name}: {time.time() - t0:.0f} s", flush=True)
         per_scene = score_on_sweeps(root, network, ckpts, heights, jobs=p["jobs"], progress=False)
         table = gap_table(per_scene, network, low=0.2, high=1.6).drop(columns=["source"])
         table.to_csv(args.out / f"{args.which}_{network}.csv", index=False)
