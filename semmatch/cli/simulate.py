@@ -91,7 +91,7 @@ def register(sub) -> None:
                    help="with --out DIR: write the person's and the robot's sequences DIR/upper (--height) and "
                         "DIR/lower (--lower-height) of one scene, routes as --routes")
     p.add_argument("--lower-height", type=float, default=0.2, help="robot camera height for --pair (m)")
-    p.add_argument("--camera-step", type=float, default=0.15,
+    p.add_argument("--camera-step", type=float, default=0.15,  # sim.DEFAULT_CAMERA_STEP (not imported at start-up)
                    help="largest camera step between frames (m, default %(default)s): a tour is at most "
                         "(frames - 1) x this long, so fewer frames at a larger step fly the same tour")
     p.add_argument("--overwrite", action="store_true", help="replace an existing sequence at --out")
@@ -127,12 +127,12 @@ def register(sub) -> None:
 def run(args) -> int:
     """Run ``semmatch simulate``."""
     from .. import sim
+    from ..sim.trajectory import check_camera_step
 
     intr = _intrinsics(args)
     noise = _noise(args.noise)
     progress = not args.quiet
-    if not 0 < args.camera_step <= 1.0:
-        raise ValueError(f"--camera-step must lie in (0, 1] m, got {args.camera_step}")
+    check_camera_step(args.camera_step, "--camera-step")
     if args.dataset is not None:
         sweep = sim.DEFAULT_SWEEP if args.sweep is None else (tuple(args.sweep) or None)
         res = sim.generate_dataset(

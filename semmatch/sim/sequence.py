@@ -39,7 +39,13 @@ from .procedural import SCENE_KINDS, generate_scene
 from .raster import make_renderer
 from .render import Renderer
 from .scene import Scene
-from .trajectory import DEFAULT_CAMERA_STEP, make_sweep_trajectories, make_trajectory, route_waypoints
+from .trajectory import (
+    DEFAULT_CAMERA_STEP,
+    check_camera_step,
+    make_sweep_trajectories,
+    make_trajectory,
+    route_waypoints,
+)
 
 __all__ = ["simulate_sequence", "simulate_sequences", "simulate_pair", "carrier_poses", "generate_dataset",
            "sweep_name", "DEFAULT_SWEEP", "check_seed_splits"]
@@ -588,8 +594,7 @@ def generate_dataset(
                     ("n_frames_sweep", n_frames_sweep)):
         if int(n) < 1:
             raise ValueError(f"{name} must be >= 1, got {n}")
-    if not 0 < float(camera_step) <= 1.0:
-        raise ValueError(f"camera_step must lie in (0, 1] m, got {camera_step}")
+    check_camera_step(camera_step)
     if isinstance(noise, dict):
         noise = NoiseConfig.from_dict(noise)
     n_train = int(n_frames_train or n_frames_upper)

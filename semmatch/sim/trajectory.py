@@ -437,6 +437,19 @@ def _kind_seed(kind: str) -> int:
 DEFAULT_CAMERA_STEP = 0.15
 
 
+def check_camera_step(step: float, name: str = "camera_step") -> float:
+    """``step`` as a float if it is a usable camera step (0 < step <= 1 m).
+
+    Raises
+    ------
+    ValueError
+        ``step`` outside (0, 1] m (the message names it ``name``).
+    """
+    if not 0 < float(step) <= 1.0:
+        raise ValueError(f"{name} must lie in (0, 1] m, got {step}")
+    return float(step)
+
+
 def make_trajectory(
     scene: Scene,
     height: float,
