@@ -205,3 +205,21 @@ def test_grid_origin_moves_both_grids():
     on_boundary = compare(floor, low, 0.05, min_overlap=0)
     offset = compare(floor, low, 0.05, grid_origin=0.025)
     assert on_boundary["mean_acc"] < 0.5 and offset["mean_acc"] == pytest.approx(1.0)
+
+
+def test_a_reference_voxelised_once_scores_like_the_map_itself(rng):
+    """Table 2 / 3 voxelise each reference once (reference_grid); the numbers must not change."""
+    from semmatch.experiments.synthetic import eval_grid_origin, reference_grid
+
+    keys = rng.integers(0, 30, (400, 3))
+    ref = at_voxels(keys, rng.integers(1, 11, 400), per_voxel=2, rng=rng)
+    labels = np.where(rng.random(400) < 0.7, ref.labels[::2], rng.integers(1, 11, 400))
+    pred = at_voxels(keys + (rng.random(keys.shape) < 0.05), labels, per_voxel=2, rng=rng)
+    T = np.eye(4)
+    T[:3, 3] = [0.013, -0.02, 0.007]
+    grid = reference_grid(ref, VS)
+    for transform in (None, T):
+        direct = compare(ref, pred, VS, transform=transform, grid_origin=eval_grid_origin(VS))
+        once = compare(grid, pred, VS, transform=transform, grid_origin=eval_grid_origin(VS))
+        assert headline(once) == headline(direct)
+        assert np.array_equal(once["confusion"], direct["confusion"])

@@ -269,10 +269,16 @@ def test_flip_choice_merges_into_the_recipe(tmp_path, monkeypatch):
     (tmp_path / "models" / "compact@1.pt").write_bytes(b"")
     monkeypatch.setattr(height, "sweep_sequences", lambda root, split: {0.2: []})
     monkeypatch.setattr(seg, "load_model", lambda path, flip: flip)
-    monkeypatch.setattr(vp, "viewpoint_gap_sequences", lambda models, sweeps, progress: pd.DataFrame(
-        [{"model": name, "height": 0.2, "n_frames": 1, "miou": 0.5 if flip else 0.6, "mean_acc": 0.9}
-         for name, flip in models.items()]))
-    choice, _ = height.choose_test_time_flip(tmp_path, ["compact@1"], progress=False)
+    steps = []
+
+    def scores(models, sweeps, frame_step, progress):
+        steps.append(frame_step)
+        return pd.DataFrame([{"model": name, "height": 0.2, "n_frames": 1, "miou": 0.5 if flip else 0.6,
+                              "mean_acc": 0.9} for name, flip in models.items()])
+
+    monkeypatch.setattr(vp, "viewpoint_gap_sequences", scores)
+    choice, _ = height.choose_test_time_flip(tmp_path, ["compact@1"], frame_step=2, progress=False)
+    assert steps == [2]  # the budget's frame step reaches the sweeps
     assert choice == {"compact@1": False}
     assert json.loads((tmp_path / "models" / "recipe.json").read_text())["flip"] == {"strong": True, "compact@1": False}
 

@@ -17,11 +17,11 @@ import numpy as np
 import pandas as pd
 
 from ..adapt import RobotViews, adapted_name, fine_tune, robot_training_views
-from ..io import read_map, read_sequence
+from ..io import read_sequence
 from ..metrics import MEASURES, compare
 from ..stats import bootstrap_ci, paired_difference_ci
 from .layout import Layout
-from .synthetic import eval_grid_origin
+from .synthetic import eval_grid_origin, reference_grid
 
 __all__ = ["robot_views", "adapt_networks", "recipe_candidates", "choose_adaptation_recipe", "pick_recipe",
            "chosen_recipe_checkpoint", "load_adapted", "adapted_height_study", "gap_table", "adapted_lower_maps"]
@@ -434,7 +434,7 @@ def _adapted_lower_scene(data_root: str, networks: dict[str, object], voxel_size
     seq = read_sequence(layout.lower_sequence(layout.scenes / "eval" / sid)).load()
     labelings = [[m.predict_labels(f.rgb) for f in seq] for m in networks.values()]
     maps = reconstruct_many(seq, labelings, voxel_size)
-    ref = read_map(layout.lower_reference(sid))
+    ref = reference_grid(layout.lower_reference(sid), eval_voxel_size)  # voxelised once for every network
     origin = eval_grid_origin(eval_voxel_size)
     rows = []
     for name, pred in zip(networks, maps, strict=True):

@@ -71,7 +71,7 @@ def height_study(
 
 def choose_test_time_flip(
     data_root: str | Path, networks: Sequence[str], *, figures_dir: str | Path | None = None,
-    progress: bool = True,
+    frame_step: int = 1, progress: bool = True,
 ) -> tuple[dict[str, bool], pd.DataFrame]:
     """Decide on the VALIDATION scenes whether each network averages its mirror image.
 
@@ -79,6 +79,16 @@ def choose_test_time_flip(
     averaging; the variant with the higher mIoU averaged over all heights and scenes is kept.
     The choice goes to ``models/recipe.json`` (read by :meth:`Layout.load_network`; the choices
     of networks not in this run are kept), the scores to ``figures_dir/validation_flip.{csv,md}``.
+
+    Parameters
+    ----------
+    data_root : path
+    networks : sequence of str
+    figures_dir : path, optional
+    frame_step : int
+        Every ``frame_step``-th frame of each validation sweep (1: all; the full profile uses 2
+        for its time budget).
+    progress : bool
 
     Returns
     -------
@@ -98,7 +108,7 @@ def choose_test_time_flip(
         if not path.is_file():
             raise FileNotFoundError(f"{path}: no trained {net} network")
         models = {f"{net}|{flip}": load_model(path, flip=flip) for flip in (False, True)}
-        df = viewpoint_gap_sequences(models, sweeps, progress=progress)
+        df = viewpoint_gap_sequences(models, sweeps, frame_step=frame_step, progress=progress)
         df["flip"] = df["model"].str.endswith("True")
         df["model"] = net
         rows.append(df)

@@ -26,7 +26,7 @@ import pandas as pd
 
 from ..io import read_map, read_sequence
 from .layout import GT, Layout
-from .synthetic import MEASURE_COLUMNS, eval_grid_origin
+from .synthetic import MEASURE_COLUMNS, eval_grid_origin, reference_grid
 
 __all__ = ["misregistration_study"]
 
@@ -153,7 +153,7 @@ def _misregistration_scene(data_root: str, methods: tuple[str, ...], cases: tupl
             raise FileNotFoundError(f"{path}: missing; run {stage} first")
     upper = read_map(layout.upper_map(sid, GT))
     lower = read_sequence(sd / "lower").load()
-    reference = read_map(layout.lower_reference(sid))
+    reference = reference_grid(layout.lower_reference(sid), o["eval_voxel_size"])  # voxelised once
     index = load_index(layout.upper_map(sid, GT), semantic_map=upper)  # cached beside the map
     center = upper.points.astype(np.float64).mean(axis=0)
     scene_seed = int(np.random.SeedSequence([o["seed"], zlib.crc32(sid.encode())]).generate_state(1)[0])

@@ -54,7 +54,7 @@ from .real_poses import (
     registration_errors,
     world_alignment,
 )
-from .synthetic import MEASURE_COLUMNS, eval_grid_origin
+from .synthetic import MEASURE_COLUMNS, eval_grid_origin, reference_grid
 
 __all__ = ["real_like_lower_map", "evaluate_real_like", "score_real_like_against_mesh"]
 
@@ -304,8 +304,9 @@ def _real_like_scene(data_root: str, methods: tuple[str, ...], networks: tuple[s
     # one fusion of the lower frames (own frame) for every labeling
     maps = reconstruct_many(seqs["lower"], [d for *_, d in lower], voxel_size,
                             outs=[real_like_lower_map(data_root, sid, s, m) for s, m, _ in lower])
+    reference_voxels = reference_grid(reference, eval_voxel_size)  # voxelised once for every labeling
     for (source, method, _), pred in zip(lower, maps, strict=True):
-        s = compare(reference, pred, voxel_size=eval_voxel_size, grid_origin=eval_grid_origin(eval_voxel_size))
+        s = compare(reference_voxels, pred, voxel_size=eval_voxel_size, grid_origin=eval_grid_origin(eval_voxel_size))
         rows.append(dict(scene=sid, model=model_name(source), method=method,
                          **{k: float(s[k]) for k in MEASURE_COLUMNS}))
     return rows, traj_rows, reg_row
@@ -362,6 +363,7 @@ def score_real_like_against_mesh(
             sd = layout.scenes / "eval" / sid
             ref = observed_reference(read_map(sd / "scene.ply"), read_sequence(sd / "lower"), spacing=mesh_spacing)
             write_map(ref_path, ref)
+        ref = reference_grid(ref, eval_voxel_size)  # voxelised once for every map of the scene
         for r in group.itertuples():
             pred = read_map(real_like_lower_map(data_root, sid, source_dir(r.model), r.method))
             s = compare(ref, pred, eval_voxel_size, transform=to_world[sid], grid_origin=eval_grid_origin(eval_voxel_size))

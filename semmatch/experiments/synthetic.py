@@ -264,8 +264,16 @@ def evaluate_synthetic(
     *,
     eval_voxel_size: float = 0.05,
     fused_base: str = "3d-neighborhood",
+    jobs: int = 1,
+    scheduler: str | None = None,
+    progress: bool = False,
 ) -> pd.DataFrame:
     """Table 2, per scene: every lower map against both references, plus the upper rows.
+
+    Each reference is voxelised once per scene and compared with every map as a
+    :class:`~semmatch.metrics.VoxelGrid` (the same numbers as voxelising it per comparison).
+    Scenes are tasks of :func:`semmatch.engine.map_tasks` (``jobs`` local processes or the
+    cluster at ``scheduler``); the rows come back in scene order.
 
     Returns
     -------
@@ -277,26 +285,51 @@ def evaluate_synthetic(
         ``fused``, ``upper`` = the network's upper map scored against the upper references),
         the four measures.
     """
+    from functools import partial
+
+    from ..engine import map_tasks
+
     layout = Layout(data_root)
+    scenes = [sd.name for sd in layout.scene_dirs("eval")]
+    task = partial(_evaluate_scene, str(layout.root.resolve()), tuple(methods), tuple(networks),
+                   float(eval_voxel_size), fused_base)
+    per_scene = map_tasks(task, scenes, jobs=jobs, scheduler=scheduler, desc="Table 2 scenes", progress=progress)
+    return pd.DataFrame([row for rows in per_scene for row in rows])
+
+
+def reference_grid(ref, voxel_size: float):
+    """A reference map voxelised once on the evaluation grid (:func:`eval_grid_origin`).
+
+    Pass the result to :func:`semmatch.metrics.compare` as ``gt_map`` for every map scored
+    against that reference: the numbers equal voxelising it per comparison.
+    """
+    from ..metrics import voxelize
+
+    return voxelize(ref, voxel_size, grid_origin=eval_grid_origin(voxel_size))
+
+
+def _evaluate_scene(data_root: str, methods: tuple[str, ...], networks: tuple[str, ...], eval_voxel_size: float,
+                    fused_base: str, sid: str) -> list[dict]:
+    """The Table 2 rows of one scene (a task of :func:`evaluate_synthetic`)."""
+    layout = Layout(data_root)
+    sd = layout.scenes / "eval" / sid
     rows = []
-    for sd in layout.scene_dirs("eval"):
-        sid = sd.name
-        up_refs = {"fusion": read_map(layout.upper_reference(sid)),
-                   "mesh": read_map(layout.mesh_reference(sid, "upper"))}
-        for net in networks:
-            up = read_map(layout.upper_map(sid, net))
-            for ref_name, ref in up_refs.items():
-                rows.append(dict(scene=sid, route="own", reference=ref_name, model=net, method="upper",
-                                 **_scores(ref, up, eval_voxel_size)))
-        for route in _routes(layout, sd):
-            refs = {"fusion": read_map(layout.lower_reference(sid, route)),
-                    "mesh": read_map(layout.mesh_reference(sid, "lower", route))}
-            for source, method in _labelings(route, methods, networks, fused_base):
-                pred = read_map(layout.lower_map(sid, source, method, route))
-                for ref_name, ref in refs.items():
-                    rows.append(dict(scene=sid, route=route, reference=ref_name, model=model_name(source),
-                                     method=method, **_scores(ref, pred, eval_voxel_size)))
-    return pd.DataFrame(rows)
+    up_refs = {"fusion": reference_grid(layout.upper_reference(sid), eval_voxel_size),
+               "mesh": reference_grid(layout.mesh_reference(sid, "upper"), eval_voxel_size)}
+    for net in networks:
+        up = read_map(layout.upper_map(sid, net))
+        for ref_name, ref in up_refs.items():
+            rows.append(dict(scene=sid, route="own", reference=ref_name, model=net, method="upper",
+                             **_scores(ref, up, eval_voxel_size)))
+    for route in _routes(layout, sd):
+        refs = {"fusion": reference_grid(layout.lower_reference(sid, route), eval_voxel_size),
+                "mesh": reference_grid(layout.mesh_reference(sid, "lower", route), eval_voxel_size)}
+        for source, method in _labelings(route, methods, networks, fused_base):
+            pred = read_map(layout.lower_map(sid, source, method, route))
+            for ref_name, ref in refs.items():
+                rows.append(dict(scene=sid, route=route, reference=ref_name, model=model_name(source),
+                                 method=method, **_scores(ref, pred, eval_voxel_size)))
+    return rows
 
 
 def main_rows(per_scene: pd.DataFrame, *, reference: str = "fusion", route: str = "own") -> pd.DataFrame:
