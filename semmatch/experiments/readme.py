@@ -37,7 +37,7 @@ _SECTIONS = (
     ("table_panoptic.png", "table_panoptic.md", "**Panoptic transfer (the paper's future work, [docs/panoptic.md](docs/panoptic.md)).** Panoptic quality of the robot's map (PQ = SQ x RQ on 5 cm voxels; thing classes, stuff, all) per transfer method and upper-map source (`oracle`: ground-truth classes and instances; `gt+clustering`: ground-truth classes, instances by 3D clustering; a network: its classes, clustered instances): mean [95% interval] over the evaluation scenes. The clustering radius was chosen on the validation scenes."),
     ("fig_panoptic.png", None, "Instances in the robot's map of one evaluation scene (one colour per instance, stuff in its class colour)."),
     ("training_curves.png", "segmentation_validation.md", "Segmentation networks: training curves and validation at human height (validation scenes; the best validation checkpoint is kept)."),
-    (None, "validation_flip_summary.md", "Test-time mirror averaging, chosen on the validation scenes' height sweeps (mIoU over all heights):"),
+    (None, "validation_flip_summary.md", "Test-time mirror averaging, chosen on the validation scenes' height sweeps (mIoU over all heights; the full profile reads every 2nd sweep frame, `flip_frame_step`):"),
 )
 
 

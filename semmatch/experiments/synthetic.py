@@ -11,8 +11,8 @@ from pathlib import Path
 
 import pandas as pd
 
-from ..io import read_map, read_sequence
-from ..metrics import MEASURES
+from ..io import SemanticMap, read_map, read_sequence
+from ..metrics import MEASURES, VoxelGrid
 from .layout import GT, ROUTES, Layout, model_name
 
 __all__ = [
@@ -23,6 +23,7 @@ __all__ = [
     "support_table",
     "reconstruct_lower_maps",
     "evaluate_synthetic",
+    "reference_grid",
     "main_rows",
     "average_over_scenes",
 ]
@@ -275,6 +276,21 @@ def evaluate_synthetic(
     Scenes are tasks of :func:`semmatch.engine.map_tasks` (``jobs`` local processes or the
     cluster at ``scheduler``); the rows come back in scene order.
 
+    Parameters
+    ----------
+    data_root : path
+        The profile's data folder (the lower maps and references of notebook 05's first step).
+    methods, networks : sequences of str
+    eval_voxel_size : float
+        Evaluation voxel (m).
+    fused_base : str
+        The transfer method the ``fused`` rows build on.
+    jobs : int
+        Local worker processes (1: in this process).
+    scheduler : str, optional
+        Dask scheduler address (default ``SEMMATCH_SCHEDULER``).
+    progress : bool
+
     Returns
     -------
     DataFrame
@@ -297,11 +313,22 @@ def evaluate_synthetic(
     return pd.DataFrame([row for rows in per_scene for row in rows])
 
 
-def reference_grid(ref, voxel_size: float):
+def reference_grid(ref: SemanticMap | str | Path, voxel_size: float) -> VoxelGrid:
     """A reference map voxelised once on the evaluation grid (:func:`eval_grid_origin`).
 
     Pass the result to :func:`semmatch.metrics.compare` as ``gt_map`` for every map scored
     against that reference: the numbers equal voxelising it per comparison.
+
+    Parameters
+    ----------
+    ref : SemanticMap or path
+        The reference map (a PLY path is read).
+    voxel_size : float
+        Evaluation voxel (m).
+
+    Returns
+    -------
+    VoxelGrid
     """
     from ..metrics import voxelize
 
