@@ -8,7 +8,8 @@ frames, the panoptic study) is a list of independent tasks, each a pure function
 * ``jobs == 1`` and no scheduler: in this process, one after the other (no cluster; debugging);
 * ``jobs > 1``: on a ``dask.distributed.LocalCluster`` of ``jobs`` single-threaded worker
   processes, started once per process and reused (its workers die with this process, also when
-  it is killed: :func:`semmatch.workers.die_with_parent` runs in each of them);
+  it is killed: :func:`semmatch.workers.die_with_parent` runs in each of them; each is pinned to
+  its own CPU, so that Open3D's multi-threaded registration repeats itself: :func:`dask_setup`);
 * a scheduler address (``scheduler=`` argument, else ``SEMMATCH_SCHEDULER``, which
   ``python -m semmatch.experiments run --scheduler`` and a profile's ``common.scheduler`` set):
   on that cluster, e.g. one started by dask-jobqueue on SLURM (docs/cluster.md). The workers
@@ -28,7 +29,7 @@ import os
 from collections.abc import Callable, Iterable
 from typing import Any
 
-__all__ = ["map_tasks", "resolve_scheduler", "check_scheduler", "SCHEDULER_ENV", "close_local_cluster"]
+__all__ = ["map_tasks", "resolve_scheduler", "check_scheduler", "SCHEDULER_ENV", "close_local_cluster", "pin_to_cpu"]
 
 #: environment variable naming a Dask scheduler address to run per-scene tasks on
 SCHEDULER_ENV = "SEMMATCH_SCHEDULER"
@@ -45,11 +46,46 @@ def resolve_scheduler(scheduler: str | None = None) -> str | None:
     return None if addr in (None, "", "local") else str(addr)
 
 
-def dask_setup(worker) -> None:  # noqa: ARG001 - Dask's preload hook
-    """Run in every local worker process: die with the process that started the cluster."""
+def dask_setup(worker) -> None:
+    """Run in every local worker process: die with the process that started the cluster, own one core.
+
+    Each worker is pinned to one CPU (:func:`pin_to_cpu`, by its index in the cluster): Open3D's
+    registration runs its RANSAC and correspondence search on as many threads as the process may
+    use, and with two threads it does not return the same poses twice; pinned, a rerun of the
+    real-like chain gives the same poses, maps and tables.
+    """
     from .workers import die_with_parent
 
     die_with_parent(int(os.environ.get("SEMMATCH_PARENT_PID", "0")) or None)
+    try:
+        index = int(worker.name)
+    except (TypeError, ValueError):  # a worker not started by _local_client: leave it as it is
+        return
+    pin_to_cpu(index)
+
+
+def pin_to_cpu(index: int) -> int | None:
+    """Restrict this process to one of the CPUs it may use: the ``index``-th, cyclically.
+
+    Parameters
+    ----------
+    index : int
+        The worker's index in its cluster (0, 1, ...); workers beyond the number of CPUs share.
+
+    Returns
+    -------
+    int or None
+        The CPU now used, or None where the platform cannot pin (no ``os.sched_setaffinity``) or
+        the process may use one CPU only.
+    """
+    if not hasattr(os, "sched_setaffinity"):
+        return None
+    cpus = sorted(os.sched_getaffinity(0))
+    if len(cpus) < 2:
+        return None
+    cpu = cpus[int(index) % len(cpus)]
+    os.sched_setaffinity(0, {cpu})
+    return cpu
 
 
 def _local_client(jobs: int, most: int | None = None):

@@ -299,3 +299,16 @@ def test_markdown_table_keeps_text_cells_and_formats_floats(tmp_path):
     assert lines[1].split("|")[1:-1] == [":-------", "-------:", "--------:", ":---------"]
     _, path = save_table(df, tmp_path, "t")
     assert path.read_text() == md + "\n"
+
+
+def test_interval_table_shows_a_missing_paper_value_blank(tmp_path):
+    from semmatch.experiments.tables import save_interval_table
+
+    summary = pd.DataFrame({"model": ["compact", "compact"], "method": ["lower", "fused"], "scenes": [3, 3],
+                            "mean_acc": [0.8, 0.9], "mean_acc_lo": [0.7, 0.85], "mean_acc_hi": [0.85, 0.95],
+                            "paper_jaccard": [0.5, np.nan], "paper_mean_acc": [0.61, np.nan]})
+    _, md = save_interval_table(summary, tmp_path, "t", measures=("mean_acc",), keep=("paper_mean_acc",))
+    lines = md.read_text().splitlines()
+    assert "nan" not in md.read_text()
+    assert "0.500" in lines[2] and "0.610" in lines[2]
+    assert [c.strip() for c in lines[3].split("|")[-3:-1]] == ["", ""]

@@ -228,3 +228,14 @@ def test_height_sweep_scores_on_a_local_cluster_equal_the_serial_ones(tmp_path):
     assert set(every["n_frames"]) == {3} and set(every_2nd["n_frames"]) == {2}  # frames 0 and 2 of 3
     with pytest.raises(ValueError, match="frame_step"):
         viewpoint_gap_sequences({"reddish": _ReddishNet()}, sweeps, frame_step=0, progress=False)
+
+
+@pytest.mark.skipif(not hasattr(os, "sched_getaffinity") or len(os.sched_getaffinity(0)) < 2,
+                    reason="pinning needs two CPUs")
+def test_local_workers_are_pinned_each_to_its_own_cpu():
+    engine.map_tasks(abs, [-1, 2], jobs=2, progress=False)
+    per_worker = engine._LOCAL["client"].run(os.sched_getaffinity, 0)
+    cpus = [frozenset(c) for c in per_worker.values()]
+    assert len(cpus) == 2 and all(len(c) == 1 for c in cpus)
+    assert cpus[0] != cpus[1]
+    assert len(os.sched_getaffinity(0)) >= 2  # the calling process keeps every CPU

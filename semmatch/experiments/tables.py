@@ -88,7 +88,8 @@ def save_interval_table(summary: pd.DataFrame, figures_dir: str | Path, name: st
     measures : tuple of str
         Measures shown with their intervals.
     keep : tuple of str
-        Further columns shown as they are (e.g. ``paper_mean_acc``).
+        Further columns shown with three decimals, a missing value blank (``paper_*`` columns
+        always are).
     """
     from .claims import format_with_intervals
 
@@ -98,10 +99,11 @@ def save_interval_table(summary: pd.DataFrame, figures_dir: str | Path, name: st
     csv, md = figures_dir / f"{name}.csv", figures_dir / f"{name}.md"
     atomic_write_text(csv, summary.to_csv(index=False, float_format="%.4f"))
     shown = format_with_intervals(summary, measures)
-    extra = [c for c in keep if c in summary.columns]
+    # the paper's values: a row the paper does not have (e.g. ``fused``) shows a blank
+    extra = [c for c in summary.columns if c in keep or str(c).startswith("paper_")]
     for c in extra:
         shown[c] = summary[c].map(lambda v: "" if pd.isna(v) else f"{v:.3f}").values
-    atomic_write_text(md, shown.to_markdown(index=False) + "\n")
+    atomic_write_text(md, markdown_table(shown) + "\n")  # text cells as written ("0.800", not 0.8)
     return csv, md
 
 
