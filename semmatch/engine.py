@@ -9,7 +9,7 @@ frames, the panoptic study) is a list of independent tasks, each a pure function
 * ``jobs > 1``: on a ``dask.distributed.LocalCluster`` of ``jobs`` single-threaded worker
   processes, started once per process and reused (its workers die with this process, also when
   it is killed: :func:`semmatch.workers.die_with_parent` runs in each of them; each is pinned to
-  its own CPU, so that Open3D's multi-threaded registration repeats itself: :func:`dask_setup`);
+  its own CPU, so that Open3D's multi-threaded RANSAC registration repeats itself: :func:`dask_setup`);
 * a scheduler address (``scheduler=`` argument, else ``SEMMATCH_SCHEDULER``, which
   ``python -m semmatch.experiments run --scheduler`` and a profile's ``common.scheduler`` set):
   on that cluster, e.g. one started by dask-jobqueue on SLURM (docs/cluster.md). The workers
@@ -50,9 +50,10 @@ def dask_setup(worker) -> None:
     """Run in every local worker process: die with the process that started the cluster, own one core.
 
     Each worker is pinned to one CPU (:func:`pin_to_cpu`, by its index in the cluster): Open3D's
-    registration runs its RANSAC and correspondence search on as many threads as the process may
-    use, and with two threads it does not return the same poses twice; pinned, a rerun of the
-    real-like chain gives the same poses, maps and tables.
+    feature-based RANSAC registration runs on as many threads as the process may use and, on two,
+    does not return the same transform twice; pinned, it does (seeded). The two workers also stop
+    competing for the two cores. Open3D's tensor RGB-D odometry stays unrepeatable even on one
+    thread (docs/cluster.md).
     """
     from .workers import die_with_parent
 
