@@ -52,8 +52,8 @@ def dask_setup(worker) -> None:
     Each worker is pinned to one CPU (:func:`pin_to_cpu`, by its index in the cluster): Open3D's
     feature-based RANSAC registration runs on as many threads as the process may use and, on two,
     does not return the same transform twice; pinned, it does (seeded). The two workers also stop
-    competing for the two cores. Open3D's tensor RGB-D odometry stays unrepeatable even on one
-    thread (docs/cluster.md).
+    competing for the two cores. The RGB-D odometry (:func:`semmatch.odometry.estimate_poses`)
+    stays unrepeatable even on one thread (docs/cluster.md).
     """
     from .workers import die_with_parent
 
