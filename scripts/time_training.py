@@ -24,7 +24,7 @@ def main() -> None:
     import torch
 
     from semmatch.experiments.pipeline import ROOT, notebook_parameters
-    from semmatch.segment import make_config, network_spec
+    from semmatch.segment import pipeline_configs
     from semmatch.segment.training import build_views, train
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -34,15 +34,13 @@ def main() -> None:
     p = notebook_parameters("02_train_segmentation", args.profile)
     data_root = ROOT / p["data_root"]
     args.out.mkdir(parents=True, exist_ok=True)
-    steps = p.get("steps") or {}
+    configs = pipeline_configs(
+        p["networks"], train_profile=p["train_profile"], seed=p["seed"], kinds=p["kinds"],
+        train_seeds=p["train_seeds"], val_seeds=p["val_seeds"], eval_seeds=p["eval_seeds"], width=p["width"],
+        height=p["height"], steps=p.get("steps"), out_dir=args.out, cache_dir=data_root / "cache" / "segment",
+    )
     result = {}
-    for net in p["networks"]:
-        arch, net_seed = network_spec(net, p["seed"])
-        cfg = make_config(p["train_profile"], arch=arch, out=str(args.out / f"{net}.pt"), kinds=tuple(p["kinds"]),
-                          train_seeds=tuple(p["train_seeds"]), val_seeds=tuple(p["val_seeds"]),
-                          eval_seeds=tuple(p["eval_seeds"]), width=p["width"], height=p["height"], seed=net_seed,
-                          steps=steps.get(net, steps.get(arch)), cache_dir=str(data_root / "cache" / "segment"),
-                          progress=False)
+    for net, cfg in configs.items():
         views = build_views(cfg)
         t0 = time.perf_counter()
         train(cfg, views=views)

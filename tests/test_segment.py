@@ -344,3 +344,16 @@ def test_cli_bench_train(capsys):
     assert "not timed" in capsys.readouterr().err
     assert main(["bench", "train", "--profile", "smoke", "--arch", "compact", "--schedule", "compact=x"]) == 2
     assert "ARCH=STEPS" in capsys.readouterr().err
+
+
+def test_pipeline_configs_name_seed_and_steps_per_network(tmp_path):
+    from semmatch.segment import pipeline_configs
+
+    common = dict(train_profile="smoke", seed=0, kinds=("living_room",), train_seeds=(1,), val_seeds=(501,),
+                  eval_seeds=(7001,), width=160, height=120, out_dir=tmp_path, cache_dir=tmp_path / "cache")
+    cfgs = pipeline_configs(["compact", "compact@2"], steps={"compact": 30, "compact@2": 40}, **common)
+    assert [c.seed for c in cfgs.values()] == [0, 2]
+    assert [c.steps for c in cfgs.values()] == [30, 40]  # a name's entry wins over its architecture's
+    assert cfgs["compact@2"].out == str(tmp_path / "compact@2.pt")
+    assert pipeline_configs(["compact@2"], steps={"compact": 30}, **common)["compact@2"].steps == 30
+    assert pipeline_configs(["compact"], steps=None, **common)["compact"].steps == 100  # the smoke profile's

@@ -24,6 +24,7 @@ _EXPORTS = {
     "train": "training",
     "make_config": "training",
     "network_spec": "training",
+    "pipeline_configs": "training",
     "TrainConfig": "training",
     "PROFILES": "training",
     "ModelConfig": "models",

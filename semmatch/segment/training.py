@@ -16,6 +16,7 @@ from __future__ import annotations
 import copy
 import os
 import time
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 
@@ -35,7 +36,7 @@ from .predict import Segmenter, load_model
 from .scores import confusion, scores
 
 __all__ = [
-    "TrainConfig", "PROFILES", "make_config", "network_spec", "train", "train_or_load", "validation_table", "augment",
+    "TrainConfig", "PROFILES", "make_config", "network_spec", "pipeline_configs", "train", "train_or_load", "validation_table", "augment",
     "evaluate_views", "build_views", "optimisation_step", "CHECKPOINT_FORMAT",
 ]
 
@@ -233,6 +234,58 @@ def make_config(profile: str = "smoke", **overrides) -> TrainConfig:
             kw[k] = tuple(kw[k])
     kw["extra"] = dict(kw.get("extra") or {}, profile=profile)
     return TrainConfig(**kw).validate()
+
+
+def pipeline_configs(
+    networks: Sequence[str],
+    *,
+    train_profile: str,
+    seed: int,
+    kinds: Sequence[str],
+    train_seeds: Sequence[int],
+    val_seeds: Sequence[int],
+    eval_seeds: Sequence[int],
+    width: int,
+    height: int,
+    steps: dict | None,
+    out_dir: str | Path,
+    cache_dir: str | Path,
+) -> dict[str, TrainConfig]:
+    """The training configuration of each network of a pipeline profile (notebook 02's parameters).
+
+    Parameters
+    ----------
+    networks : sequence of str
+        Network names (:func:`network_spec`: ``"compact"``, ``"compact@2"``, ...).
+    train_profile : str
+        Named training profile (:data:`PROFILES`).
+    seed : int
+        Training seed of a name without ``@SEED``.
+    kinds, train_seeds, val_seeds, eval_seeds, width, height
+        As in :class:`TrainConfig`.
+    steps : dict or None
+        Steps per network name or architecture (a name's entry wins); missing: the profile's.
+    out_dir : path
+        Checkpoints go to ``out_dir/<network>.pt``.
+    cache_dir : path
+        Cache of the rendered views.
+
+    Returns
+    -------
+    dict
+        Network name -> validated :class:`TrainConfig`.
+    """
+    steps = steps or {}
+    configs = {}
+    for net in networks:
+        arch, net_seed = network_spec(net, seed)
+        configs[net] = make_config(
+            train_profile, arch=arch, out=str(Path(out_dir) / f"{net}.pt"), kinds=tuple(kinds),
+            train_seeds=tuple(train_seeds), val_seeds=tuple(val_seeds), eval_seeds=tuple(eval_seeds),
+            width=width, height=height, seed=net_seed, steps=steps.get(net, steps.get(arch)),
+            cache_dir=str(cache_dir), progress=False,
+        )
+    return configs
 
 
 def _device(name: str) -> torch.device:
