@@ -159,26 +159,22 @@ class _Tracker:
     def __init__(self, *, residual: str, robust: bool, max_step: float, prior: np.ndarray | None,
                  prior_tolerance: tuple[float, float] | None, depth_max: float, device: str | None,
                  T: np.ndarray) -> None:
-        import open3d as o3d
-        import open3d.core as o3c
+        from .rgbd_odometry import METHODS
 
-        odometry = o3d.t.pipelines.odometry
-        residuals = {"point-to-plane": odometry.Method.PointToPlane, "hybrid": odometry.Method.Hybrid,
-                     "intensity": odometry.Method.Intensity}
-        if residual not in residuals:
-            raise ValueError(f"residual must be one of {tuple(residuals)}, got {residual!r}")
+        if residual not in METHODS:
+            raise ValueError(f"residual must be one of {METHODS}, got {residual!r}")
         # the chosen residual and, for robustness in geometrically degenerate views (a wall and
         # the floor), the other geometric/photometric one; the smaller photometric + depth misfit wins
-        extra = [residuals["point-to-plane"], residuals["hybrid"]] if robust else []
-        self.methods = [residuals[residual]] + [m for m in extra if m != residuals[residual]]
-        self.criteria = [odometry.OdometryConvergenceCriteria(k) for k in (30, 15, 8)]
+        extra = ["point-to-plane", "hybrid"] if robust else []
+        self.methods = [residual] + [m for m in extra if m != residual]
+        self.iterations = (30, 15, 8)  # per pyramid level, coarsest first
         self.robust, self.max_step, self.depth_max = robust, max_step, depth_max
         self.prior, self.prior_tolerance = prior, prior_tolerance
-        self.device = o3c.Device(device or default_device())
+        self.device = device or default_device()
         self.T = T
         self.T_prev: np.ndarray | None = None  # pose of the last tracked frame
         self.i_prev = -1  # its index
-        self.prev = None  # its Open3D RGB-D image
+        self.prev = None  # its image pyramid (semmatch.rgbd_odometry.rgbd_pyramid)
         self.prev_frame: Frame | None = None
         self.motion = np.eye(4)  # per-frame motion (constant-velocity guesses)
         self.lost: list[int] = []
@@ -189,12 +185,10 @@ class _Tracker:
         if np.count_nonzero((d_mm > 0) & (d_mm <= self.depth_max * 1000.0)) < MIN_VALID_DEPTH * d_mm.size:
             self.dropped.append(getattr(f, "index", i))
             return self._bridge(i)
-        import open3d as o3d
-        import open3d.core as o3c
+        from .rgbd_odometry import rgbd_pyramid
 
-        depth = o3d.t.geometry.Image(o3c.Tensor(d_mm)).to(self.device)
-        color = o3d.t.geometry.Image(o3c.Tensor(np.ascontiguousarray(f.rgb, dtype=np.uint8))).to(self.device)
-        rgbd = o3d.t.geometry.RGBDImage(color, depth)
+        rgbd = rgbd_pyramid(d_mm, f.rgb, f.intrinsics.K, levels=len(self.iterations), depth_max=self.depth_max,
+                            device=self.device)
         if self.prev is not None:
             gap = i - self.i_prev  # > 1 after dropouts: the motion since the last tracked frame
             best = self._relative_motion(i, f, rgbd, gap)
@@ -222,32 +216,26 @@ class _Tracker:
         if self.prior is not None:
             prior_motion = np.linalg.inv(self.prior[self.i_prev]) @ self.prior[i]
             inits = [prior_motion] + inits
-        K = f.intrinsics.K
         best = None
         for init in inits + [np.eye(4)]:  # rest only when nothing else converged
-            best = self._best_candidate(f, rgbd, K, init, prior_motion)
+            best = self._best_candidate(f, rgbd, init, prior_motion)
             if best is not None:
                 return best
         # tracking lost: the prior's motion, else constant velocity
         self.lost.append(getattr(f, "index", i))
         return inits[-1] if prior_motion is None else prior_motion
 
-    def _best_candidate(self, f: Frame, rgbd, K: np.ndarray, init: np.ndarray,
+    def _best_candidate(self, f: Frame, rgbd, init: np.ndarray,
                         prior_motion: np.ndarray | None) -> np.ndarray | None:
         """The residual whose plausible result (started at ``init``) fits the previous frame best, or None."""
-        import open3d as o3d
-        import open3d.core as o3c
+        from .rgbd_odometry import multi_scale_odometry
 
         best, best_cost = None, np.inf
         for m in self.methods:
             try:
-                res = o3d.t.pipelines.odometry.rgbd_odometry_multi_scale(
-                    rgbd, self.prev, o3c.Tensor(K), o3c.Tensor(init), 1000.0, self.depth_max,
-                    criteria_list=self.criteria, method=m,
-                )
+                Tm = multi_scale_odometry(rgbd, self.prev, init, method=m, iterations=self.iterations)[0]
             except RuntimeError:  # no correspondences (singular system)
                 continue
-            Tm = res.transformation.cpu().numpy()
             if not _plausible(Tm, self.max_step):
                 continue
             if (prior_motion is not None and self.prior_tolerance is not None

@@ -14,6 +14,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from .fusion import default_device
+from .rgbd_odometry import multi_scale_odometry, open3d_threads, rgbd_pyramid
 from .trajectory_metrics import rotation_deg
 
 __all__ = ["refine_pose_graph"]
@@ -122,8 +123,14 @@ def refine_pose_graph(
             raise ValueError(f"{name} frame {i}: depth is {d.shape}, the intrinsics say {(H, W)}")
     dev = o3c.Device(device or default_device())
     K = o3c.Tensor(intrinsics.K)
-    blank = o3d.t.geometry.Image(o3c.Tensor(np.zeros((H, W, 3), np.uint8))).to(dev)  # point-to-plane: depth only
     imgs = [o3d.t.geometry.Image(o3c.Tensor(d)).to(dev) for d in depths]
+    pyramids: dict[int, object] = {}  # depth-only pyramids (point-to-plane), built on first use
+
+    def pyramid(i: int):
+        if i not in pyramids:
+            pyramids[i] = rgbd_pyramid(depths[i], None, intrinsics.K, levels=len(criteria), depth_max=depth_max,
+                                       device=str(dev))
+        return pyramids[i]
     metres = [d.astype(np.float32) / 1000.0 for d in depths]
     samples = [backproject(np.where(m <= depth_max, m, 0), intrinsics, stride=8)[0] for m in metres]
     criteria = [o3d.t.pipelines.odometry.OdometryConvergenceCriteria(k) for k in (30, 15, 8)]
@@ -133,49 +140,47 @@ def refine_pose_graph(
     def register(i: int, j: int) -> tuple[np.ndarray, np.ndarray] | None:
         init = np.linalg.inv(poses[j]) @ poses[i]  # T_j_i
         try:
-            res = odo.rgbd_odometry_multi_scale(
-                o3d.t.geometry.RGBDImage(blank, imgs[i]), o3d.t.geometry.RGBDImage(blank, imgs[j]), K,
-                o3c.Tensor(init), 1000.0, depth_max, criteria_list=criteria, method=odo.Method.PointToPlane,
-            )
+            T, fitness, _ = multi_scale_odometry(pyramid(i), pyramid(j), init, method="point-to-plane",
+                                                 iterations=criteria)
         except RuntimeError:  # no correspondences (singular system)
             return None
-        T = res.transformation.cpu().numpy()
         D = np.linalg.inv(init) @ T
-        if (not np.isfinite(T).all() or res.fitness < min_fitness or np.linalg.norm(D[:3, 3]) > max_t
+        if (not np.isfinite(T).all() or fitness < min_fitness or np.linalg.norm(D[:3, 3]) > max_t
                 or rotation_deg(D[:3, :3]) > max_r):
             return None
         info = odo.compute_odometry_information_matrix(imgs[i], imgs[j], K, o3c.Tensor(T), 0.07, 1000.0, depth_max)
         return T, info.cpu().numpy().astype(np.float64)
 
-    graph = reg.PoseGraph()
-    for p in poses:
-        graph.nodes.append(reg.PoseGraphNode(p))
-    for i in tqdm(range(1, n), desc="pose graph", disable=not progress, leave=False):
-        pairs = [j for j in range(max(0, i - neighbours), i - 1)
-                 if _overlap(samples[i], metres[j], np.linalg.inv(poses[j]) @ poses[i], intrinsics) >= min_overlap]
-        if i % loop_stride == 0:
-            loops = [(_overlap(samples[i], metres[j], np.linalg.inv(poses[j]) @ poses[i], intrinsics), j)
-                     for j in range(0, i - neighbours - 5, loop_stride)]
-            pairs += [j for ov, j in sorted(loops, reverse=True)[:loop_candidates] if ov >= loop_overlap]
-        for j in [i - 1] + pairs:
-            if j == i - 1:  # the chained motion itself (chosen robustly by the tracker, not re-registered)
-                T = np.linalg.inv(poses[j]) @ poses[i]
-                info = odo.compute_odometry_information_matrix(imgs[i], imgs[j], K, o3c.Tensor(T), 0.07, 1000.0,
-                                                               depth_max).cpu().numpy().astype(np.float64)
-                edge = (T, info if np.isfinite(info).all() and info.any() else np.eye(6))
-            else:
-                edge = register(i, j)
-            if edge is not None:
-                graph.edges.append(reg.PoseGraphEdge(i, j, edge[0], edge[1], uncertain=j != i - 1))
-    option = reg.GlobalOptimizationOption(max_correspondence_distance=0.03, edge_prune_threshold=0.25,
-                                          preference_loop_closure=1.0, reference_node=0)
-    level = o3d.utility.get_verbosity_level()
-    o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Error)
-    try:
-        reg.global_optimization(graph, reg.GlobalOptimizationLevenbergMarquardt(),
-                                reg.GlobalOptimizationConvergenceCriteria(), option)
-    finally:
-        o3d.utility.set_verbosity_level(level)
+    with open3d_threads(1):  # repeatable sums (semmatch.rgbd_odometry)
+        graph = reg.PoseGraph()
+        for p in poses:
+            graph.nodes.append(reg.PoseGraphNode(p))
+        for i in tqdm(range(1, n), desc="pose graph", disable=not progress, leave=False):
+            pairs = [j for j in range(max(0, i - neighbours), i - 1)
+                     if _overlap(samples[i], metres[j], np.linalg.inv(poses[j]) @ poses[i], intrinsics) >= min_overlap]
+            if i % loop_stride == 0:
+                loops = [(_overlap(samples[i], metres[j], np.linalg.inv(poses[j]) @ poses[i], intrinsics), j)
+                         for j in range(0, i - neighbours - 5, loop_stride)]
+                pairs += [j for ov, j in sorted(loops, reverse=True)[:loop_candidates] if ov >= loop_overlap]
+            for j in [i - 1] + pairs:
+                if j == i - 1:  # the chained motion itself (chosen robustly by the tracker, not re-registered)
+                    T = np.linalg.inv(poses[j]) @ poses[i]
+                    info = odo.compute_odometry_information_matrix(imgs[i], imgs[j], K, o3c.Tensor(T), 0.07, 1000.0,
+                                                                   depth_max).cpu().numpy().astype(np.float64)
+                    edge = (T, info if np.isfinite(info).all() and info.any() else np.eye(6))
+                else:
+                    edge = register(i, j)
+                if edge is not None:
+                    graph.edges.append(reg.PoseGraphEdge(i, j, edge[0], edge[1], uncertain=j != i - 1))
+        option = reg.GlobalOptimizationOption(max_correspondence_distance=0.03, edge_prune_threshold=0.25,
+                                              preference_loop_closure=1.0, reference_node=0)
+        level = o3d.utility.get_verbosity_level()
+        o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Error)
+        try:
+            reg.global_optimization(graph, reg.GlobalOptimizationLevenbergMarquardt(),
+                                    reg.GlobalOptimizationConvergenceCriteria(), option)
+        finally:
+            o3d.utility.set_verbosity_level(level)
     out = np.stack([np.asarray(node.pose) for node in graph.nodes])
     out = poses[0] @ np.linalg.inv(out[0]) @ out  # frame 0 stays where it was
     if not np.isfinite(out).all():
