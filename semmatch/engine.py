@@ -53,7 +53,7 @@ def dask_setup(worker) -> None:
     feature-based RANSAC registration runs on as many threads as the process may use and, on two,
     does not return the same transform twice; pinned, it does (seeded). The two workers also stop
     competing for the two cores. The RGB-D odometry (:func:`semmatch.odometry.estimate_poses`)
-    stays unrepeatable even on one thread (docs/cluster.md).
+    limits Open3D to one thread itself (:mod:`semmatch.rgbd_odometry`), pinned or not.
     """
     from .workers import die_with_parent
 

@@ -164,6 +164,7 @@ def register_maps(
     confidence: float = 0.999,
     icp_voxels: Sequence[float] = (0.04, 0.02, 0.01),
     icp_iterations: int = 50,
+    threads: int | None = 1,
 ) -> Registration:
     """Rigid transform taking ``source`` into ``target``'s frame, from geometry alone.
 
@@ -194,6 +195,11 @@ def register_maps(
         features at 10 cm and a finest level of 2.5 cm: 0.9 cm and 0.12 degrees).
     icp_iterations : int
         ICP iterations per level.
+    threads : int or None
+        Open3D threads for the run (:func:`semmatch.rgbd_odometry.open3d_threads`). RANSAC's
+        result depends on the thread count and, with more than one thread, differs between runs
+        (two threads: two runs of one scene, two transforms); one thread (the default) repeats
+        itself wherever it runs. None: every core, faster on a machine to oneself, not repeatable.
 
     Returns
     -------
@@ -207,6 +213,21 @@ def register_maps(
         An empty map or NaN vertices (naming the map's file), non-positive ``voxel_size``,
         ``restarts`` below 1, or too few points left after downsampling.
     """
+    import contextlib
+
+    from .rgbd_odometry import open3d_threads
+
+    if threads is not None and int(threads) < 1:
+        raise ValueError(f"threads must be >= 1 or None, got {threads}")
+    with open3d_threads(int(threads)) if threads is not None else contextlib.nullcontext():
+        return _register(source, target, voxel_size=voxel_size, seed=seed, restarts=restarts,
+                         max_iterations=max_iterations, confidence=confidence, icp_voxels=icp_voxels,
+                         icp_iterations=icp_iterations)
+
+
+def _register(source: SemanticMap, target: SemanticMap, *, voxel_size: float, seed: int, restarts: int,
+              max_iterations: int, confidence: float, icp_voxels: Sequence[float], icp_iterations: int) -> Registration:
+    """:func:`register_maps` under its thread limit."""
     import open3d as o3d
 
     reg = o3d.pipelines.registration

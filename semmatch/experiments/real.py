@@ -210,7 +210,18 @@ def evaluate_real_like(
 def _real_like_scene(data_root: str, methods: tuple[str, ...], networks: tuple[str, ...], sources: tuple[str, ...],
                      o: dict, sid: str) -> tuple[list[dict], list[dict], dict]:
     """The real-like chain of one scene (a task of :func:`evaluate_real_like`): its score rows,
-    trajectory rows and registration row."""
+    trajectory rows and registration row. Open3D runs on one thread (its parallel sums and
+    RANSAC differ from run to run otherwise; :mod:`semmatch.rgbd_odometry`), so the task gives the
+    same numbers on any worker, pinned or not."""
+    from ..rgbd_odometry import open3d_threads
+
+    with open3d_threads(1):
+        return _real_like_scene_chain(data_root, methods, networks, sources, o, sid)
+
+
+def _real_like_scene_chain(data_root: str, methods: tuple[str, ...], networks: tuple[str, ...],
+                           sources: tuple[str, ...], o: dict, sid: str) -> tuple[list[dict], list[dict], dict]:
+    """:func:`_real_like_scene` under its thread limit."""
     from ..fusion import reconstruct_many
     from ..metrics import compare
     from ..registration import register_maps
