@@ -16,7 +16,15 @@ the **validation** sweeps only (paired per-scene mIoU differences, 95 % interval
   human-height part of each batch (``fine_tune(distill=1.0)``);
 - ``scenes``: compact, the chosen recipe, ground-truth and ``3d-neighborhood`` labels of the
   profile's adaptation scenes (8 in the full profile) against three times as many training
-  scenes (is the amount of robot data the limit?).
+  scenes (is the amount of robot data the limit?);
+- ``robot-only``: compact, every batch from the robot's frames (``upper_share`` 0: no guard
+  against forgetting), ground-truth and ``3d-neighborhood`` labels: how much of the gap at 0.2 m
+  fine-tuning alone can close (the robot-height expert of a height-routed pair);
+- ``scratch``: no adaptation: the compact network trained from scratch with its own training
+  config (steps, scenes, frames per scene) on views at robot heights (0.1-0.3 m) and at every
+  height (0.1-1.8 m) instead of human heights (1.2-1.8 m). What a compact network of this
+  budget reaches at 0.2 m when it sees only the robot's view, with ground truth throughout:
+  the ceiling of any adaptation of it.
 
 Frozen batch-norm statistics are not an option of :func:`semmatch.adapt.fine_tune`: for that
 variant this script swaps the optimisation step it uses for the length of one run.
@@ -42,11 +50,34 @@ VARIANTS = {
     "strong-lr": [("strong", "3d-neighborhood", 400, 1e-4, 0.75, "plain")],
     "distill": [("compact", "3d-neighborhood", 400, 1e-3, 0.5, "distill"),
                 ("compact", "3d-neighborhood", 400, 3e-4, 0.75, "distill")],
+    "robot-only": [("compact", "ground-truth", 400, 1e-3, 0.0, "plain"),
+                   ("compact", "3d-neighborhood", 400, 1e-3, 0.0, "plain"),
+                   ("compact", "3d-neighborhood", 400, 3e-4, 0.0, "plain")],
     "scenes": [("compact", "ground-truth", 400, 3e-4, 0.75, "plain", 1),
                ("compact", "3d-neighborhood", 400, 3e-4, 0.75, "plain", 1),
                ("compact", "ground-truth", 400, 3e-4, 0.75, "plain", 3),
                ("compact", "3d-neighborhood", 400, 3e-4, 0.75, "plain", 3)],
 }
+
+#: ``scratch`` variant: run name -> camera height range of the training views (m)
+SCRATCH = {"scratch-robot-heights": (0.1, 0.3), "scratch-all-heights": (0.1, 1.8)}
+
+
+def train_from_scratch(checkpoint: Path, heights: tuple[float, float], out: Path) -> Path:
+    """Train ``checkpoint``'s architecture anew with its training config, views at ``heights``.
+
+    The views are rendered into ``out.parent / "cache"`` (not the profile's cache); the training
+    scenes, frames, steps and seeds are the checkpoint's.
+    """
+    import torch
+
+    from semmatch.segment.training import TrainConfig, train
+
+    rec = dict(torch.load(checkpoint, map_location="cpu", weights_only=False)["train_config"])
+    known = set(TrainConfig.__dataclass_fields__)
+    cfg = TrainConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in rec.items() if k in known})
+    cfg.heights, cfg.out, cfg.cache_dir, cfg.progress = tuple(heights), str(out), str(out.parent / "cache"), False
+    return train(cfg)
 
 
 @contextlib.contextmanager
@@ -79,7 +110,7 @@ def main() -> None:
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("out", type=Path, help="folder for the checkpoints and tables")
-    ap.add_argument("--which", choices=sorted(VARIANTS), required=True)
+    ap.add_argument("--which", choices=sorted([*VARIANTS, "scratch"]), required=True)
     ap.add_argument("--profile", default=None, help="profile of params.yaml (default: its 'profile')")
     ap.add_argument("--max-steps", type=int, help="cap every run's steps (a quick check, not the documented runs)")
     args = ap.parse_args()
@@ -89,6 +120,17 @@ def main() -> None:
     layout = Layout(root)
     heights = validation_gap_sweeps(root, 0.2, 1.6)
     args.out.mkdir(parents=True, exist_ok=True)
+    if args.which == "scratch":
+        ckpts = {}
+        for name, hs in SCRATCH.items():
+            t0 = time.time()
+            ckpts[name] = train_from_scratch(layout.model("compact"), hs, args.out / f"{name}.pt")
+            print(f"trained {name} ({hs[0]:g}-{hs[1]:g} m): {time.time() - t0:.0f} s", flush=True)
+        per_scene = score_on_sweeps(root, "compact", ckpts, heights, jobs=p["jobs"], progress=False)
+        table = gap_table(per_scene, "compact", low=0.2, high=1.6).drop(columns=["source"])
+        table.to_csv(args.out / "scratch_compact.csv", index=False)
+        print(table.round(3).to_string(), flush=True)
+        return
     runs = [(*r, 1)[:7] for r in VARIANTS[args.which]]  # the profile's adaptation scenes unless a multiple is given
     need = p["adapt_scenes"] * max(r[6] for r in runs)
     if need > len(p["train_seeds"]):
