@@ -20,6 +20,9 @@ the **validation** sweeps only (paired per-scene mIoU differences, 95 % interval
 - ``robot-only``: compact, every batch from the robot's frames (``upper_share`` 0: no guard
   against forgetting), ground-truth and ``3d-neighborhood`` labels: how much of the gap at 0.2 m
   fine-tuning alone can close (the robot-height expert of a height-routed pair);
+- ``long``: compact, the most a 10-minute adaptation allows here: 1600 steps at the network's
+  own training learning rate (4e-3), half of each batch human-height, the robot's frames of three
+  times the profile's adaptation scenes; ground-truth and ``3d-neighborhood`` labels;
 - ``scratch``: no adaptation: the compact network trained from scratch with its own training
   config (steps, scenes, frames per scene) on views at robot heights (0.1-0.3 m) and at every
   height (0.1-1.8 m) instead of human heights (1.2-1.8 m). What a compact network of this
@@ -53,6 +56,8 @@ VARIANTS = {
     "robot-only": [("compact", "ground-truth", 400, 1e-3, 0.0, "plain"),
                    ("compact", "3d-neighborhood", 400, 1e-3, 0.0, "plain"),
                    ("compact", "3d-neighborhood", 400, 3e-4, 0.0, "plain")],
+    "long": [("compact", "ground-truth", 1600, 4e-3, 0.5, "plain", 3),
+             ("compact", "3d-neighborhood", 1600, 4e-3, 0.5, "plain", 3)],
     "scenes": [("compact", "ground-truth", 400, 3e-4, 0.75, "plain", 1),
                ("compact", "3d-neighborhood", 400, 3e-4, 0.75, "plain", 1),
                ("compact", "ground-truth", 400, 3e-4, 0.75, "plain", 3),
