@@ -23,6 +23,10 @@ the **validation** sweeps only (paired per-scene mIoU differences, 95 % interval
 - ``long``: compact, the most a 10-minute adaptation allows here: 1600 steps at the network's
   own training learning rate (4e-3), half of each batch human-height, the robot's frames of three
   times the profile's adaptation scenes; ground-truth and ``3d-neighborhood`` labels;
+- ``long-short``: as ``long`` with ``3d-neighborhood`` labels, 400 and 800 steps (what fits the
+  pipeline's budget?);
+- ``lr``: the pipeline's 400 steps and 8 scenes at the network's own learning rate (4e-3),
+  half or a quarter of each batch from the robot;
 - ``scratch``: no adaptation: the compact network trained from scratch with its own training
   config (steps, scenes, frames per scene) on views at robot heights (0.1-0.3 m) and at every
   height (0.1-1.8 m) instead of human heights (1.2-1.8 m). What a compact network of this
@@ -58,6 +62,10 @@ VARIANTS = {
                    ("compact", "3d-neighborhood", 400, 3e-4, 0.0, "plain")],
     "long": [("compact", "ground-truth", 1600, 4e-3, 0.5, "plain", 3),
              ("compact", "3d-neighborhood", 1600, 4e-3, 0.5, "plain", 3)],
+    "long-short": [("compact", "3d-neighborhood", 400, 4e-3, 0.5, "plain", 3),
+                   ("compact", "3d-neighborhood", 800, 4e-3, 0.5, "plain", 3)],
+    "lr": [("compact", "3d-neighborhood", 400, 4e-3, 0.5, "plain"),
+           ("compact", "3d-neighborhood", 400, 4e-3, 0.75, "plain")],
     "scenes": [("compact", "ground-truth", 400, 3e-4, 0.75, "plain", 1),
                ("compact", "3d-neighborhood", 400, 3e-4, 0.75, "plain", 1),
                ("compact", "ground-truth", 400, 3e-4, 0.75, "plain", 3),

@@ -124,6 +124,9 @@ def refine_pose_graph(
     dev = o3c.Device(device or default_device())
     K = o3c.Tensor(intrinsics.K)
     imgs = [o3d.t.geometry.Image(o3c.Tensor(d)).to(dev) for d in depths]
+    metres = [d.astype(np.float32) / 1000.0 for d in depths]
+    samples = [backproject(np.where(m <= depth_max, m, 0), intrinsics, stride=8)[0] for m in metres]
+    criteria = [o3d.t.pipelines.odometry.OdometryConvergenceCriteria(k) for k in (30, 15, 8)]
     pyramids: dict[int, object] = {}  # depth-only pyramids (point-to-plane), built on first use
 
     def pyramid(i: int):
@@ -131,9 +134,7 @@ def refine_pose_graph(
             pyramids[i] = rgbd_pyramid(depths[i], None, intrinsics.K, levels=len(criteria), depth_max=depth_max,
                                        device=str(dev))
         return pyramids[i]
-    metres = [d.astype(np.float32) / 1000.0 for d in depths]
-    samples = [backproject(np.where(m <= depth_max, m, 0), intrinsics, stride=8)[0] for m in metres]
-    criteria = [o3d.t.pipelines.odometry.OdometryConvergenceCriteria(k) for k in (30, 15, 8)]
+
     odo = o3d.t.pipelines.odometry
     max_t, max_r = max_correction
 

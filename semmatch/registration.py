@@ -199,7 +199,7 @@ def register_maps(
         Open3D threads for the run (:func:`semmatch.rgbd_odometry.open3d_threads`). RANSAC's
         result depends on the thread count and, with more than one thread, differs between runs
         (two threads: two runs of one scene, two transforms); one thread (the default) repeats
-        itself wherever it runs. None: every core, faster on a machine to oneself, not repeatable.
+        itself run to run. None: every core, faster on a machine to oneself, not repeatable.
 
     Returns
     -------

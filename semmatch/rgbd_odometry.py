@@ -40,7 +40,11 @@ METHODS = ("point-to-plane", "hybrid", "intensity")
 
 @contextlib.contextmanager
 def open3d_threads(n: int = 1) -> Iterator[None]:
-    """Limit Open3D to ``n`` CPU threads inside the block (process-wide; the previous limit is restored)."""
+    """Limit Open3D to ``n`` CPU threads inside the block.
+
+    Process-wide; on leaving, the count Open3D reported on entry is set again (an explicit limit
+    equal to its automatic one when none had been set).
+    """
     import open3d as o3d
 
     previous = o3d.utility.get_max_threads()
@@ -65,6 +69,8 @@ class RGBDPyramid:
         Back-projected depth (NaN where missing).
     intrinsics : list of Tensor (3, 3) float64
         The camera matrix of each level.
+    depth_outlier_trunc : float
+        Open3D's ``OdometryLossParams.depth_outlier_trunc`` the pyramid was built with (metres).
     """
 
     depth: list

@@ -211,8 +211,8 @@ def _real_like_scene(data_root: str, methods: tuple[str, ...], networks: tuple[s
                      o: dict, sid: str) -> tuple[list[dict], list[dict], dict]:
     """The real-like chain of one scene (a task of :func:`evaluate_real_like`): its score rows,
     trajectory rows and registration row. Open3D runs on one thread (its parallel sums and
-    RANSAC differ from run to run otherwise; :mod:`semmatch.rgbd_odometry`), so the task gives the
-    same numbers on any worker, pinned or not."""
+    RANSAC differ from run to run otherwise; :mod:`semmatch.rgbd_odometry`), so the task repeats
+    its numbers run to run, on a pinned worker or not."""
     from ..rgbd_odometry import open3d_threads
 
     with open3d_threads(1):
