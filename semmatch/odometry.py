@@ -1,14 +1,15 @@
 """Camera poses of recordings without them: RGB-D odometry, and a one-recording estimate-fuse-score chain.
 
-Tracker (:func:`estimate_poses`): multi-scale frame-to-frame RGB-D odometry of
-``open3d.t.pipelines.odometry`` (point-to-plane, with a hybrid depth + intensity alternative
+Tracker (:func:`estimate_poses`): multi-scale frame-to-frame RGB-D odometry with the kernels of
+``open3d.t.pipelines.odometry``, made repeatable run to run by :mod:`semmatch.rgbd_odometry`
+(point-to-plane, with a hybrid depth + intensity alternative
 chosen per frame by photometric and depth misfit), chained, then refined by a pose graph
 (:func:`semmatch.pose_graph.refine_pose_graph`). The first pose is ``init_pose`` (identity by
 default; pass the known start pose, :func:`start_pose`, to build maps in the world frame).
 Trajectory errors against ground truth are :mod:`semmatch.trajectory_metrics`; how much drift
 the pose graph removes is measured in docs/protocol.md ("Odometry").
 
-One module (just over 500 lines): the tracker and the one-recording chain that runs it.
+One module (about 500 lines): the tracker and the one-recording chain that runs it.
 """
 
 from __future__ import annotations
