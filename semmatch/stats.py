@@ -1,4 +1,5 @@
-"""Bootstrap confidence intervals of a mean over scenes, and of a paired mean difference.
+"""Bootstrap confidence intervals of a mean over scenes, of a paired mean difference, and of a
+ratio of paired means (e.g. the share of a gap closed).
 
 Both are percentile bootstrap intervals computed by :func:`scipy.stats.bootstrap`; the
 resampling generator is seeded, so the same values and seed give the same interval. Degenerate
@@ -16,7 +17,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy import stats as _st
 
-__all__ = ["bootstrap_ci", "paired_difference_ci"]
+__all__ = ["bootstrap_ci", "paired_difference_ci", "ratio_of_means_ci"]
 
 
 def _as_1d(values: ArrayLike, name: str) -> np.ndarray:
@@ -118,3 +119,71 @@ def paired_difference_ci(
     if not keep.any():
         raise ValueError("paired_difference_ci: no complete pair (empty input, or a NaN in every pair)")
     return bootstrap_ci(x[keep] - y[keep], confidence=confidence, n_resamples=n_resamples, seed=seed)
+
+
+def ratio_of_means_ci(
+    num: ArrayLike,
+    den: ArrayLike,
+    *,
+    confidence: float = 0.95,
+    n_resamples: int = 10000,
+    seed: int = 0,
+) -> tuple[float, float, float]:
+    """``mean(num) / mean(den)`` of paired values and a percentile bootstrap interval of it.
+
+    The units (e.g. scenes) are resampled together, so each resample's ratio keeps the pairing
+    (e.g. the share of the viewpoint gap closed: ``num`` the per-scene gain, ``den`` the
+    per-scene gap).
+
+    Parameters
+    ----------
+    num, den : array_like
+        Paired values of equal length; a pair with a NaN on either side is dropped.
+    confidence : float, optional
+        Confidence level of the two-sided interval, in (0, 1).
+    n_resamples : int, optional
+        Number of bootstrap resamples.
+    seed : int, optional
+        Seed of the resampling generator.
+
+    Returns
+    -------
+    tuple of float
+        ``(ratio, lo, hi)``. One pair, or every pair equal, gives ``(r, r, r)``.
+
+    Raises
+    ------
+    ValueError
+        If the lengths differ, no complete pair is left, ``mean(den)`` is 0, or ``confidence``
+        is not in (0, 1).
+    """
+    if not 0.0 < confidence < 1.0:
+        raise ValueError(f"ratio_of_means_ci: confidence must be in (0, 1), got {confidence}")
+    x, y = _as_1d(num, "ratio_of_means_ci (num)"), _as_1d(den, "ratio_of_means_ci (den)")
+    if x.shape != y.shape:
+        raise ValueError(f"ratio_of_means_ci: num and den must have equal lengths, got {x.size} and {y.size}")
+    keep = ~(np.isnan(x) | np.isnan(y))
+    if not keep.any():
+        raise ValueError("ratio_of_means_ci: no complete pair (empty input, or a NaN in every pair)")
+    x, y = x[keep], y[keep]
+    if float(np.mean(y)) == 0.0:
+        raise ValueError("ratio_of_means_ci: the mean of den is 0 (the ratio is undefined)")
+    ratio = float(np.mean(x) / np.mean(y))
+    if x.size == 1 or (np.all(x == x[0]) and np.all(y == y[0])):
+        return ratio, ratio, ratio
+
+    def statistic(a: np.ndarray, b: np.ndarray, axis: int = -1) -> np.ndarray:
+        return np.mean(a, axis=axis) / np.mean(b, axis=axis)
+
+    res = _st.bootstrap(
+        (x, y),
+        statistic,
+        n_resamples=n_resamples,
+        confidence_level=confidence,
+        method="percentile",
+        paired=True,
+        vectorized=True,
+        axis=-1,
+        rng=np.random.default_rng(seed),
+    )
+    return ratio, float(res.confidence_interval.low), float(res.confidence_interval.high)

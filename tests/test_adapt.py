@@ -81,6 +81,8 @@ def test_gap_table_on_a_hand_made_sweep():
     assert t.loc["net~x", "gain_low"] == pytest.approx(0.2)
     assert t.loc["net~x", "change_high"] == pytest.approx(-0.02)
     assert t.loc["net~x", "gap_closed"] == pytest.approx(0.5)
+    # both scenes close half of their gap: every resample of the scenes does too
+    assert t.loc["net~x", ["gap_closed_lo", "gap_closed_hi"]].tolist() == pytest.approx([0.5, 0.5])
     assert t.loc["net", "source"] == "none (unadapted)"
 
 

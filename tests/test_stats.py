@@ -7,7 +7,7 @@ import warnings
 import numpy as np
 import pytest
 
-from semmatch.stats import bootstrap_ci, paired_difference_ci
+from semmatch.stats import bootstrap_ci, paired_difference_ci, ratio_of_means_ci
 
 
 def test_constant_sample_gives_zero_width_interval_without_warning():
@@ -81,3 +81,32 @@ def test_paired_difference_rejects_bad_input():
         paired_difference_ci([1.0, 2.0], [1.0])
     with pytest.raises(ValueError, match="no complete pair"):
         paired_difference_ci([1.0, np.nan], [np.nan, 2.0])
+
+
+def test_ratio_of_means_is_the_mean_gain_over_the_mean_gap_with_an_interval_around_it():
+    rng = np.random.default_rng(3)
+    gap = rng.uniform(0.15, 0.3, 12)
+    gain = 0.5 * gap + rng.normal(0, 0.03, 12)
+    r, lo, hi = ratio_of_means_ci(gain, gap, seed=1)
+    assert r == pytest.approx(gain.mean() / gap.mean())
+    assert lo < r < hi
+    assert ratio_of_means_ci(gain, gap, seed=1) == (r, lo, hi)  # seeded
+
+
+def test_ratio_of_means_resamples_the_pairs_together():
+    """Gain proportional to the gap in every scene: every resample of whole scenes gives the same
+    ratio (resampling gains and gaps independently would not)."""
+    gap = np.array([0.1, 0.2, 0.3, 0.4, 0.25])
+    r, lo, hi = ratio_of_means_ci(0.6 * gap, gap)
+    assert r == pytest.approx(0.6)
+    assert lo == pytest.approx(0.6) and hi == pytest.approx(0.6)
+
+
+def test_ratio_of_means_rejects_bad_input():
+    with pytest.raises(ValueError, match="equal lengths"):
+        ratio_of_means_ci([1.0, 2.0], [1.0])
+    with pytest.raises(ValueError, match="no complete pair"):
+        ratio_of_means_ci([1.0, np.nan], [np.nan, 2.0])
+    with pytest.raises(ValueError, match="mean of den is 0"):
+        ratio_of_means_ci([1.0, 2.0], [1.0, -1.0])
+    assert ratio_of_means_ci([0.0, 0.0, 0.0], [0.2, 0.3, 0.1]) == (0.0, 0.0, 0.0)

@@ -19,7 +19,7 @@ import pandas as pd
 from ..adapt import RobotViews, adapted_name, fine_tune, robot_training_views
 from ..io import read_sequence
 from ..metrics import MEASURES, compare
-from ..stats import bootstrap_ci, paired_difference_ci
+from ..stats import bootstrap_ci, paired_difference_ci, ratio_of_means_ci
 from .layout import Layout
 from .synthetic import eval_grid_origin, reference_grid
 
@@ -236,7 +236,7 @@ def choose_adaptation_recipe(
         The chosen candidate merged into ``defaults``.
     table : DataFrame
         One row per candidate: its keywords, ``miou@low``/``miou@high`` with intervals, ``gain_low``,
-        ``change_high`` (with intervals), ``gap_closed``, ``within_forgetting``, ``chosen``.
+        ``change_high`` and ``gap_closed`` (with intervals), ``within_forgetting``, ``chosen``.
 
     Raises
     ------
@@ -362,8 +362,9 @@ def gap_table(per_scene: pd.DataFrame, network: str, *, low: float = 0.2, high: 
 
     Per model: ``measure`` at ``low`` and ``high`` (mean [interval]); ``gain_low`` (adapted minus
     unadapted at ``low``, paired over scenes) and ``change_high`` (the same at ``high``: negative
-    = forgetting); ``gap_closed``: ``gain_low`` over the unadapted network's gap ``high - low``.
-    """
+    = forgetting); ``gap_closed``: ``gain_low`` over the unadapted network's gap ``high - low``
+    (mean gain over mean gap; its interval resamples the scenes with their gain and gap together,
+    :func:`semmatch.stats.ratio_of_means_ci`)."""
     def at(model: str, h: float) -> pd.Series:
         sel = per_scene[(per_scene["model"] == model) & np.isclose(per_scene["height"], h)]
         return sel.set_index("scene")[measure]
@@ -377,11 +378,14 @@ def gap_table(per_scene: pd.DataFrame, network: str, *, low: float = 0.2, high: 
         for name, s in ((f"{measure}@{low:g}", lo), (f"{measure}@{high:g}", hi)):
             m, a, b = bootstrap_ci(s.values)
             row.update({name: m, f"{name}_lo": a, f"{name}_hi": b})
+        gain = lo.reindex(base_lo.index).values - base_lo.values
         g = paired_difference_ci(lo.reindex(base_lo.index).values, base_lo.values)
         c = paired_difference_ci(hi.reindex(base_hi.index).values, base_hi.values)
+        r = (ratio_of_means_ci(gain, (base_hi - base_lo).reindex(base_lo.index).values) if gap > 0
+             else (float("nan"),) * 3)
         row.update({"gain_low": g[0], "gain_low_lo": g[1], "gain_low_hi": g[2],
                     "change_high": c[0], "change_high_lo": c[1], "change_high_hi": c[2],
-                    "gap_closed": g[0] / gap if gap > 0 else float("nan")})
+                    "gap_closed": r[0], "gap_closed_lo": r[1], "gap_closed_hi": r[2]})
         rows.append(row)
     return pd.DataFrame(rows)
 
