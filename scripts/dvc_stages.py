@@ -79,7 +79,7 @@ stages = {
             f"profiles.{P}.adapt_robot_view"],
     outs=[f"data/{P}/adapted"],
     figs=[*tbl("adapt_label_quality", "validation_adapt_recipe", "adapt_height_per_scene", "adapt_height", "adapt_gap",
-               "table2_adapted_per_scene", "table2_adapted"), "adapt_height.png"]),
+               "table2_adapted_per_scene", "table2_adapted", "table2_adapted_vs_transfer"), "adapt_height.png"]),
  "panoptic": dict(
     nb="10_panoptic", deps=[f"data/{P}/scenes", f"data/{P}/upper", f"data/{P}/lower_maps"],
     params=["profile", *common("methods", "voxel_size", "eval_voxel_size", "jobs"), f"profiles.{P}.panoptic"],

@@ -241,3 +241,29 @@ def test_adapt_networks_reuses_a_checkpoint_of_the_same_recipe_and_refuses_anoth
     with pytest.raises(ValueError, match="cannot reuse.*label_source"):
         adapt_networks(root, "compact", robot, ["ground-truth"], reuse={"ground-truth": done}, progress=False,
                        **recipe)
+
+
+def test_robot_map_comparison_pairs_scenes_and_judges_the_interval():
+    import pandas as pd
+
+    from semmatch.experiments.adapt import robot_map_comparison
+
+    rows = []
+    for k, scene in enumerate("abcdef"):
+        rows += [dict(scene=scene, model="net", method="lower", mean_acc=0.80 + 0.01 * k),
+                 dict(scene=scene, model="net", method="3d-neighborhood", mean_acc=0.85 + 0.01 * k),
+                 dict(scene=scene, model="net", method="fused", mean_acc=0.95 + 0.01 * k),
+                 # the adapted network: +0.05 over the unadapted one in every scene, one scene less
+                 *([dict(scene=scene, model="net~gt", method="lower", mean_acc=0.85 + 0.01 * k + 0.002 * (-1) ** k)]
+                   if scene != "f" else [])]
+    t = robot_map_comparison(pd.DataFrame(rows), "net").set_index("against")
+    assert list(t.index) == ["net lower", "net 3d-neighborhood", "net fused"]
+    assert (t["scenes"] == 5).all()
+    assert t.loc["net lower", "diff"] == pytest.approx(0.05, abs=0.002)
+    assert t.loc["net lower", "verdict"] == "beats"
+    assert t.loc["net 3d-neighborhood", "verdict"] == "not resolved"
+    assert t.loc["net fused", "verdict"] == "loses"
+    with pytest.raises(ValueError, match="no adapted"):
+        robot_map_comparison(pd.DataFrame(rows), "other")
+    with pytest.raises(ValueError, match="no net rows of dbscan"):
+        robot_map_comparison(pd.DataFrame(rows), "net", against=("dbscan",))

@@ -24,7 +24,8 @@ from .layout import Layout
 from .synthetic import eval_grid_origin, reference_grid
 
 __all__ = ["robot_views", "adapt_networks", "recipe_candidates", "choose_adaptation_recipe", "pick_recipe",
-           "chosen_recipe_checkpoint", "load_adapted", "adapted_height_study", "gap_table", "adapted_lower_maps"]
+           "chosen_recipe_checkpoint", "load_adapted", "adapted_height_study", "gap_table", "adapted_lower_maps",
+           "robot_map_comparison"]
 
 
 def _adapt_dir(data_root: str | Path) -> Path:
@@ -445,3 +446,58 @@ def _adapted_lower_scene(data_root: str, networks: dict[str, object], voxel_size
         s = compare(ref, pred, eval_voxel_size, grid_origin=origin)
         rows.append({"scene": sid, "model": name, "method": "lower", **{k: float(s[k]) for k in MEASURES}})
     return rows
+
+
+def robot_map_comparison(table2: pd.DataFrame, network: str, *, against: Sequence[str] = ("3d-neighborhood", "fused"),
+                         measures: Sequence[str] = ("mean_acc",), seed: int = 0) -> pd.DataFrame:
+    """Does the adapted robot beat transfer from the person's map on its own? Paired per-scene
+    differences of each adapted network's own lower map against ``network``'s rows.
+
+    Parameters
+    ----------
+    table2 : DataFrame
+        Per-scene Table 2 rows (``scene``, ``model``, ``method`` and the measures): ``network``'s
+        rows (``lower`` and the ``against`` methods) and the adapted networks' ``lower`` rows
+        (models ``<network>~<source>``), as notebook 09's ``table2_adapted_per_scene``.
+    network : str
+        The unadapted network.
+    against : sequence of str
+        ``network``'s methods to compare with besides its own ``lower`` map (transfer methods,
+        ``fused``).
+    measures : sequence of str
+    seed : int
+        Seed of the bootstrap.
+
+    Returns
+    -------
+    DataFrame
+        One row per adapted network, compared method and measure: ``model``, ``against``,
+        ``measure``, ``diff`` (adapted minus the other, mean over scenes), ``lo``, ``hi`` (95 %
+        paired bootstrap interval), ``scenes`` and ``verdict``: ``beats`` when the interval lies
+        above 0, ``loses`` below, otherwise ``not resolved``.
+
+    Raises
+    ------
+    ValueError
+        ``table2`` has no adapted network's ``lower`` rows, or lacks a compared method of ``network``.
+    """
+    adapted = [m for m in dict.fromkeys(table2["model"]) if str(m).startswith(f"{network}~")]
+    if not adapted:
+        raise ValueError(f"the table has no adapted {network} rows (models {network}~<source>)")
+    base = table2[table2["model"] == network]
+    missing = [m for m in ("lower", *against) if m not in set(base["method"])]
+    if missing:
+        raise ValueError(f"the table has no {network} rows of {', '.join(missing)}")
+    rows = []
+    for model in adapted:
+        own = table2[(table2["model"] == model) & (table2["method"] == "lower")].set_index("scene")
+        for other in ("lower", *against):
+            ref = base[base["method"] == other].set_index("scene")
+            scenes = own.index.intersection(ref.index)
+            for m in measures:
+                d, lo, hi = paired_difference_ci(own.loc[scenes, m].to_numpy(np.float64),
+                                                 ref.loc[scenes, m].to_numpy(np.float64), seed=seed)
+                verdict = "beats" if lo > 0 else "loses" if hi < 0 else "not resolved"
+                rows.append({"model": model, "against": f"{network} {other}", "measure": m, "diff": d, "lo": lo,
+                             "hi": hi, "scenes": int(len(scenes)), "verdict": verdict})
+    return pd.DataFrame(rows)
