@@ -235,6 +235,10 @@ def test_adapt_networks_reuses_a_checkpoint_of_the_same_recipe_and_refuses_anoth
     out = adapt_networks(root, "compact", robot, ["3d-neighborhood"], reuse={"3d-neighborhood": done},
                          progress=False, **recipe)
     assert out["compact~3d-neighborhood"].read_bytes() == done.read_bytes()  # copied, not trained again
+    elsewhere = adapt_networks(root, "compact", robot, ["3d-neighborhood"], reuse={"3d-neighborhood": done},
+                               out_dir=tmp_path / "elsewhere", progress=False, **recipe)
+    assert elsewhere["compact~3d-neighborhood"] == tmp_path / "elsewhere" / "compact~3d-neighborhood.pt"
+    assert elsewhere["compact~3d-neighborhood"].read_bytes() == done.read_bytes()
     with pytest.raises(ValueError, match="cannot reuse.*steps"):
         adapt_networks(root, "compact", robot, ["3d-neighborhood"], reuse={"3d-neighborhood": done},
                        progress=False, **{**recipe, "steps": 3})

@@ -82,6 +82,7 @@ def adapt_networks(
     distill: float = 0.0,
     seed: int = 0,
     reuse: dict[str, Path] | None = None,
+    out_dir: str | Path | None = None,
     progress: bool = True,
 ) -> dict[str, Path]:
     """Fine-tune ``network`` once per label source on the robot's frames (:func:`robot_views`).
@@ -95,12 +96,14 @@ def adapt_networks(
     reuse : dict, optional
         ``{source: checkpoint}`` already fine-tuned with this very recipe from the same network
         (e.g. :func:`chosen_recipe_checkpoint`): copied instead of trained again.
+    out_dir : path, optional
+        Where the checkpoints go (default: ``data/<profile>/adapted/``, the stage's output).
     progress : bool
 
     Returns
     -------
     dict
-        ``{adapted name: checkpoint path}`` (under ``data/<profile>/adapted/``).
+        ``{adapted name: checkpoint path}`` (under ``out_dir``).
 
     Raises
     ------
@@ -114,7 +117,7 @@ def adapt_networks(
     out = {}
     for s in sources:
         name = adapted_name(network, s)
-        target = _adapt_dir(data_root) / f"{name}.pt"
+        target = Path(out_dir or _adapt_dir(data_root)) / f"{name}.pt"
         if reuse and s in reuse:
             out[name] = _reuse_checkpoint(Path(reuse[s]), target, layout.model(network), s, recipe, robot)
             continue
