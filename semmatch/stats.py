@@ -1,7 +1,7 @@
 """Bootstrap confidence intervals of a mean over scenes, of a paired mean difference, and of a
 ratio of paired means (e.g. the share of a gap closed).
 
-Both are percentile bootstrap intervals computed by :func:`scipy.stats.bootstrap`; the
+All three are percentile bootstrap intervals computed by :func:`scipy.stats.bootstrap`; the
 resampling generator is seeded, so the same values and seed give the same interval. Degenerate
 samples (one value, or all values equal) have no spread to resample: they get the zero-width
 interval ``(v, v, v)`` instead of SciPy's ``DegenerateDataWarning`` and NaN bounds.
