@@ -27,6 +27,17 @@ def _as_1d(values: ArrayLike, name: str) -> np.ndarray:
     return x.ravel()
 
 
+def _complete_pairs(a: ArrayLike, b: ArrayLike, fn: str, names: tuple[str, str]) -> tuple[np.ndarray, np.ndarray]:
+    """The pairs of ``a`` and ``b`` with no NaN on either side (``fn`` and ``names`` for errors)."""
+    x, y = _as_1d(a, f"{fn} ({names[0]})"), _as_1d(b, f"{fn} ({names[1]})")
+    if x.shape != y.shape:
+        raise ValueError(f"{fn}: {names[0]} and {names[1]} must have equal lengths, got {x.size} and {y.size}")
+    keep = ~(np.isnan(x) | np.isnan(y))
+    if not keep.any():
+        raise ValueError(f"{fn}: no complete pair (empty input, or a NaN in every pair)")
+    return x[keep], y[keep]
+
+
 def bootstrap_ci(
     values: ArrayLike,
     *,
@@ -112,13 +123,8 @@ def paired_difference_ci(
     ValueError
         If the lengths differ or no complete pair is left.
     """
-    x, y = _as_1d(a, "paired_difference_ci (a)"), _as_1d(b, "paired_difference_ci (b)")
-    if x.shape != y.shape:
-        raise ValueError(f"paired_difference_ci: a and b must have equal lengths, got {x.size} and {y.size}")
-    keep = ~(np.isnan(x) | np.isnan(y))
-    if not keep.any():
-        raise ValueError("paired_difference_ci: no complete pair (empty input, or a NaN in every pair)")
-    return bootstrap_ci(x[keep] - y[keep], confidence=confidence, n_resamples=n_resamples, seed=seed)
+    x, y = _complete_pairs(a, b, "paired_difference_ci", ("a", "b"))
+    return bootstrap_ci(x - y, confidence=confidence, n_resamples=n_resamples, seed=seed)
 
 
 def ratio_of_means_ci(
@@ -159,13 +165,7 @@ def ratio_of_means_ci(
     """
     if not 0.0 < confidence < 1.0:
         raise ValueError(f"ratio_of_means_ci: confidence must be in (0, 1), got {confidence}")
-    x, y = _as_1d(num, "ratio_of_means_ci (num)"), _as_1d(den, "ratio_of_means_ci (den)")
-    if x.shape != y.shape:
-        raise ValueError(f"ratio_of_means_ci: num and den must have equal lengths, got {x.size} and {y.size}")
-    keep = ~(np.isnan(x) | np.isnan(y))
-    if not keep.any():
-        raise ValueError("ratio_of_means_ci: no complete pair (empty input, or a NaN in every pair)")
-    x, y = x[keep], y[keep]
+    x, y = _complete_pairs(num, den, "ratio_of_means_ci", ("num", "den"))
     if float(np.mean(y)) == 0.0:
         raise ValueError("ratio_of_means_ci: the mean of den is 0 (the ratio is undefined)")
     ratio = float(np.mean(x) / np.mean(y))

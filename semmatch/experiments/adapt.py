@@ -382,11 +382,11 @@ def gap_table(per_scene: pd.DataFrame, network: str, *, low: float = 0.2, high: 
         for name, s in ((f"{measure}@{low:g}", lo), (f"{measure}@{high:g}", hi)):
             m, a, b = bootstrap_ci(s.values)
             row.update({name: m, f"{name}_lo": a, f"{name}_hi": b})
-        gain = lo.reindex(base_lo.index).values - base_lo.values
-        g = paired_difference_ci(lo.reindex(base_lo.index).values, base_lo.values)
+        lo_paired = lo.reindex(base_lo.index).values
+        g = paired_difference_ci(lo_paired, base_lo.values)
         c = paired_difference_ci(hi.reindex(base_hi.index).values, base_hi.values)
-        r = (ratio_of_means_ci(gain, (base_hi - base_lo).reindex(base_lo.index).values) if gap > 0
-             else (float("nan"),) * 3)
+        r = (ratio_of_means_ci(lo_paired - base_lo.values, (base_hi - base_lo).reindex(base_lo.index).values)
+             if gap > 0 else (float("nan"),) * 3)
         row.update({"gain_low": g[0], "gain_low_lo": g[1], "gain_low_hi": g[2],
                     "change_high": c[0], "change_high_lo": c[1], "change_high_hi": c[2],
                     "gap_closed": r[0], "gap_closed_lo": r[1], "gap_closed_hi": r[2]})
