@@ -10,7 +10,7 @@ import sys
 import yaml
 
 from semmatch.experiments.pipeline import OVERRIDABLE, ROOT
-from semmatch.experiments.stagedeps import stage_modules
+from semmatch.experiments.stagedeps import DISPLAY_ONLY, stage_modules
 
 PROFILES = yaml.safe_load((ROOT / "params.yaml").read_text())["profiles"]
 
@@ -28,8 +28,22 @@ def tbl(*names):
     return out
 
 
+# execution settings: how a stage runs, not what it computes (results do not depend on them), so
+# they are never tracked and changing them reruns nothing
+EXECUTION = ("jobs", "scheduler")
+
+
 def common(*keys):
+    assert not set(keys) & set(EXECUTION), f"execution settings {EXECUTION} are not tracked params"
     return [f"profiles.{P}.common.{k}" for k in keys]
+
+
+def modules(nb, figs):
+    """The stage's semmatch modules: never the display-only ones, the figure-drawing ones
+    (semmatch.plots) only when the stage writes a figure file."""
+    draws = any(str(f).endswith(".png") for f in figs)
+    return stage_modules(nb, leave_out=DISPLAY_ONLY + (() if draws else ("semmatch.plots",)))
+
 
 
 stages = {
@@ -44,17 +58,17 @@ stages = {
     figs=["training_curves.png", *tbl("segmentation_validation", "validation_flip", "validation_flip_summary")]),
  "reconstruct_upper": dict(
     nb="03_reconstruct_upper", deps=[f"data/{P}/scenes", f"data/{P}/models"],
-    params=["profile", *common("networks", "voxel_size", "eval_voxel_size", "jobs"), f"profiles.{P}.reconstruct_upper"],
+    params=["profile", *common("networks", "voxel_size", "eval_voxel_size"), f"profiles.{P}.reconstruct_upper"],
     outs=[f"data/{P}/upper"], figs=[*tbl("upper_maps"), "upper_maps.png"]),
  "label_transfer": dict(
     nb="04_label_transfer", deps=[f"data/{P}/scenes", f"data/{P}/models", f"data/{P}/upper"],
-    params=["profile", *common("methods", "networks", "jobs", "fused_base"), f"profiles.{P}.label_transfer"],
+    params=["profile", *common("methods", "networks", "fused_base"), f"profiles.{P}.label_transfer"],
     outs=[f"data/{P}/lower_labels"],
     figs=[*tbl("table1_speed", "support_per_scene"), "table1_speed.png", "support_per_scene.png",
           "fig_transferred_frames.png"]),
  "evaluate_synthetic": dict(
     nb="05_evaluate_synthetic", deps=[f"data/{P}/scenes", f"data/{P}/upper", f"data/{P}/lower_labels"],
-    params=["profile", *common("methods", "networks", "voxel_size", "eval_voxel_size", "fused_base", "jobs"), f"profiles.{P}.evaluate_synthetic"],
+    params=["profile", *common("methods", "networks", "voxel_size", "eval_voxel_size", "fused_base"), f"profiles.{P}.evaluate_synthetic"],
     outs=[f"data/{P}/lower_maps"],
     figs=[*tbl("table2_per_scene", "table2_synthetic", "table2_mesh_reference", "table2_route_ablation", "claims_synthetic", "table2_training_seeds"),
           "table2_synthetic.png", "table2_mesh_reference.png", "findings_synthetic.md"]),
@@ -64,7 +78,7 @@ stages = {
     outs=[], figs=[*tbl("fig3_height", "fig3_height_per_scene", "claims_height", "fig3_training_seeds"), "fig3_height.png", "findings_height.md"]),
  "real_data": dict(
     nb="07_real_data", deps=[f"data/{P}/scenes", f"data/{P}/models", f"data/{P}/upper", f"data/{P}/lower_maps"],
-    params=["profile", *common("methods", "networks", "voxel_size", "eval_voxel_size", "fused_base", "jobs"), f"profiles.{P}.real_data"],
+    params=["profile", *common("methods", "networks", "voxel_size", "eval_voxel_size", "fused_base"), f"profiles.{P}.real_data"],
     outs=[f"data/{P}/real_like"],
     figs=[*tbl("table3_per_scene", "table3_real", "table3_mesh_reference", "trajectory_error", "validation_odometry_gate",
                "misregistration", "claims_real", "trajectory_error_summary", "registration_error"),
@@ -82,7 +96,7 @@ stages = {
                "table2_adapted_per_scene", "table2_adapted", "table2_adapted_vs_transfer"), "adapt_height.png"]),
  "panoptic": dict(
     nb="10_panoptic", deps=[f"data/{P}/scenes", f"data/{P}/upper", f"data/{P}/lower_maps"],
-    params=["profile", *common("methods", "voxel_size", "eval_voxel_size", "jobs"), f"profiles.{P}.panoptic"],
+    params=["profile", *common("methods", "voxel_size", "eval_voxel_size"), f"profiles.{P}.panoptic"],
     outs=[f"data/{P}/panoptic"],
     figs=[*tbl("validation_panoptic_clustering", "table_panoptic_per_scene", "table_panoptic"),
           "table_panoptic.png", "fig_panoptic.png"]),
@@ -90,12 +104,18 @@ stages = {
 # stages whose headline numbers go to figures/<profile>/metrics/<stage>.json (semmatch.experiments.headline)
 METRICS = ("train_segmentation", "reconstruct_upper", "label_transfer", "evaluate_synthetic", "height_study",
            "real_data", "adapt_robot_view", "panoptic")
-# curves and tables for `dvc plots show`: file -> (stage, x, y)
+# curves and tables for `dvc plots show`: file -> (stage, x, y, template, title). Templates are the
+# vega-lite specs in .dvc/plots/ (each draws one mark per series: per model, method or route);
+# the page loads vega from .dvc/plots/offline.html (configured in .dvc/config), so it works offline.
 PLOTS = {
-    "fig3_height.csv": ("height_study", "height", "miou"),
-    "table1_speed.csv": ("label_transfer", "method", "fps"),
-    "support_per_scene.csv": ("label_transfer", "scene", "support"),
-    "misregistration.csv": ("real_data", "translation_m", "mean_acc"),
+    "fig3_height.csv": ("height_study", "height", "miou", "lines_by_model",
+                        "Fig. 3: mIoU against camera height, one line per network (95 % band)"),
+    "table1_speed.csv": ("label_transfer", "method", "fps", "bar_log",
+                         "Table 1: label-transfer speed per method (FPS, this machine)"),
+    "support_per_scene.csv": ("label_transfer", "scene", "support", "grouped_bar_route",
+                              "Support of the robot's frames in the person's map, per scene and route"),
+    "misregistration.csv": ("real_data", "translation_m", "mean_acc", "misregistration",
+                            "Mean Acc. against misregistration of the person's map, one line per method"),
 }
 
 
@@ -117,14 +137,15 @@ for name, st in stages.items():
     figs = [f for f in st["figs"] if f not in plots]
     stage = {
         "cmd": f"python -m semmatch.experiments run {st['nb']}",
-        "deps": [f"notebooks/{st['nb']}.ipynb", *stage_modules(st["nb"]), *st["deps"]],
+        "deps": [f"notebooks/{st['nb']}.ipynb", *modules(st["nb"], st["figs"]), *st["deps"]],
         "params": with_overrides(st["params"]),
         "outs": [*st["outs"], f"reports/{P}/{st['nb']}.ipynb", *fig(*figs)],
     }
     if name in METRICS:
         stage["metrics"] = [{f"figures/{P}/metrics/{name}.json": {"cache": False}}]
     if plots:
-        stage["plots"] = [{f"figures/{P}/{f}": {"cache": False, "x": x, "y": y}} for f, (_, x, y) in plots.items()]
+        stage["plots"] = [{f"figures/{P}/{f}": {"cache": False, "x": x, "y": y, "template": tpl, "title": title}}
+                          for f, (_, x, y, tpl, title) in plots.items()]
     out["stages"][name] = stage
 head = """# The paper's results, one stage per notebook, run through papermill by
 # `python -m semmatch.experiments run NN_name` with the parameters of the active profile
@@ -133,7 +154,8 @@ head = """# The paper's results, one stage per notebook, run through papermill b
 # Every stage depends on the semmatch modules it can run, found from the imports of its
 # notebook and of the stage command (semmatch.experiments.stagedeps; generated by
 # scripts/dvc_stages.py, checked at run time by the smoke test): editing a module reruns
-# exactly the stages that use it.
+# exactly the stages that use it. Display-only modules (semmatch.viz: views inside the
+# executed reports) and execution settings (jobs, scheduler) are not tracked.
 """
 if __name__ == "__main__":
     open(sys.argv[1], "w").write(head + yaml.safe_dump(out, sort_keys=False, width=120))

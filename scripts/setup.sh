@@ -6,6 +6,8 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 VENV=${VENV:-.venv}
 PYTHON=${PYTHON:-python3}
+TORCH="torch==2.13.0"  # the same pin as environment.yml (tests/test_packaging.py)
+TORCH_CPU_INDEX=${TORCH_CPU_INDEX:-https://download.pytorch.org/whl/cpu}
 
 if ! /sbin/ldconfig -p 2>/dev/null | grep -q 'libusb-1.0.so.0'; then
   if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
@@ -43,9 +45,26 @@ pip_install() { "$VENV/bin/python" -m pip install -q "$@" 2> >(grep -v "^WARNING
 if [ ! -f "$stamp" ] || [ requirements.txt -nt "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
   echo "setup: installing pinned dependencies into $VENV (CPU torch)"
   pip_install --upgrade pip
-  # torch first and alone: a pinned CPU build, so nothing can pull a CUDA build
-  pip_install "torch==2.13.0"
+  # torch first and alone: a pinned CPU build, so nothing can pull a CUDA build. PyTorch's own CPU
+  # wheel index when it answers (any Linux machine: PyPI's torch is the CUDA build, several GB of
+  # nvidia wheels); else, fast, the ordinary index (machines whose pip already resolves to a CPU build)
+  if "$VENV/bin/python" -c "import urllib.request as u; u.urlopen('$TORCH_CPU_INDEX/torch/', timeout=4)" 2>/dev/null; then
+    echo "setup: torch from PyTorch's CPU wheel index"
+    pip_install --index-url "$TORCH_CPU_INDEX" "$TORCH"
+  else
+    echo "setup: PyTorch's CPU wheel index not reachable: torch from the configured index"
+    pip_install "$TORCH"
+  fi
   pip_install -r requirements.txt
   pip_install --no-deps -e .
   touch "$stamp"
+fi
+
+# Dash (a dependency of Open3D; semmatch does not use it) installs a JupyterLab source extension
+# that makes JupyterLab open with "Build Recommended: @plotly/dash-jupyterlab". Remove it from the
+# environment's lab folder (pip puts it back on reinstall: checked every run) and disable it.
+rm -f "$VENV"/share/jupyter/lab/extensions/dash-jupyterlab*.tgz
+if [ -x "$VENV/bin/jupyter" ] && ! grep -qs '"@plotly/dash-jupyterlab": true' "$VENV/etc/jupyter/labconfig/page_config.json"; then
+  "$VENV/bin/jupyter" labextension disable --level=sys_prefix @plotly/dash-jupyterlab >/dev/null 2>&1 \
+    || echo "setup: warning: could not disable the Dash JupyterLab extension" >&2
 fi

@@ -319,6 +319,44 @@ def test_stages_depend_on_what_they_use_and_not_on_the_rest():
         assert "semmatch/experiments/pipeline.py" in st["deps"] and "semmatch" not in st["deps"]
 
 
+def test_editing_viz_or_execution_settings_reruns_no_stage():
+    """DVC reruns a stage when a dependency or a tracked param changes: viz.py (views shown in the
+    reports only) and jobs/scheduler (how, not what) are neither for any stage; the figure code
+    is a dependency exactly of the stages that write figure files."""
+    import yaml
+
+    stages = yaml.safe_load((pipeline.ROOT / "dvc.yaml").read_text())["stages"]
+    for name, st in stages.items():
+        assert not [d for d in st["deps"] if d.startswith("semmatch/viz")], name
+        assert not [p for p in st["params"] if p.split(".")[-1] in ("jobs", "scheduler")], name
+        draws = any(str(next(iter(o)) if isinstance(o, dict) else o).endswith(".png") for o in st["outs"])
+        assert ("semmatch/plots/charts.py" in st["deps"]) == draws, name
+    # 03 shows a 3D view with viz: its computing code stays tracked, viz does not
+    assert "semmatch/experiments/synthetic.py" in stages["reconstruct_upper"]["deps"]
+
+
+def test_stage_modules_leave_out_display_only_modules(tmp_path):
+    import json
+
+    from semmatch.experiments.stagedeps import stage_modules
+
+    pkg = tmp_path / "semmatch"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text("")
+    (pkg / "runner.py").write_text("")
+    (pkg / "compute.py").write_text("def show():\n    from .viz import view\n")
+    (pkg / "viz.py").write_text("from .only_for_views import colours\n")
+    (pkg / "only_for_views.py").write_text("")
+    (tmp_path / "notebooks").mkdir()
+    cell = {"cell_type": "code", "metadata": {}, "outputs": [], "execution_count": None,
+            "source": ["from semmatch import compute\n", "from semmatch.viz import view\n"]}
+    (tmp_path / "notebooks" / "nb.ipynb").write_text(json.dumps({"cells": [cell], "metadata": {}, "nbformat": 4,
+                                                                  "nbformat_minor": 5}))
+    mods = stage_modules("nb", root=tmp_path, runner="semmatch.runner", leave_out=("semmatch.viz",))
+    assert mods == ["semmatch/__init__.py", "semmatch/compute.py", "semmatch/runner.py"]
+    assert "semmatch/viz.py" in stage_modules("nb", root=tmp_path, runner="semmatch.runner", leave_out=())
+
+
 def test_top_level_overrides_reach_the_profile(tmp_path):
     body = ("profiles:\n  p:\n    common: {seed: 0, voxel_size: 0.05, methods: [a, b]}\n"
             "    simulate: {n_frames_lower: 8}\n")
@@ -428,3 +466,20 @@ def test_layout_scene_dir_by_index(tmp_path):
     assert layout.scene_dir(0).name == "bedroom_7001" and layout.scene_dir(1).name == "office_7002"
     with pytest.raises(ValueError, match="scene index 2 out of range: 2 eval scenes"):
         layout.scene_dir(2)
+
+
+def test_root_is_found_from_the_working_directory_not_the_package(tmp_path, monkeypatch):
+    """A checkout is found by walking up to params.yaml (Jupyter starts in notebooks/), or named
+    by SEMMATCH_ROOT; the package's own location does not decide (a shared or non-editable install)."""
+    other = tmp_path / "checkout"
+    (other / "notebooks" / "deep").mkdir(parents=True)
+    (other / "params.yaml").write_text("profile: smoke\n")
+    monkeypatch.delenv(pipeline.ROOT_ENV, raising=False)
+    assert pipeline.find_root(other / "notebooks" / "deep") == other.resolve()
+    monkeypatch.chdir(other / "notebooks")
+    assert pipeline.find_root() == other.resolve()
+    monkeypatch.setenv(pipeline.ROOT_ENV, str(other))
+    assert pipeline.find_root(pipeline.ROOT) == other.resolve()  # the variable wins over the search
+    monkeypatch.setenv(pipeline.ROOT_ENV, str(tmp_path))
+    with pytest.raises(FileNotFoundError, match="SEMMATCH_ROOT=.*no params.yaml"):
+        pipeline.find_root()

@@ -29,6 +29,8 @@ from .protocol import check_protocol
 __all__ = [
     "NOTEBOOKS",
     "ROOT",
+    "ROOT_ENV",
+    "find_root",
     "NotebookFailed",
     "section_of",
     "load_params",
@@ -40,7 +42,48 @@ __all__ = [
     "main",
 ]
 
-ROOT = Path(__file__).resolve().parents[2]
+#: environment variable naming the repository root (the folder with ``params.yaml``)
+ROOT_ENV = "SEMMATCH_ROOT"
+
+
+def find_root(start: str | os.PathLike | None = None) -> Path:
+    """The repository root the pipeline reads ``params.yaml`` from and writes ``data/`` under.
+
+    ``$SEMMATCH_ROOT`` when set, else the nearest folder at or above ``start`` (default: the
+    working directory, e.g. ``notebooks/`` in Jupyter) that holds ``params.yaml``. Not the
+    package's location: with a non-editable install, or one environment shared by two
+    checkouts, that is not the checkout being worked in. Outside any checkout the source
+    tree's root is the last resort (an editable install), then the working directory.
+
+    Parameters
+    ----------
+    start : path, optional
+        Where the search starts.
+
+    Returns
+    -------
+    Path
+
+    Raises
+    ------
+    FileNotFoundError
+        If ``$SEMMATCH_ROOT`` is set to a folder without ``params.yaml``.
+    """
+    env = os.environ.get(ROOT_ENV)
+    if env:
+        root = Path(env).expanduser().resolve()
+        if not (root / "params.yaml").is_file():
+            raise FileNotFoundError(f"{ROOT_ENV}={env}: no params.yaml in {root} (it must name the repository root)")
+        return root
+    here = Path(start if start is not None else os.getcwd()).resolve()
+    for folder in (here, *here.parents):
+        if (folder / "params.yaml").is_file():
+            return folder
+    source = Path(__file__).resolve().parents[2]
+    return source if (source / "params.yaml").is_file() else here
+
+
+ROOT = find_root()
 
 #: the notebooks in run order
 NOTEBOOKS: tuple[str, ...] = (
@@ -139,6 +182,30 @@ def notebook_parameters(
     return params
 
 
+def _quiet_dash_comm() -> None:
+    """Give Dash a comm that talks to no frontend.
+
+    Open3D imports Dash, which opens a ``dash`` comm when imported in a Jupyter kernel; only
+    Dash's own JupyterLab extension (disabled by scripts/setup.sh) would handle it, so nbconvert
+    and papermill warn "No handler found for comm target 'dash'". Other comms are untouched.
+    """
+    try:
+        import comm
+    except ImportError:  # pragma: no cover  (not in a Jupyter environment)
+        return
+    if getattr(comm.create_comm, "_semmatch_quiet", False):
+        return
+    create = comm.create_comm
+
+    def create_comm(*args, **kwargs):
+        if kwargs.get("target_name") == "dash":
+            return comm.DummyComm(*args, **kwargs)
+        return create(*args, **kwargs)
+
+    create_comm._semmatch_quiet = True
+    comm.create_comm = create_comm
+
+
 def notebook_setup(notebook: str, namespace: dict) -> dict:
     """Make a notebook run the same in plain Jupyter as under papermill.
 
@@ -165,6 +232,7 @@ def notebook_setup(notebook: str, namespace: dict) -> dict:
     """
     if not os.environ.get("SEMMATCH_PIPELINE"):  # under run_notebook papermill sets the directory
         os.chdir(ROOT)
+    _quiet_dash_comm()
     from .stagedeps import record_loaded_modules
 
     record_loaded_modules(notebook)  # only with SEMMATCH_RECORD_MODULES set (the DVC deps test)

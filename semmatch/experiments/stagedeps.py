@@ -8,6 +8,12 @@ imports anywhere in a module (also those inside functions, which run only when c
 parent packages of every module, and the lazily exported names of a package (an ``_EXPORTS``
 table of ``name -> submodule``, as :mod:`semmatch.segment` has).
 
+Presentation-only modules are left out (``leave_out``, default :data:`DISPLAY_ONLY`): the
+interactive 3D views of :mod:`semmatch.viz` appear only in the executed report, never in a
+tracked table, figure or data file, so editing them must rerun no computing stage. The
+pipeline's generator (``scripts/dvc_stages.py``) also leaves out :mod:`semmatch.plots` for a
+stage that draws no figure file.
+
 :func:`record_loaded_modules` is the runtime check: under the pipeline with
 ``SEMMATCH_RECORD_MODULES=<folder>`` set, every notebook writes the semmatch modules it
 actually loaded to ``<folder>/<notebook>.txt`` when its kernel exits; the smoke test compares
@@ -23,13 +29,22 @@ import os
 import sys
 from pathlib import Path
 
-__all__ = ["stage_modules", "record_loaded_modules", "RECORD_ENV"]
+__all__ = ["stage_modules", "record_loaded_modules", "RECORD_ENV", "DISPLAY_ONLY"]
 
 #: environment variable naming the folder where notebooks record the modules they loaded
 RECORD_ENV = "SEMMATCH_RECORD_MODULES"
 
 _ROOT = Path(__file__).resolve().parents[2]
 _PACKAGE = "semmatch"
+
+#: modules (with their submodules) whose output is only shown, never written to a tracked file:
+#: no stage depends on them, nor on what only they import
+DISPLAY_ONLY = ("semmatch.viz",)
+
+
+def _under(name: str, packages: tuple[str, ...]) -> bool:
+    """True when module ``name`` is one of ``packages`` or inside one of them."""
+    return any(name == p or name.startswith(p + ".") for p in packages)
 
 
 def _module_file(name: str, root: Path) -> Path | None:
@@ -71,14 +86,17 @@ def _lazy_exports(tree: ast.AST, package: str) -> set[str]:
     return set()
 
 
-def _closure(names: set[str], root: Path) -> dict[str, Path]:
-    """Modules reachable from ``names`` (with their parent packages) -> source file."""
+def _closure(names: set[str], root: Path, leave_out: tuple[str, ...] = ()) -> dict[str, Path]:
+    """Modules reachable from ``names`` (with their parent packages) -> source file, not entering
+    the modules of ``leave_out``."""
     seen: dict[str, Path] = {}
     todo = sorted(names)
     while todo:
         parts = todo.pop().split(".")
         for i in range(1, len(parts) + 1):
             mod = ".".join(parts[:i])
+            if _under(mod, leave_out):
+                break
             f = _module_file(mod, root)
             if f is None or mod in seen:
                 continue
@@ -103,7 +121,8 @@ def _notebook_code(path: Path) -> str:
 
 
 def stage_modules(notebook: str | os.PathLike, *, root: str | os.PathLike = _ROOT,
-                  runner: str = "semmatch.experiments.pipeline") -> list[str]:
+                  runner: str = "semmatch.experiments.pipeline",
+                  leave_out: tuple[str, ...] = DISPLAY_ONLY) -> list[str]:
     """Source files of every semmatch module a pipeline stage can run.
 
     Parameters
@@ -114,6 +133,9 @@ def stage_modules(notebook: str | os.PathLike, *, root: str | os.PathLike = _ROO
         Repository root (the folder holding the ``semmatch`` package).
     runner : str
         Module of the stage command, included with its imports.
+    leave_out : tuple of str
+        Presentation-only modules (and their submodules) the stage must not depend on; imports
+        are not followed into them.
 
     Returns
     -------
@@ -137,7 +159,7 @@ def stage_modules(notebook: str | os.PathLike, *, root: str | os.PathLike = _ROO
         names = _imported_names(ast.parse(_notebook_code(nb), filename=str(nb)), "")
     except SyntaxError as e:
         raise SyntaxError(f"{nb}: a code cell is not valid Python: {e}") from None
-    files = _closure(names | {runner}, root)
+    files = _closure(names | {runner}, root, tuple(leave_out))
     return sorted(f.relative_to(root).as_posix() for f in files.values())
 
 
@@ -151,6 +173,10 @@ def record_loaded_modules(notebook: str, folder: str | os.PathLike | None = None
     folder : path, optional
         Default: the folder named by ``SEMMATCH_RECORD_MODULES``; nothing is recorded when
         neither is given.
+
+    Notes
+    -----
+    The modules of :data:`DISPLAY_ONLY` are not recorded: stages leave them out by design.
 
     Returns
     -------
@@ -166,7 +192,8 @@ def record_loaded_modules(notebook: str, folder: str | os.PathLike | None = None
         files = set()
         for m in list(sys.modules.values()):
             f = getattr(m, "__file__", None)
-            if f and (getattr(m, "__name__", "") == _PACKAGE or getattr(m, "__name__", "").startswith(_PACKAGE + ".")):
+            name = getattr(m, "__name__", "")
+            if f and _under(name, (_PACKAGE,)) and not _under(name, DISPLAY_ONLY):
                 p = Path(f).resolve()
                 files.add(p.relative_to(_ROOT).as_posix() if p.is_relative_to(_ROOT) else str(p))
         out.parent.mkdir(parents=True, exist_ok=True)
