@@ -1,4 +1,4 @@
-"""semmatch.stats: percentile bootstrap intervals of a mean and of a paired difference."""
+"""semmatch.stats: stratified t intervals and tests, Holm, and percentile bootstrap intervals."""
 
 from __future__ import annotations
 
@@ -6,8 +6,20 @@ import warnings
 
 import numpy as np
 import pytest
+from scipy import stats as st
 
-from semmatch.stats import bootstrap_ci, paired_difference_ci, ratio_of_means_ci
+from semmatch.stats import (
+    INTERVAL_METHODS,
+    bootstrap_ci,
+    holm,
+    interval,
+    paired_difference_ci,
+    ratio_of_means_ci,
+    scene_kind,
+    stratified_estimate,
+    stratified_t_ci,
+    t_test_pvalue,
+)
 
 
 def test_constant_sample_gives_zero_width_interval_without_warning():
@@ -110,3 +122,75 @@ def test_ratio_of_means_rejects_bad_input():
     with pytest.raises(ValueError, match="mean of den is 0"):
         ratio_of_means_ci([1.0, 2.0], [1.0, -1.0])
     assert ratio_of_means_ci([0.0, 0.0, 0.0], [0.2, 0.3, 0.1]) == (0.0, 0.0, 0.0)
+
+
+# ------------------------------------------------------------------------------------------------
+# stratified t intervals, tests, Holm
+
+
+def test_scene_kind():
+    assert scene_kind("living_room_8001") == "living_room"
+    assert scene_kind("office_7003") == "office"
+    assert scene_kind("s0") == "s0" and scene_kind("room_a") == "room_a"
+
+
+def test_unstratified_estimate_is_the_one_sample_t():
+    x = np.random.default_rng(3).normal(0.5, 0.1, 9)
+    est = stratified_estimate(x)
+    assert est.mean == pytest.approx(x.mean()) and est.df == 8 and not est.stratified
+    assert est.se == pytest.approx(x.std(ddof=1) / 3)
+    ref = st.ttest_1samp(x, 0.45, alternative="greater")
+    assert t_test_pvalue(est, 0.45, "greater") == pytest.approx(ref.pvalue)
+    assert t_test_pvalue(est, 0.45, "less") == pytest.approx(1 - ref.pvalue)
+    lo, hi = st.t.interval(0.95, 8, loc=x.mean(), scale=est.se)
+    assert stratified_t_ci(x) == pytest.approx((x.mean(), lo, hi))
+
+
+def test_stratified_estimate_uses_within_stratum_spread_and_welch_df():
+    a, b = np.array([1.0, 2.0, 3.0]), np.array([10.0, 11.0, 13.0])
+    est = stratified_estimate(np.r_[a, b], ["a"] * 3 + ["b"] * 3)
+    assert est.stratified and est.mean == pytest.approx(np.r_[a, b].mean())
+    # equal weights 1/2: var = (s_a^2/3 + s_b^2/3) / 4 (the same as Welch's SE of (a+b)/2)
+    va, vb = a.var(ddof=1) / 3 / 4, b.var(ddof=1) / 3 / 4
+    assert est.se == pytest.approx(np.sqrt(va + vb))
+    assert est.df == pytest.approx((va + vb) ** 2 / (va**2 / 2 + vb**2 / 2))
+    # a stratum with one value, or a single stratum: the plain t
+    assert not stratified_estimate([1.0, 2.0, 4.0], ["a", "a", "b"]).stratified
+    assert not stratified_estimate([1.0, 2.0, 4.0], ["a"] * 3).stratified
+    with pytest.raises(ValueError, match="stratum labels"):
+        stratified_estimate([1.0, 2.0], ["a"])
+    with pytest.raises(ValueError, match="no values"):
+        stratified_estimate([np.nan])
+
+
+def test_degenerate_samples_and_their_tests():
+    est = stratified_estimate([0.3, 0.3, 0.3])
+    assert est.se == 0 and stratified_t_ci([0.3, 0.3, 0.3]) == (0.3, 0.3, 0.3)
+    assert t_test_pvalue(est, 0.0, "greater") == 0.0 and t_test_pvalue(est, 0.0, "less") == 1.0
+    assert t_test_pvalue(est, 0.3, "greater") == 1.0
+    with pytest.raises(ValueError, match="alternative"):
+        t_test_pvalue(est, 0.0, "two-sided")
+
+
+def test_holm_matches_the_step_down_rule():
+    p = [0.01, 0.04, 0.03, 0.005, np.nan]
+    # sorted 0.005, 0.01, 0.03, 0.04 times 4, 3, 2, 1, made monotone
+    np.testing.assert_allclose(holm(p), [0.03, 0.06, 0.06, 0.02, np.nan])
+    assert holm([0.9, 0.8]).tolist() == [1.0, 1.0] and holm([0.2, 0.01]).tolist() == [0.2, 0.02]
+    assert holm([]).size == 0 and np.isnan(holm([np.nan])).all()
+
+
+@pytest.mark.parametrize("method", INTERVAL_METHODS)
+def test_every_interval_method_brackets_the_mean(method):
+    x = np.random.default_rng(11).normal(0.0, 1.0, 12)
+    kinds = np.repeat(["a", "b", "c", "d"], 3)
+    m, lo, hi = interval(x, kinds, method=method, n_resamples=500)
+    assert m == pytest.approx(x.mean()) and lo < m < hi
+    assert interval([0.5, 0.5], method=method) == (0.5, 0.5, 0.5)
+    assert interval(x, kinds, method=method, n_resamples=500, seed=2) == interval(x, kinds, method=method,
+                                                                                     n_resamples=500, seed=2)
+
+
+def test_interval_refuses_unknown_methods():
+    with pytest.raises(ValueError, match="method"):
+        interval([1.0, 2.0], method="wald")

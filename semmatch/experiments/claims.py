@@ -1,33 +1,37 @@
-"""Intervals over scenes, and a verdict with an interval for every comparative claim of the paper.
+"""Intervals over scenes, and a verdict for every comparative claim of the paper by the analysis plan.
 
-The per-scene tables of the pipeline (Table 2: synthetic, Table 3: real-like, Fig. 3: height
-sweep) are summarised as means with 95 % percentile bootstrap intervals over scenes
-(:func:`summarize_over_scenes`), and each comparative claim of the paper's §4-5 (:data:`CLAIMS`)
-is judged on paired per-scene differences (:func:`check_claims`):
+The analysis plan (``analysis_plan.yaml`` beside this module, explained in
+``docs/analysis_plan.md``) fixes the claims, their comparisons and measures, the references, the
+interval method, the smallest effect size of interest (SESOI) per measure, the multiplicity rule
+and the verdict rules; :func:`load_analysis_plan` reads it and the functions here apply it.
 
-* ``beats`` (A beats B): *holds* if the interval of mean(A - B) lies above 0, *does not hold*
-  if it lies below 0, else *not resolved*.
-* ``best`` (A is best of a set): A - X for every other member X; *holds* if every interval is
-  above 0, *does not hold* if any is below 0, else *not resolved*. ``worst`` (every other member
-  beats A) is the same on X - A. One row per claim and model, showing the deciding competitor.
-* ``similar`` (A similar to B, equivalence): *holds* if the interval of mean(A - B) lies inside
-  ``(-margin, margin)``, *does not hold* if it lies entirely beyond ``margin`` or ``-margin``,
-  else *not resolved*.
-
-A comparison with fewer than ``min_scenes`` complete scene pairs is *not resolved* (one scene has
-no spread to judge by). Claims whose data or methods are absent give no row.
+* :func:`summarize_over_scenes`: mean of each measure over scenes with the plan's interval
+  (a t interval over scenes).
+* :func:`check_claims`: every comparison of every claim, under each reference, on paired
+  per-scene differences: the mean difference with its 95 % interval, Holm-adjusted one-sided
+  tests within the claim's family (its comparisons under one reference), a verdict (``holds``,
+  ``does not hold``, ``equivalent`` within the SESOI, ``inconclusive``) and the paper's own
+  difference with whether it lies inside our interval.
+* :func:`claim_verdicts`: one verdict per claim and reference by the plan's claim rule, and
+  :func:`verdict_table` the claims with the primary and the secondary reference side by side.
+* :func:`judge_speed_claims`: the paper's speed statements on Table 1.
+* :func:`judge_figures`: all of it on one run's per-scene tables, in one verdict table.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from functools import lru_cache
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import yaml
 
 from ..metrics import MEASURES
-from ..stats import bootstrap_ci, paired_difference_ci
+from ..stats import holm, interval, scene_kind, stratified_estimate, t_test_pvalue
+from .paper import FIG3_MEAN_ACC, PAPER_MODEL_OF, TABLE2, TABLE3
 
 __all__ = [
     "MEASURES",
@@ -35,12 +39,21 @@ __all__ = [
     "VERDICTS",
     "ALL_OTHERS",
     "TOP_HEIGHT",
+    "PLAN_FILE",
     "Claim",
+    "AnalysisPlan",
+    "load_analysis_plan",
     "CLAIMS",
     "summarize_over_scenes",
     "format_with_intervals",
     "check_claims",
+    "claim_verdicts",
+    "verdict_table",
+    "judge_speed_claims",
     "claims_markdown",
+    "judge_figures",
+    "support_regression",
+    "per_kind_means",
 ]
 
 MEASURE_LABELS = {
@@ -50,12 +63,14 @@ MEASURE_LABELS = {
     "mean_acc": "Mean Acc.",
     "miou": "mIoU",
 }
-VERDICTS = ("holds", "does not hold", "not resolved")
+VERDICTS = ("holds", "does not hold", "equivalent", "inconclusive")
 
 #: in :attr:`Claim.others`: every other transfer method (tables) or every other height (Fig. 3)
 ALL_OTHERS = "<all others>"
 #: in :attr:`Claim.others`: the highest camera height of the sweep
 TOP_HEIGHT = "<top height>"
+#: the analysis plan read by :func:`load_analysis_plan`
+PLAN_FILE = Path(__file__).with_name("analysis_plan.yaml")
 
 _GT = "ground truth"
 #: columns that split a per-scene table into separate tables (never pooled)
@@ -64,6 +79,9 @@ _BASELINES = ("lower", "upper")
 _DATA = {"synthetic": "table2", "real-like": "table3", "height sweep": "fig3"}
 _KINDS = ("beats", "best", "worst", "similar")
 _MODELS = ("networks", "ground truth", "all")
+_ROLES = ("primary", "secondary")
+#: the reference name of Fig. 3's rows (per-frame scores against ground-truth label images)
+FRAMES_REFERENCE = "frames"
 
 
 @dataclass(frozen=True)
@@ -81,16 +99,20 @@ class Claim:
     data : str
         ``"synthetic"`` (Table 2), ``"real-like"`` (Table 3) or ``"height sweep"`` (Fig. 3).
     kind : str
-        ``"beats"``, ``"best"``, ``"worst"`` or ``"similar"`` (see the module docstring).
+        ``"beats"``, ``"best"``, ``"worst"`` or ``"similar"``.
     subjects : tuple
         The A of the comparison: methods (``"lower"``, ``"upper"`` or a transfer method) or
-        camera heights in metres; one comparison (row) per subject.
+        camera heights in metres.
     others : tuple
         The B side: methods or heights, :data:`ALL_OTHERS` or :data:`TOP_HEIGHT`.
     measure : str
         The per-scene measure compared.
     models : str
         Upper maps the claim is judged for: ``"networks"``, ``"ground truth"`` or ``"all"``.
+    role : str
+        ``"primary"`` (confirmatory) or ``"secondary"`` (declared, reported).
+    note : str
+        Remarks of the plan (e.g. where the paper contradicts itself).
     """
 
     id: str
@@ -102,6 +124,8 @@ class Claim:
     others: tuple[str | float, ...]
     measure: str = "mean_acc"
     models: str = "networks"
+    role: str = "primary"
+    note: str = ""
 
     def __post_init__(self) -> None:
         if self.data not in _DATA:
@@ -110,52 +134,119 @@ class Claim:
             raise ValueError(f"Claim {self.id}: kind must be one of {_KINDS}, got {self.kind!r}")
         if self.models not in _MODELS:
             raise ValueError(f"Claim {self.id}: models must be one of {_MODELS}, got {self.models!r}")
+        if self.role not in _ROLES:
+            raise ValueError(f"Claim {self.id}: role must be one of {_ROLES}, got {self.role!r}")
 
 
-_SP, _SLIC, _DB, _NB = "3d-projected-sp", "3d-slic", "dbscan", "3d-neighborhood"
-_TRANSFER = ("2d-slic", _SLIC, _SP, _DB, _NB)
+@dataclass(frozen=True)
+class AnalysisPlan:
+    """The analysis plan's settings as the code uses them (see ``analysis_plan.yaml``).
 
-#: The comparative claims of the paper's §4-5 (and the abstract's summary of them). C16-C18 are
-#: the sentences the first fifteen leave out: §5's "similar to the human perspective" on the real
-#: recordings, and §4.3's "comparable results" and "fell short with the ground truth mesh".
-CLAIMS: tuple[Claim, ...] = (
-    Claim("C1", "every transfer method beats the lower-view network", "§4.3", "synthetic",
-          "beats", _TRANSFER, ("lower",)),
-    Claim("C2", "3D neighbourhood has the best Mean Acc. of the transfer methods, whatever the upper map",
-          "§4.3", "synthetic", "best", (_NB,), (ALL_OTHERS,), models="all"),
-    Claim("C3", "DBSCAN has the highest Color Acc. with network maps", "Table 2, §4.4", "synthetic",
-          "best", (_DB,), (ALL_OTHERS,), measure="color_acc"),
-    Claim("C4", "DBSCAN's Color Acc. is similar to the other methods' with network maps", "§4.3",
-          "synthetic", "similar", (_DB,), (ALL_OTHERS,), measure="color_acc"),
-    Claim("C5", "with the ground-truth map, 3D SLIC and 3D projected SP outperform DBSCAN", "§4.3",
-          "synthetic", "beats", (_SLIC, _SP), (_DB,), models="ground truth"),
-    Claim("C6", "3D SLIC and 3D projected SP perform similarly with network maps", "§4.3", "synthetic",
-          "similar", (_SLIC,), (_SP,)),
-    Claim("C7", "the lower-view network is worse than the upper-view one", "§1, abstract, Table 2",
-          "synthetic", "beats", ("upper",), ("lower",)),
-    Claim("C8", "transfer gives accuracy similar to the human perspective (3D neighbourhood vs upper map)",
-          "abstract, §1, §5", "synthetic", "similar", (_NB,), ("upper",)),
-    Claim("C9", "the networks perform worst at 0.2 m camera height", "§4.2, Fig. 3", "height sweep",
-          "worst", (0.2,), (ALL_OTHERS,)),
-    Claim("C10", "the best camera height is 0.8 m, with a slight decay above it", "§4.2, Fig. 3",
-          "height sweep", "beats", (0.8,), (TOP_HEIGHT,)),
-    Claim("C11", "3D neighbourhood has the best Mean Acc. of the transfer methods", "§4.4", "real-like",
-          "best", (_NB,), (ALL_OTHERS,)),
-    Claim("C12", "DBSCAN has the highest Color Acc.", "§4.4", "real-like", "best", (_DB,), (ALL_OTHERS,),
-          measure="color_acc"),
-    Claim("C13", "DBSCAN performs worse than the other methods", "§4.4", "real-like", "worst", (_DB,),
-          (ALL_OTHERS,)),
-    Claim("C14", "3D projected SP has a significantly higher Mean Acc. than 3D SLIC", "§4.4", "real-like",
-          "beats", (_SP,), (_SLIC,)),
-    Claim("C15", "every transfer method beats the lower-view network", "§4.4, Table 3", "real-like",
-          "beats", _TRANSFER, ("lower",)),
-    Claim("C16", "transfer gives accuracy similar to the human perspective (3D neighbourhood vs upper map)",
-          "§5", "real-like", "similar", (_NB,), ("upper",)),
-    Claim("C17", "3D SLIC and 3D projected SP give results comparable to DBSCAN with network maps",
-          "§4.3", "synthetic", "similar", (_SLIC, _SP), (_DB,)),
-    Claim("C18", "with the ground-truth map, DBSCAN's Color Acc. falls short of the other methods", "§4.3",
-          "synthetic", "worst", (_DB,), (ALL_OTHERS,), measure="color_acc", models="ground truth"),
-)
+    Attributes
+    ----------
+    claims : tuple of Claim
+    sesoi : dict
+        Smallest effect size of interest per measure.
+    interval : str
+        Interval method (:data:`semmatch.stats.INTERVAL_METHODS`).
+    confidence : float
+        Level of the two-sided intervals.
+    alpha : float
+        Level of the Holm-adjusted one-sided tests.
+    min_scenes : int
+        Fewer complete scene pairs make a comparison inconclusive.
+    primary_reference : str
+    secondary_references : tuple of str
+    route : str
+    speed_claims : tuple of dict
+    raw : dict
+        The whole YAML document.
+    """
+
+    claims: tuple[Claim, ...]
+    sesoi: dict[str, float]
+    interval: str = "t"
+    confidence: float = 0.95
+    alpha: float = 0.05
+    min_scenes: int = 2
+    primary_reference: str = "fusion"
+    secondary_references: tuple[str, ...] = ("mesh",)
+    route: str = "own"
+    speed_claims: tuple[dict, ...] = ()
+    raw: dict = field(default_factory=dict, compare=False, repr=False)
+
+    @property
+    def references(self) -> tuple[str, ...]:
+        """The primary reference, then the secondary ones."""
+        return (self.primary_reference, *self.secondary_references)
+
+
+def _level(v: object) -> str | float:
+    return float(v) if isinstance(v, int | float) else str(v)
+
+
+def _parse_plan(data: dict, source: str) -> AnalysisPlan:
+    try:
+        inf, refs = data["inference"], data["references"]
+        claims = tuple(
+            Claim(id=str(c["id"]), statement=str(c["statement"]), section=str(c["section"]), data=c["data"],
+                  kind=c["kind"], subjects=tuple(_level(v) for v in c["subjects"]),
+                  others=tuple(_level(v) for v in c["others"]), measure=c.get("measure", "mean_acc"),
+                  models=c.get("models", "networks"), role=c.get("role", "primary"), note=str(c.get("note", "")))
+            for c in data["claims"]
+        )
+        plan = AnalysisPlan(
+            claims=claims, sesoi={str(k): float(v) for k, v in data["sesoi"].items()},
+            interval=str(inf["interval"]), confidence=float(inf["confidence"]), alpha=float(inf["alpha"]),
+            min_scenes=int(inf["min_scenes"]), primary_reference=str(refs["primary"]),
+            secondary_references=tuple(str(r) for r in refs.get("secondary", ())), route=str(data["route"]),
+            speed_claims=tuple(data.get("speed_claims", ())), raw=data,
+        )
+    except (KeyError, TypeError) as e:
+        raise ValueError(f"{source}: not a valid analysis plan ({type(e).__name__}: {e})") from e
+    ids = [c.id for c in plan.claims]
+    if len(set(ids)) != len(ids):
+        raise ValueError(f"{source}: claim ids repeat: {sorted({i for i in ids if ids.count(i) > 1})}")
+    missing = sorted({c.measure for c in plan.claims} - set(plan.sesoi))
+    if missing:
+        raise ValueError(f"{source}: no smallest effect size of interest (sesoi) for {missing}")
+    return plan
+
+
+@lru_cache(maxsize=8)
+def _load_cached(path: str, mtime: float) -> AnalysisPlan:
+    data = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
+    if not isinstance(data, dict):
+        raise ValueError(f"{path}: not a valid analysis plan (expected a YAML mapping)")
+    return _parse_plan(data, path)
+
+
+def load_analysis_plan(path: str | Path | None = None) -> AnalysisPlan:
+    """Read the analysis plan.
+
+    Parameters
+    ----------
+    path : str or Path, optional
+        A plan file; default :data:`PLAN_FILE` (the committed plan).
+
+    Returns
+    -------
+    AnalysisPlan
+
+    Raises
+    ------
+    ValueError
+        If the file is not a valid plan (names the file and what is missing).
+    FileNotFoundError
+        If the file does not exist.
+    """
+    p = Path(path) if path is not None else PLAN_FILE
+    return _load_cached(str(p.resolve()), p.stat().st_mtime)
+
+
+#: The comparative claims of the analysis plan (the paper's §4-5 and the abstract's summary of
+#: them, plus the plan's declared secondary claims).
+CLAIMS: tuple[Claim, ...] = load_analysis_plan().claims
 
 
 # ------------------------------------------------------------------------------------------------
@@ -168,8 +259,10 @@ def summarize_over_scenes(
     *,
     by: Sequence[str] = ("model", "method"),
     seed: int = 0,
+    method: str | None = None,
+    confidence: float | None = None,
 ) -> pd.DataFrame:
-    """Mean of each measure over scenes per group, with a 95 % bootstrap interval.
+    """Mean of each measure over scenes per group, with the analysis plan's interval.
 
     Parameters
     ----------
@@ -183,7 +276,12 @@ def summarize_over_scenes(
     by : sequence of str, optional
         Grouping columns; groups keep their order of first appearance.
     seed : int, optional
-        Seed of the bootstrap (see :func:`semmatch.stats.bootstrap_ci`).
+        Seed of the bootstrap (bootstrap interval methods only).
+    method : str, optional
+        Interval method (:func:`semmatch.stats.interval`); default the plan's (``t``). The
+        ``stratified-*`` methods take the scene kinds from the ``scene`` column's names.
+    confidence : float, optional
+        Confidence level; default the plan's (0.95).
 
     Returns
     -------
@@ -197,16 +295,21 @@ def summarize_over_scenes(
     if missing:
         raise ValueError(f"summarize_over_scenes: grouping columns {missing} are not in the frame")
     measures = [m for m in measures if m in df.columns]
+    plan = load_analysis_plan()
+    method = plan.interval if method is None else method
+    confidence = plan.confidence if confidence is None else confidence
     rows = []
     for key, g in df.groupby(by, sort=False, dropna=False):
         row = dict(zip(by, key if isinstance(key, tuple) else (key,)))
         row["scenes"] = int(g["scene"].nunique()) if "scene" in g.columns else len(g)
+        strata = [scene_kind(s) for s in g["scene"]] if "scene" in g.columns else None
         for m in measures:
             vals = g[m].to_numpy(dtype=np.float64)
             if np.isnan(vals).all():
                 row[m] = row[f"{m}_lo"] = row[f"{m}_hi"] = np.nan
             else:
-                row[m], row[f"{m}_lo"], row[f"{m}_hi"] = bootstrap_ci(vals, seed=seed)
+                row[m], row[f"{m}_lo"], row[f"{m}_hi"] = interval(vals, strata, method=method, confidence=confidence,
+                                                                 seed=seed)
         rows.append(row)
     cols = [*by, "scenes", *(c for m in measures for c in (m, f"{m}_lo", f"{m}_hi"))]
     return pd.DataFrame(rows, columns=cols)
@@ -249,24 +352,24 @@ def _level_name(level: str | float) -> str:
     return f"{level:g} m" if isinstance(level, float) else str(level)
 
 
-def _per_scene(df: pd.DataFrame, level_col: str, measure: str, select: dict[str, str | None]) -> pd.DataFrame:
-    """Rows of ``df`` to judge on: the chosen reference and route, columns scene/model/level/measure."""
+def _per_scene(df: pd.DataFrame, level_col: str, measure: str, route: str | None) -> pd.DataFrame:
+    """Rows of ``df`` to judge on: columns scene/reference/model/level/measure, one route."""
     need = ["scene", "model", level_col, measure]
     missing = [c for c in need if c not in df.columns]
     if missing:
         raise ValueError(f"check_claims: a per-scene frame needs the columns {need}; {missing} missing")
-    for col, value in select.items():
-        if col in df.columns and value is not None:
-            df = df[(df[col] == value) | df[col].isna()]
-    df = df[need].copy()
+    if "route" in df.columns and route is not None:
+        df = df[(df["route"] == route) | df["route"].isna()]
+    keep = need + (["reference"] if "reference" in df.columns else [])
+    df = df[keep].copy()
     if level_col == "height":
         df["height"] = df["height"].astype(np.float64).round(3)
-    dup = df.duplicated(["scene", "model", level_col])
+    key = ["scene", "model", level_col] + (["reference"] if "reference" in df.columns else [])
+    dup = df.duplicated(key)
     if dup.any():
         raise ValueError(
-            f"check_claims: several rows per (scene, model, {level_col}), e.g. "
-            f"{df.loc[dup, ['scene', 'model', level_col]].iloc[0].tolist()}; pass per-scene rows of "
-            "one table (with 'reference' / 'route' columns when the frame holds several)"
+            f"check_claims: several rows per ({', '.join(key)}), e.g. {df.loc[dup, key].iloc[0].tolist()}; pass "
+            "per-scene rows of one table (with 'reference' / 'route' columns when the frame holds several)"
         )
     return df
 
@@ -286,20 +389,55 @@ def _resolve(levels: tuple, available: list, *, top: float | None) -> list:
     return list(dict.fromkeys(out))
 
 
-def _verdict_pair(kind: str, lo: float, hi: float, n: int, margin: float, min_scenes: int) -> str:
-    if n < min_scenes:
-        return "not resolved"
+def _paper_diff(claim: Claim, model: str, first: str | float, second: str | float) -> float:
+    """The paper's own value of ``first - second`` for this claim's data and measure (NaN if none)."""
+    paper_model = PAPER_MODEL_OF.get(model)
+    if paper_model is None:
+        return np.nan
+    if claim.data == "height sweep":
+        curve = FIG3_MEAN_ACC.get(paper_model, {})
+        if claim.measure != "mean_acc":
+            return np.nan
+        a = next((v for h, v in curve.items() if np.isclose(h, float(first))), None)
+        b = next((v for h, v in curve.items() if np.isclose(h, float(second))), None)
+    else:
+        if claim.measure not in MEASURES:
+            return np.nan
+        table, i = (TABLE2 if claim.data == "synthetic" else TABLE3), list(MEASURES).index(claim.measure)
+        a = table.get((paper_model, str(first)), (None,) * 4)[i]
+        b = table.get((paper_model, str(second)), (None,) * 4)[i]
+    return np.nan if a is None or b is None else float(a - b)
+
+
+def _compare(x: np.ndarray, y: np.ndarray, strata: list[str], *, sesoi: float, plan: AnalysisPlan,
+             seed: int) -> dict | None:
+    """Mean paired difference, its interval and the raw one-sided p-values (None: no pair)."""
+    keep = ~(np.isnan(x) | np.isnan(y))
+    n = int(keep.sum())
+    if n == 0:
+        return None
+    d = (x - y)[keep]
+    g = [s for s, k in zip(strata, keep) if k]
+    nan = dict(lo=np.nan, hi=np.nan, df=np.nan, p_pos=np.nan, p_neg=np.nan, p_eq=np.nan, p_beyond=np.nan)
+    if n < plan.min_scenes:
+        return dict(diff=float(d.mean()), scenes=n, **nan)
+    est = stratified_estimate(d, g if plan.interval == "stratified-t" else None)
+    _, lo, hi = interval(d, g, method=plan.interval, confidence=plan.confidence, seed=seed)
+    p = lambda null, alt: t_test_pvalue(est, null, alt)  # noqa: E731
+    return dict(diff=est.mean, lo=lo, hi=hi, scenes=n, df=est.df, p_pos=p(0.0, "greater"), p_neg=p(0.0, "less"),
+                p_eq=max(p(-sesoi, "greater"), p(sesoi, "less")),
+                p_beyond=min(1.0, 2 * min(p(sesoi, "greater"), p(-sesoi, "less"))))
+
+
+def _comparison_verdict(kind: str, holds: float, against: float, equivalent: float, alpha: float) -> str:
+    """The plan's comparison rule on Holm-adjusted p-values (NaN: not tested)."""
+    if np.isnan(holds):
+        return "inconclusive"
     if kind == "similar":
-        if lo > -margin and hi < margin:
-            return "holds"
-        if lo > margin or hi < -margin:
-            return "does not hold"
-        return "not resolved"
-    if lo > 0:
-        return "holds"
-    if hi < 0:
-        return "does not hold"
-    return "not resolved"
+        return "holds" if equivalent <= alpha else "does not hold" if against <= alpha else "inconclusive"
+    if equivalent <= alpha:
+        return "equivalent"
+    return "holds" if holds <= alpha else "does not hold" if against <= alpha else "inconclusive"
 
 
 def check_claims(
@@ -308,56 +446,53 @@ def check_claims(
     fig3: pd.DataFrame | None = None,
     *,
     methods: Sequence[str],
-    margin: float = 0.02,
+    plan: AnalysisPlan | None = None,
+    references: Sequence[str] | None = None,
+    route: str | None = None,
     seed: int = 0,
-    reference: str | None = "fusion",
-    route: str | None = "own",
-    confidence: float = 0.95,
-    n_resamples: int = 10000,
-    min_scenes: int = 2,
-    claims: Sequence[Claim] = CLAIMS,
+    claims: Sequence[Claim] | None = None,
 ) -> pd.DataFrame:
-    """Judge the paper's comparative claims on paired per-scene differences.
+    """Judge the plan's claims on paired per-scene differences, one row per comparison.
 
     Parameters
     ----------
     table2, table3 : DataFrame, optional
         Per-scene Table 2 (synthetic) / Table 3 (real-like) rows: ``scene``, ``model``,
-        ``method`` (a transfer method, ``lower`` or ``upper``), optionally ``reference``, and
-        the measures. Rows of other methods (e.g. ``fused``) are ignored.
+        ``method`` (a transfer method, ``lower`` or ``upper``), optionally ``reference`` and
+        ``route``, and the measures. Rows of other methods (e.g. ``fused``) are ignored. Without a
+        ``reference`` column the rows count as the plan's primary reference.
     fig3 : DataFrame, optional
-        Per-scene height sweep: ``model``, ``scene``, ``height`` (m) and ``mean_acc``.
+        Per-scene height sweep: ``model``, ``scene``, ``height`` (m) and the measures (reference
+        ``frames``: per-frame scores against the ground-truth label images).
     methods : sequence of str
         The transfer methods configured; a claim on a method not listed (or without rows) is
         skipped, and "the other methods" are the listed ones.
-    margin : float, optional
-        Equivalence margin of the ``similar`` claims, in units of the measure.
+    plan : AnalysisPlan, optional
+        Default :func:`load_analysis_plan` (the committed plan).
+    references : sequence of str, optional
+        References judged (default the plan's primary and secondary ones); each is its own family.
+    route : str, optional
+        Robot route judged when a table has a ``route`` column (default the plan's, ``own``).
     seed : int, optional
-        Seed of the bootstrap.
-    reference : str or None, optional
-        When a table has a ``reference`` column, judge on rows with this reference (and rows
-        whose reference is missing); None keeps every row.
-    route : str or None, optional
-        The same for a ``route`` column (``own``: the robot's own tour, the main protocol).
-    confidence : float, optional
-        Confidence level of the intervals.
-    n_resamples : int, optional
-        Bootstrap resamples per interval.
-    min_scenes : int, optional
-        A comparison over fewer complete scene pairs is "not resolved".
+        Seed of bootstrap intervals (only when the plan's interval method is a bootstrap).
     claims : sequence of Claim, optional
-        The claims to judge (default: :data:`CLAIMS`).
+        The claims to judge (default the plan's).
 
     Returns
     -------
     DataFrame
-        One row per claim and model (and per subject/other pair for ``beats``/``similar``):
-        ``claim, statement, section, data, model, measure, comparison, diff, lo, hi, scenes,
-        verdict``. ``diff`` is the mean paired difference as written in ``comparison`` (positive
-        supports a beats/best/worst claim), ``lo``/``hi`` its interval, ``scenes`` the pairs used.
+        ``claim, statement, section, data, role, kind, reference, model, measure, comparison, diff,
+        lo, hi, scenes, df, p_holds, p_against, p_equivalent, verdict, paper_diff, paper_in_ci``.
+        ``diff`` is the mean paired difference as written in ``comparison`` (positive supports a
+        beats/best/worst claim), ``lo``/``hi`` its interval; the p-values are Holm-adjusted within
+        the claim and reference; ``paper_diff`` is the paper's own difference (NaN where it has
+        none) and ``paper_in_ci`` whether it lies in ``[lo, hi]``.
     """
+    plan = load_analysis_plan() if plan is None else plan
+    claims = plan.claims if claims is None else claims
+    references = plan.references if references is None else tuple(references)
+    route = plan.route if route is None else route
     frames = {"table2": table2, "table3": table3, "fig3": fig3}
-    kw = dict(confidence=confidence, n_resamples=n_resamples, seed=seed)
     allowed = set(methods) | set(_BASELINES)
     rows: list[dict] = []
     for claim in claims:
@@ -366,71 +501,186 @@ def check_claims(
             continue
         heights = claim.data == "height sweep"
         level_col = "height" if heights else "method"
-        df = _per_scene(src, level_col, claim.measure, {} if heights else {"reference": reference, "route": route})
-        for model in df["model"].unique():
-            if (claim.models == "networks" and model == _GT) or (claim.models == "ground truth" and model != _GT):
-                continue
-            wide = df[df["model"] == model].pivot(index="scene", columns=level_col, values=claim.measure)
-            wide = wide.dropna(axis=1, how="all")
-            if heights:
-                available = sorted(float(h) for h in wide.columns)
-                top = available[-1] if available else None
-                pool = available
-            else:
-                available = [m for m in wide.columns if m in allowed]
-                top = None
-                pool = [m for m in methods if m in available]  # "the other methods"
-            subjects = _resolve(claim.subjects, available, top=top)
-            others = _resolve(claim.others, pool if ALL_OTHERS in claim.others else available, top=top)
-            base = dict(claim=claim.id, statement=claim.statement, section=claim.section, data=claim.data,
-                        model=model, measure=claim.measure)
-            extra = ""
-            if heights and available:
-                means = wide.mean(axis=0)
-                extra = f"; highest mean at {_level_name(float(means.idxmax()))}"
-            for a in subjects:
-                comps = []
-                for b in others:
-                    if b == a:
-                        continue
-                    first, second = (b, a) if claim.kind == "worst" else (a, b)
-                    x = wide[first].to_numpy(dtype=np.float64)
-                    y = wide[second].to_numpy(dtype=np.float64)
-                    n = int((~(np.isnan(x) | np.isnan(y))).sum())
-                    if n == 0:
-                        continue
-                    d, lo, hi = paired_difference_ci(x, y, **kw)
-                    text = f"{_level_name(first)} - {_level_name(second)}"
-                    comps.append(dict(comparison=text, diff=d, lo=lo, hi=hi, scenes=n,
-                                      verdict=_verdict_pair(claim.kind, lo, hi, n, margin, min_scenes)))
-                if not comps:
+        df = _per_scene(src, level_col, claim.measure, None if heights else route)
+        if "reference" not in df.columns:
+            df["reference"] = FRAMES_REFERENCE if heights else plan.primary_reference
+        refs = [FRAMES_REFERENCE] if heights else [r for r in references if r in set(df["reference"])]
+        sesoi = plan.sesoi[claim.measure]
+        for ref in refs:
+            family: list[dict] = []
+            dref = df[df["reference"] == ref]
+            for model in dref["model"].unique():
+                if (claim.models == "networks" and model == _GT) or (claim.models == "ground truth" and model != _GT):
                     continue
-                if claim.kind in ("beats", "similar"):
-                    for c in comps:
-                        rows.append({**base, **c, "comparison": c["comparison"] + extra})
-                    continue
-                # best / worst: every comparison must hold; show the deciding one
-                k = len(comps)
-                against = [c for c in comps if c["verdict"] == "does not hold"]
-                open_ = [c for c in comps if c["verdict"] == "not resolved"]
-                if against:
-                    verdict, pick = "does not hold", min(against, key=lambda c: c["diff"])
-                    note = f"{len(against)} of {k} against the claim"
-                elif open_:
-                    verdict, pick = "not resolved", min(open_, key=lambda c: c["diff"])
-                    note = f"closest unresolved of {k}"
+                wide = dref[dref["model"] == model].pivot(index="scene", columns=level_col, values=claim.measure)
+                wide = wide.dropna(axis=1, how="all")
+                strata = [scene_kind(s) for s in wide.index]
+                if heights:
+                    available = sorted(float(h) for h in wide.columns)
+                    top = available[-1] if available else None
+                    pool = available
                 else:
-                    verdict, pick = "holds", min(comps, key=lambda c: c["diff"])
-                    note = f"closest of {k}"
-                rows.append({**base, **pick, "comparison": f"{pick['comparison']} ({note}){extra}",
-                             "verdict": verdict})
-    cols = ["claim", "statement", "section", "data", "model", "measure", "comparison", "diff", "lo", "hi",
-            "scenes", "verdict"]
-    return pd.DataFrame(rows, columns=cols)
+                    available = [m for m in wide.columns if m in allowed]
+                    top = None
+                    pool = [m for m in methods if m in available]  # "the other methods"
+                subjects = _resolve(claim.subjects, available, top=top)
+                others = _resolve(claim.others, pool if ALL_OTHERS in claim.others else available, top=top)
+                for a in subjects:
+                    for b in others:
+                        if b == a:
+                            continue
+                        first, second = (b, a) if claim.kind == "worst" else (a, b)
+                        c = _compare(wide[first].to_numpy(dtype=np.float64), wide[second].to_numpy(dtype=np.float64),
+                                     strata, sesoi=sesoi, plan=plan, seed=seed)
+                        if c is None:
+                            continue
+                        family.append(dict(
+                            claim=claim.id, statement=claim.statement, section=claim.section, data=claim.data,
+                            role=claim.role, kind=claim.kind, reference=ref, model=model, measure=claim.measure,
+                            comparison=f"{_level_name(first)} - {_level_name(second)}",
+                            paper_diff=_paper_diff(claim, model, first, second), **c))
+            if not family:
+                continue
+            fam = pd.DataFrame(family)
+            similar = claim.kind == "similar"
+            fam["p_holds"] = holm(fam["p_eq"] if similar else fam["p_pos"])
+            fam["p_against"] = holm(fam["p_beyond"] if similar else fam["p_neg"])
+            fam["p_equivalent"] = holm(fam["p_eq"])
+            fam["verdict"] = [_comparison_verdict(claim.kind, h, ag, eq, plan.alpha) for h, ag, eq in
+                              zip(fam["p_holds"], fam["p_against"], fam["p_equivalent"])]
+            rows.extend(fam.to_dict("records"))
+    cols = ["claim", "statement", "section", "data", "role", "kind", "reference", "model", "measure", "comparison",
+            "diff", "lo", "hi", "scenes", "df", "p_holds", "p_against", "p_equivalent", "verdict", "paper_diff"]
+    out = pd.DataFrame(rows, columns=cols)
+    inside = (out["paper_diff"] >= out["lo"]) & (out["paper_diff"] <= out["hi"])
+    out["paper_in_ci"] = np.where(out["paper_diff"].isna() | out["lo"].isna(), None, inside)
+    return out
 
 
-def claims_markdown(df: pd.DataFrame, *, digits: int = 3) -> str:
-    """A Markdown table of :func:`check_claims` results, the claims' wording and a verdict count.
+def _claim_rule(verdicts: Sequence[str], kind: str) -> str:
+    """The plan's claim rule on its comparisons' verdicts."""
+    n = len(verdicts)
+    count = {v: sum(x == v for x in verdicts) for v in VERDICTS}
+    if n and count["holds"] == n:
+        return "holds"
+    if n and count["does not hold"] * 2 >= n:
+        return "does not hold"
+    if n and kind != "similar" and count["equivalent"] * 2 >= n:
+        return "equivalent"
+    return "inconclusive"
+
+
+def claim_verdicts(comparisons: pd.DataFrame) -> pd.DataFrame:
+    """One verdict per claim and reference from :func:`check_claims`' comparisons (the plan's rule).
+
+    Parameters
+    ----------
+    comparisons : DataFrame
+        Output of :func:`check_claims`.
+
+    Returns
+    -------
+    DataFrame
+        ``claim, statement, data, role, reference, verdict, comparisons, counts, paper_in_ci``:
+        ``counts`` the comparisons' verdicts (e.g. ``"4 holds, 1 inconclusive"``), ``paper_in_ci``
+        how many of the comparisons with a paper value have it inside our interval (``"2 of 5"``).
+    """
+    rows = []
+    for (cid, ref), g in comparisons.groupby(["claim", "reference"], sort=False):
+        counts = g["verdict"].value_counts()
+        with_paper = g["paper_in_ci"].dropna()
+        rows.append(dict(
+            claim=cid, statement=g["statement"].iloc[0], data=g["data"].iloc[0], role=g["role"].iloc[0],
+            reference=ref, verdict=_claim_rule(list(g["verdict"]), g["kind"].iloc[0]), comparisons=len(g),
+            counts=", ".join(f"{int(counts[v])} {v}" for v in VERDICTS if v in counts),
+            paper_in_ci=f"{int(with_paper.astype(bool).sum())} of {len(with_paper)}" if len(with_paper) else "-",
+        ))
+    return pd.DataFrame(rows, columns=["claim", "statement", "data", "role", "reference", "verdict", "comparisons",
+                                       "counts", "paper_in_ci"])
+
+
+def verdict_table(comparisons: pd.DataFrame, *, plan: AnalysisPlan | None = None,
+                  data: Sequence[str] | None = None) -> pd.DataFrame:
+    """Every claim of the plan (for the given data) with its verdict under each reference.
+
+    Parameters
+    ----------
+    comparisons : DataFrame
+        Output of :func:`check_claims`.
+    plan : AnalysisPlan, optional
+        Default the committed plan.
+    data : sequence of str, optional
+        Which claims to list (``"synthetic"``, ``"real-like"``, ``"height sweep"``); default the
+        data present in ``comparisons``.
+
+    Returns
+    -------
+    DataFrame
+        ``claim, statement, data, role, verdict`` (primary reference, or the ground-truth frames
+        of Fig. 3), ``verdict_<ref>`` per secondary reference, ``counts`` and ``paper_in_ci`` (of
+        the primary reference). A claim without data reads ``not judged (no data)``.
+    """
+    plan = load_analysis_plan() if plan is None else plan
+    per = claim_verdicts(comparisons)
+    data = list(dict.fromkeys(comparisons["data"])) if data is None else list(data)
+    rows = []
+    for claim in plan.claims:
+        if claim.data not in data:
+            continue
+        mine = per[per["claim"] == claim.id]
+        primary = mine[mine["reference"].isin([plan.primary_reference, FRAMES_REFERENCE])]
+        row = dict(claim=claim.id, statement=claim.statement, data=claim.data, role=claim.role)
+        row["verdict"] = primary["verdict"].iloc[0] if len(primary) else "not judged (no data)"
+        for ref in plan.secondary_references:
+            sec = mine[mine["reference"] == ref]
+            row[f"verdict_{ref}"] = sec["verdict"].iloc[0] if len(sec) else "-"
+        row["counts"] = primary["counts"].iloc[0] if len(primary) else "-"
+        row["paper_in_ci"] = primary["paper_in_ci"].iloc[0] if len(primary) else "-"
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def judge_speed_claims(table1: pd.DataFrame, *, plan: AnalysisPlan | None = None) -> pd.DataFrame:
+    """The plan's speed claims judged on Table 1 (one measurement: holds / does not hold).
+
+    Parameters
+    ----------
+    table1 : DataFrame
+        ``method`` and ``fps`` (frames per second of each transfer method; a ``cpu_fps`` column,
+        the rate from the method's CPU time on one core, is used instead when present).
+    plan : AnalysisPlan, optional
+        Default the committed plan.
+
+    Returns
+    -------
+    DataFrame
+        ``claim, statement, section, role, rule, evidence, verdict``.
+    """
+    plan = load_analysis_plan() if plan is None else plan
+    col = "cpu_fps" if "cpu_fps" in table1.columns else "fps"
+    if "method" not in table1.columns or col not in table1.columns:
+        raise ValueError(f"judge_speed_claims: Table 1 needs the columns 'method' and '{col}'")
+    fps = dict(zip(table1["method"], table1[col].astype(float)))
+    rows = []
+    for c in plan.speed_claims:
+        if "min_fps" in c:
+            slow = {m: f for m, f in fps.items() if f < float(c["min_fps"])}
+            ok = not slow
+            evidence = (f"slowest {min(fps, key=fps.get)} {min(fps.values()):.1f} FPS" if fps else "no rows")
+            evidence += "" if ok else f"; below {c['min_fps']}: {', '.join(sorted(slow))}"
+        else:
+            slowest = [m for m in c["slowest"] if m in fps]
+            rest = [f for m, f in fps.items() if m not in c["slowest"]]
+            ok = bool(slowest) and bool(rest) and max(fps[m] for m in slowest) < min(rest)
+            evidence = ", ".join(f"{m} {f:.1f}" for m, f in sorted(fps.items(), key=lambda kv: kv[1])) + " FPS"
+        rows.append(dict(claim=c["id"], statement=c["statement"], section=c["section"],
+                         role=c.get("role", "primary"), rule=c["rule"], evidence=evidence,
+                         verdict="holds" if ok else "does not hold"))
+    return pd.DataFrame(rows, columns=["claim", "statement", "section", "role", "rule", "evidence", "verdict"])
+
+
+def claims_markdown(df: pd.DataFrame, *, digits: int = 3, plan: AnalysisPlan | None = None) -> str:
+    """Markdown of :func:`check_claims` results: the verdict per claim, then every comparison.
 
     Parameters
     ----------
@@ -438,33 +688,187 @@ def claims_markdown(df: pd.DataFrame, *, digits: int = 3) -> str:
         Output of :func:`check_claims`.
     digits : int, optional
         Decimals of the differences.
+    plan : AnalysisPlan, optional
+        Default the committed plan.
 
     Returns
     -------
     str
-        The table (claim, data, model, measure, comparison, difference with interval, scenes,
-        verdict), a line counting the verdicts and a list of the claims' statements.
+        The claim table (:func:`verdict_table`), a line counting the claims' verdicts, the
+        comparisons (difference with interval, scenes, Holm-adjusted p, verdict, the paper's
+        difference) and the claims' statements.
     """
     if df.empty:
         return "No claim could be judged (no per-scene data for any of them).\n"
+    plan = load_analysis_plan() if plan is None else plan
 
     def fmt(v: float) -> str:
-        return f"{v:+.{digits}f}"
+        return "-" if pd.isna(v) else f"{v:+.{digits}f}"
 
-    table = pd.DataFrame({
+    claims = verdict_table(df, plan=plan)
+    comps = pd.DataFrame({
         "claim": df["claim"],
-        "data": df["data"],
+        "reference": df["reference"],
         "model": df["model"],
         "measure": df["measure"].map(lambda m: MEASURE_LABELS.get(m, m)),
         "comparison": df["comparison"],
-        "difference [95% CI]": [f"{fmt(d)} [{fmt(lo)}, {fmt(hi)}]" for d, lo, hi in
-                                zip(df["diff"], df["lo"], df["hi"])],
+        f"difference [{plan.confidence:.0%} CI]": [f"{fmt(d)} [{fmt(lo)}, {fmt(hi)}]" for d, lo, hi in
+                                                    zip(df["diff"], df["lo"], df["hi"])],
         "scenes": df["scenes"],
+        "p (Holm)": [("-" if pd.isna(a) else f"{a:.3f}") for a in
+                     np.where(df["verdict"] == "does not hold", df["p_against"],
+                              np.where(df["verdict"] == "equivalent", df["p_equivalent"], df["p_holds"]))],
         "verdict": df["verdict"],
+        "paper": [fmt(v) for v in df["paper_diff"]],
+        "paper in CI": df["paper_in_ci"].map(lambda v: "-" if v is None or pd.isna(v) else ("yes" if v else "no")),
     })
-    counts = df["verdict"].value_counts()
-    summary = ", ".join(f"{int(counts.get(v, 0))} {v}" for v in VERDICTS)
+    counts = claims["verdict"].value_counts()
+    summary = ", ".join(f"{int(counts[v])} {v}" for v in (*VERDICTS, "not judged (no data)") if v in counts)
     legend = df.drop_duplicates("claim")[["claim", "statement", "section", "data"]]
-    lines = [table.to_markdown(index=False), "", f"Verdicts over {len(df)} rows: {summary}.", ""]
+    lines = [claims.to_markdown(index=False), "", f"Claims judged: {len(claims)} ({summary}).", "",
+             comps.to_markdown(index=False), "", f"Comparisons: {len(df)}.", ""]
     lines += [f"- **{r.claim}** ({r.data}, {r.section}): {r.statement}" for r in legend.itertuples()]
     return "\n".join(lines) + "\n"
+
+
+def judge_figures(figures_dir: str | Path, out_dir: str | Path | None = None, *,
+                  methods: Sequence[str] | None = None, plan: AnalysisPlan | None = None) -> pd.DataFrame:
+    """Every claim of the plan judged on the per-scene tables of one run, in one verdict table.
+
+    Reads ``table2_per_scene.csv``, ``table3_per_scene.csv``, ``fig3_height_per_scene.csv`` and
+    ``table1_speed.csv`` from ``figures_dir`` (those present) and writes into ``out_dir``:
+    ``claims_all.csv`` (every comparison), ``verdicts.csv`` / ``verdicts.md`` (one row per claim,
+    the speed claims included), ``findings_all.md`` (:func:`claims_markdown`) and the declared
+    secondary analyses ``secondary_s1_support`` (:func:`support_regression`, with
+    ``support_per_scene.csv``) and ``secondary_s3_<table>_per_kind`` (:func:`per_kind_means`).
+
+    Parameters
+    ----------
+    figures_dir : str or Path
+        A run's figures folder (e.g. ``figures/full`` or ``figures/confirm/<name>``).
+    out_dir : str or Path, optional
+        Where to write (default ``figures_dir``).
+    methods : sequence of str, optional
+        The transfer methods (default the plan's claims' methods present in the tables).
+    plan : AnalysisPlan, optional
+        Default the committed plan.
+
+    Returns
+    -------
+    DataFrame
+        The verdict table (:func:`verdict_table` rows, then the speed claims).
+
+    Raises
+    ------
+    FileNotFoundError
+        If ``figures_dir`` holds none of the per-scene tables.
+    """
+    from .tables import save_table
+
+    plan = load_analysis_plan() if plan is None else plan
+    figures_dir = Path(figures_dir)
+    out_dir = figures_dir if out_dir is None else Path(out_dir)
+    read = {name: (pd.read_csv(figures_dir / f"{name}.csv") if (figures_dir / f"{name}.csv").is_file() else None)
+            for name in ("table2_per_scene", "table3_per_scene", "fig3_height_per_scene", "table1_speed")}
+    if all(v is None for k, v in read.items() if k != "table1_speed"):
+        raise FileNotFoundError(f"judge_figures: no per-scene table (table2/table3/fig3 _per_scene.csv) in {figures_dir}")
+    if methods is None:
+        present = set().union(*(set(t["method"]) for k, t in read.items() if t is not None and "method" in t))
+        methods = [m for m in ("2d-slic", "3d-projected-sp", "3d-slic", "dbscan", "3d-neighborhood") if m in present]
+    comps = check_claims(read["table2_per_scene"], read["table3_per_scene"], read["fig3_height_per_scene"],
+                         methods=methods, plan=plan)
+    table = verdict_table(comps, plan=plan, data=list(_DATA))
+    if read["table1_speed"] is not None:
+        speed = judge_speed_claims(read["table1_speed"], plan=plan)
+        table = pd.concat([table, speed.assign(data="speed (Table 1)")[["claim", "statement", "data", "role",
+                                                                        "verdict"]]], ignore_index=True)
+    save_table(comps, out_dir, "claims_all")
+    save_table(table.fillna("-"), out_dir, "verdicts")
+    # declared secondary analyses: S1 (C1 against support), S3 (per-kind means)
+    support_csv = figures_dir / "support_per_scene.csv"
+    if read["table2_per_scene"] is not None and support_csv.is_file():
+        save_table(support_regression(read["table2_per_scene"], pd.read_csv(support_csv), plan=plan), out_dir,
+                   "secondary_s1_support")
+    for name, tag in (("table2_per_scene", "table2"), ("table3_per_scene", "table3")):
+        if read[name] is not None:
+            save_table(per_kind_means(read[name]), out_dir, f"secondary_s3_{tag}_per_kind")
+    from ..io import atomic_write_text
+
+    atomic_write_text(out_dir / "findings_all.md", claims_markdown(comps, plan=plan))
+    return table
+
+
+def support_regression(table2: pd.DataFrame, support: pd.DataFrame, *, plan: AnalysisPlan | None = None,
+                       measure: str = "mean_acc") -> pd.DataFrame:
+    """Secondary analysis S1: each method's per-scene gain over ``lower`` against the map's support.
+
+    Parameters
+    ----------
+    table2 : DataFrame
+        Per-scene Table 2 rows (``scene, model, method``, the measure; optional ``reference`` /
+        ``route``: the plan's primary reference and route are used).
+    support : DataFrame
+        ``scene``, ``support`` (share of the robot's pixels the person's map supports) and
+        optionally ``route``.
+    plan : AnalysisPlan, optional
+        Default the committed plan.
+    measure : str, optional
+        The measure of the gain.
+
+    Returns
+    -------
+    DataFrame
+        ``model, method, scenes, slope, slope_lo, slope_hi, intercept``: least-squares slope of
+        the gain on support (gain per unit of support share) with its 95 % t interval (n - 2 df).
+    """
+    from scipy import stats as st
+
+    plan = load_analysis_plan() if plan is None else plan
+    t = table2
+    if "reference" in t.columns:
+        t = t[t["reference"] == plan.primary_reference]
+    if "route" in t.columns:
+        t = t[t["route"] == plan.route]
+    s = support[support["route"] == plan.route] if "route" in support.columns else support
+    s = s.set_index("scene")["support"]
+    rows = []
+    for model, g in t.groupby("model", sort=False):
+        wide = g.pivot(index="scene", columns="method", values=measure)
+        if "lower" not in wide.columns:
+            continue
+        for m in (c for c in wide.columns if c not in ("lower", "upper")):
+            d = pd.DataFrame({"gain": wide[m] - wide["lower"], "support": s.reindex(wide.index)}).dropna()
+            if len(d) < 3 or d["support"].nunique() < 2:
+                continue
+            fit = st.linregress(d["support"], d["gain"])
+            half = float(st.t.ppf(0.5 + plan.confidence / 2, len(d) - 2)) * fit.stderr
+            rows.append(dict(model=model, method=m, scenes=len(d), slope=fit.slope, slope_lo=fit.slope - half,
+                             slope_hi=fit.slope + half, intercept=fit.intercept))
+    return pd.DataFrame(rows, columns=["model", "method", "scenes", "slope", "slope_lo", "slope_hi", "intercept"])
+
+
+def per_kind_means(per_scene: pd.DataFrame, measures: Sequence[str] = MEASURES,
+                   by: Sequence[str] = ("model", "method")) -> pd.DataFrame:
+    """Secondary analysis S3: the mean of each measure per scene kind (no verdicts).
+
+    Parameters
+    ----------
+    per_scene : DataFrame
+        Per-scene rows with a ``scene`` column (kinds from the scene names) and the ``by`` columns.
+    measures : sequence of str, optional
+        Measures averaged (those present).
+    by : sequence of str, optional
+        Grouping columns besides the kind (plus ``reference`` / ``route`` when present).
+
+    Returns
+    -------
+    DataFrame
+        The grouping columns, ``kind``, ``scenes`` and the measures' means.
+    """
+    df = per_scene.assign(kind=[scene_kind(s) for s in per_scene["scene"]])
+    keys = [c for c in (*by, *_SPLITS) if c in df.columns] + ["kind"]
+    measures = [m for m in measures if m in df.columns]
+    g = df.groupby(keys, sort=False)
+    out = g[measures].mean()
+    out.insert(0, "scenes", g["scene"].nunique())
+    return out.reset_index()

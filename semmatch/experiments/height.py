@@ -44,7 +44,7 @@ def height_study(
     or the cluster at ``scheduler``; the networks are pickled to the workers).
 
     Writes ``fig3_height_per_scene.csv`` (one row per network, scene and height),
-    ``fig3_height.{csv,md}`` (mean over scenes with a 95 % bootstrap interval) and
+    ``fig3_height.{csv,md}`` (mean over scenes with the analysis plan's 95 % interval) and
     ``fig3_height.png`` (the means with their intervals as bands).
 
     Returns

@@ -20,7 +20,7 @@ _SECTIONS = (
     ("support_per_scene.png", None, "Share of the robot's pixels (with depth) that the person's map supports, per evaluation scene, on the robot's own tour and on the replayed route."),
     ("fig_transferred_frames.png", None, "Robot frames of one evaluation scene: RGB, ground truth and the labels each method transferred from the ground-truth upper map (black: no support in the person's map)."),
     ("table1_speed.png", "table1_speed.md", "**Table 1 (speed).** Transfer methods on 640x480 frames, one process on this 2-core machine, beside the paper's server numbers and the reference closest-point backend measured in the same run."),
-    ("table2_synthetic.png", "table2_synthetic.md", "**Table 2 (synthetic).** Lower-view semantic reconstructions on the robot's own tour, scored against the lower frames fused with ground-truth labels (5 cm voxels): mean [95% bootstrap interval] over the evaluation scenes; `fused` = transferred labels where the person's map supports a pixel, the lower-view network elsewhere; `paper_mean_acc`: the paper's value (compact ~ Mask R-CNN, strong ~ Transfiner)."),
+    ("table2_synthetic.png", "table2_synthetic.md", "**Table 2 (synthetic).** Lower-view semantic reconstructions on the robot's own tour, scored against the lower frames fused with ground-truth labels (5 cm voxels): mean [95% interval] over the evaluation scenes; `fused` = transferred labels where the person's map supports a pixel, the lower-view network elsewhere; `paper_mean_acc`: the paper's value (compact ~ Mask R-CNN, strong ~ Transfiner)."),
     (None, "findings_synthetic.md", None),
     (None, "table2_mesh_reference.md", "**Table 2 against an independent reference**: the ground-truth mesh where the robot's camera observed it (geometry errors of the fusion count)."),
     (None, "table2_route_ablation.md", "**Route ablation**: the robot on its own tour (`own`) and replaying the person's tour there and back (`shared`, the earlier protocol)."),
@@ -82,7 +82,7 @@ def _verdict_agreement(variance_dir: Path) -> str:
         return ""
     d = pd.concat(frames, ignore_index=True)
     d = d[d["model"].astype(str).str.startswith("compact")]
-    key = ["claim", "data", "measure", "comparison"]
+    key = ["claim", "data", "measure", "comparison"] + (["reference"] if "reference" in d.columns else [])
     if d.empty or not set(key + ["verdict"]) <= set(d.columns):
         return ""
     verdicts = d.groupby(key, sort=False)["verdict"].agg(lambda v: ", ".join(dict.fromkeys(v)))

@@ -87,8 +87,9 @@ def plot_misregistration(df: pd.DataFrame, path: str | Path, *, measure: str = "
                          confidence: float = 0.95, seed: int = 0) -> Path:
     """Two panels: ``measure`` against translation and against rotation, one line per method.
 
-    Each point is the mean over scenes with a ``confidence`` percentile-bootstrap band
-    (:func:`semmatch.stats.bootstrap_ci`); the unperturbed case starts both series.
+    Each point is the mean over scenes with a ``confidence`` t-interval band over scenes (the
+    analysis plan's interval, :func:`semmatch.stats.stratified_t_ci`); the unperturbed case
+    starts both series.
 
     Parameters
     ----------
@@ -100,7 +101,7 @@ def plot_misregistration(df: pd.DataFrame, path: str | Path, *, measure: str = "
         A column of ``df`` (default Mean Acc.).
     confidence : float
     seed : int
-        Seed of the bootstrap.
+        Unused (kept for callers of the former bootstrap band).
 
     Returns
     -------
@@ -113,7 +114,7 @@ def plot_misregistration(df: pd.DataFrame, path: str | Path, *, measure: str = "
     """
     import matplotlib.pyplot as plt
 
-    from ..stats import bootstrap_ci
+    from ..stats import stratified_t_ci
 
     need = {"method", "translation_m", "rotation_deg", measure}
     if df.empty or not need <= set(df.columns):
@@ -126,7 +127,7 @@ def plot_misregistration(df: pd.DataFrame, path: str | Path, *, measure: str = "
         sel = df[df[other] == 0]
         for method, g in sel.groupby("method", sort=False):
             xs = sorted(g[x].unique())
-            stats = np.array([bootstrap_ci(g.loc[g[x] == v, measure].to_numpy(), confidence=confidence, seed=seed)
+            stats = np.array([stratified_t_ci(g.loc[g[x] == v, measure].to_numpy(), confidence=confidence)
                               for v in xs])
             xv = np.asarray(xs) * scale
             (line,) = ax.plot(xv, stats[:, 0], marker="o", label=method)
@@ -134,7 +135,7 @@ def plot_misregistration(df: pd.DataFrame, path: str | Path, *, measure: str = "
         ax.set_xlabel(label)
         ax.grid(alpha=0.3)
     n = df["scene"].nunique() if "scene" in df.columns else 0
-    axes[0].set_ylabel(f"{measure} (mean over {n} scenes, {confidence:.0%} bootstrap band)")
+    axes[0].set_ylabel(f"{measure} (mean over {n} scenes, {confidence:.0%} t interval)")
     axes[0].set_title("map translated")
     axes[1].set_title("map rotated about its centroid")
     axes[1].legend(fontsize="small")
