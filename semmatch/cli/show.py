@@ -1,4 +1,4 @@
-"""``semmatch show MAP.ply [--reference GT.ply] --html OUT.html``: an interactive 3D page."""
+"""``semmatch show MAP.ply [--reference GT.ply] --html OUT.html [--plotlyjs MODE]``: an interactive 3D page."""
 
 from __future__ import annotations
 
@@ -10,9 +10,10 @@ def register(sub) -> None:
     p = sub.add_parser(
         "show",
         help="write an interactive 3D view (self-contained HTML) of a semantic map",
-        description="One self-contained HTML page (plotly) of MAP in label colours, or of its "
-        "errors against a reference (correct / wrong / unsupported voxels), optionally with "
-        "camera paths. Large maps are decimated for display.",
+        description="One HTML page (plotly) of MAP in label colours with a legend of its categories, "
+        "or of its errors against a reference (correct blue / wrong orange / unsupported grey "
+        "voxels), optionally with camera paths (a simulated sequence is named person or robot). "
+        "Large maps are decimated for display.",
     )
     p.add_argument("map", help="semantic PLY (mesh or point cloud)")
     p.add_argument("--html", required=True, help="HTML page to write")
@@ -20,6 +21,10 @@ def register(sub) -> None:
     p.add_argument("--instances", action="store_true", help="colour by instance (panoptic maps)")
     p.add_argument("--trajectory", action="append", default=[], metavar="SEQ",
                    help="add the camera path of a sequence folder (repeatable)")
+    p.add_argument("--plotlyjs", choices=("inline", "directory", "cdn"), default="inline",
+                   help="inline: plotly.js inside the page (self-contained, several MB); directory: one "
+                        "shared plotly.min.js beside the pages (small pages, offline); cdn: loaded from "
+                        "the internet (default %(default)s)")
     p.add_argument("--voxel-size", type=float, default=0.05, help="voxels of --reference (default %(default)s)")
     p.add_argument("--max-vertices", type=int, default=150_000,
                    help="display budget; larger maps are decimated (default %(default)s)")
@@ -29,7 +34,7 @@ def register(sub) -> None:
 def run(args: argparse.Namespace) -> int:
     """Write the page."""
     from semmatch.io import read_sequence
-    from semmatch.viz import error_figure, map_figure, trajectory_trace, write_html
+    from semmatch.viz import error_figure, map_figure, trajectory_name, trajectory_trace, write_html
 
     if args.reference and args.instances:
         raise ValueError("--instances and --reference cannot be combined")
@@ -39,8 +44,8 @@ def run(args: argparse.Namespace) -> int:
         fig = map_figure(args.map, color_by="instances" if args.instances else "labels",
                          max_vertices=args.max_vertices)
     for k, seq in enumerate(args.trajectory):
-        colour = ("black", "royalblue", "darkorange", "purple")[k % 4]
-        fig.add_trace(trajectory_trace(read_sequence(seq).poses, seq, colour))
-    write_html(fig, args.html)
+        colour = ("black", "rgb(204,121,167)", "rgb(0,158,115)", "rgb(86,180,233)")[k % 4]
+        fig.add_trace(trajectory_trace(read_sequence(seq).poses, trajectory_name(seq), colour))
+    write_html(fig, args.html, plotlyjs=args.plotlyjs)
     print(f"{args.html}: written")
     return 0
