@@ -25,7 +25,16 @@ import numpy as np
 
 from .fusion import check_depth_units
 from .geometry import Intrinsics
-from .io import Frame, frame_index, read_depth, read_image, read_intrinsics, read_label_image, read_tum
+from .io import (
+    Frame,
+    frame_index,
+    listed_file,
+    read_depth,
+    read_intrinsics,
+    read_label_image,
+    read_rgb,
+    read_tum,
+)
 
 __all__ = [
     "TUM_INTRINSICS",
@@ -238,8 +247,9 @@ class TumRgbdSequence(_SequenceABC):
             warnings.warn(msg + "; they are skipped", UserWarning, stacklevel=2)
         self.timestamps = t_rgb[pairs[:, 0]]
         self.depth_timestamps = t_dep[pairs[:, 1]]
-        self._rgb = [self.path / f_rgb[i] for i in pairs[:, 0]]
-        self._depth = [self.path / f_dep[j] for j in pairs[:, 1]]
+        # entries stay inside the folder (no absolute paths, no '..'): semmatch.io.listed_file
+        self._rgb = [listed_file(self.path, f_rgb[i], str(rgb_txt)) for i in pairs[:, 0]]
+        self._depth = [listed_file(self.path, f_dep[j], str(dep_txt)) for j in pairs[:, 1]]
         self.intrinsics = intrinsics or self._default_intrinsics()
         self.labels_dir = Path(labels) if labels is not None else None
         self.check_units = check_units
@@ -277,10 +287,7 @@ class TumRgbdSequence(_SequenceABC):
             return [self[j] for j in range(*i.indices(len(self)))]
         i = frame_index(i, len(self))
         rp, dp = self._rgb[i], self._depth[i]
-        rgb = read_image(rp)
-        if rgb.ndim == 2:
-            rgb = np.repeat(rgb[..., None], 3, axis=2)
-        rgb = rgb[..., :3].astype(np.uint8)
+        rgb = read_rgb(rp)  # 16-bit colour scaled, not wrapped to its low byte
         depth = read_depth(dp, self.intrinsics.depth_scale)
         shape = self.intrinsics.shape
         for p, arr in ((rp, rgb), (dp, depth)):

@@ -54,7 +54,14 @@ def decimate(m: SemanticMap, max_vertices: int = MAX_DISPLAY_VERTICES, *, seed: 
     Meshes: Open3D vertex clustering at the cell size whose count of surface cells matches
     ``max_vertices``; every new vertex takes the label (and instance) of the nearest original
     vertex. Point maps: a seeded random subset.
+
+    Raises
+    ------
+    ValueError
+        ``max_vertices`` below 1.
     """
+    if not max_vertices >= 1:
+        raise ValueError(f"max_vertices must be >= 1, got {max_vertices}")
     if len(m) <= max_vertices:
         return m
     if not m.is_mesh:

@@ -40,6 +40,42 @@ def sequence_arg(args: argparse.Namespace) -> str:
     return pos or flag
 
 
+def number(kind: type = float, *, lo: float | None = None, hi: float | None = None, lo_open: bool = False):
+    """An argparse ``type`` that parses a ``kind`` (int or float) and refuses it outside its range.
+
+    Parameters
+    ----------
+    kind : type
+        ``int`` or ``float``; NaN and infinities are refused.
+    lo, hi : float, optional
+        Inclusive bounds (``lo`` exclusive with ``lo_open``).
+
+    Returns
+    -------
+    callable
+        For ``add_argument(type=...)``: argparse turns its ``ArgumentTypeError`` into a usage
+        error (exit 2) that names the flag.
+    """
+    import math
+
+    def parse(text: str):
+        try:
+            v = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected {'an integer' if kind is int else 'a number'}, "
+                                             f"got {text!r}") from None
+        if not math.isfinite(v):
+            raise argparse.ArgumentTypeError(f"must be finite, got {text!r}")
+        if lo is not None and (v <= lo if lo_open else v < lo):
+            raise argparse.ArgumentTypeError(f"must be {'>' if lo_open else '>='} {lo:g}, got {text}")
+        if hi is not None and v > hi:
+            raise argparse.ArgumentTypeError(f"must be <= {hi:g}, got {text}")
+        return v
+
+    parse.__name__ = kind.__name__  # argparse names the type in its messages
+    return parse
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The full ``semmatch`` argument parser."""
     parser = argparse.ArgumentParser(
@@ -64,10 +100,25 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``semmatch`` console script."""
+    from concurrent.futures.process import BrokenProcessPool
+
+    from semmatch.io.outputs import check_cli_paths, terminate_as_interrupt
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        return int(args.func(args) or 0)
+        with terminate_as_interrupt():  # SIGTERM, like Ctrl-C, runs the clean-up of temporary folders
+            check_cli_paths(args)  # before any work: no output on, in or around an input
+            return int(args.func(args) or 0)
+    except BrokenProcessPool as e:  # a worker killed from outside (the out-of-memory killer, a kill -9)
+        jobs = getattr(args, "jobs", None)
+        print(f"semmatch {args.verb}: error: a worker process died before finishing its item ({e}); it was most "
+              "likely killed by the system for lack of memory. Nothing half-written was left in place; rerun with "
+              f"fewer worker processes{f' (--jobs {jobs} now)' if jobs else ''}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt as e:
+        what = "terminated (SIGTERM)" if type(e).__name__ == "Terminated" else "interrupted"
+        print(f"semmatch {args.verb}: {what}; nothing half-written was left in place", file=sys.stderr)
+        return 143 if what.startswith("terminated") else 130
     except (ValueError, FileNotFoundError, FileExistsError, KeyError) as e:
         msg = e.args[0] if isinstance(e, KeyError) and e.args else e
         print(f"semmatch {args.verb}: error: {msg}", file=sys.stderr)

@@ -9,6 +9,7 @@ def register(sub) -> None:
     """Add ``semmatch adapt``."""
     from semmatch.adapt import LABEL_SOURCES
     from semmatch.cli import add_quiet
+    from semmatch.io.outputs import declare_paths
 
     p = sub.add_parser(
         "adapt",
@@ -33,6 +34,7 @@ def register(sub) -> None:
                    help="share of each batch from human-height training views (default %(default)s)")
     p.add_argument("--seed", type=int, default=0, help="default %(default)s")
     add_quiet(p)
+    declare_paths(p, inputs=("model",), outputs=("out",))
     p.set_defaults(func=run)
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -10,6 +11,8 @@ import numpy as np
 
 def register(sub) -> None:
     """Add ``semmatch evaluate``."""
+    from semmatch.io.outputs import declare_paths
+
     p = sub.add_parser(
         "evaluate",
         help="compare semantic maps with ground truth (Jaccard, Sorensen, Color Acc., Mean Acc.)",
@@ -30,6 +33,10 @@ def register(sub) -> None:
     p.add_argument("--markdown", help="write the table as Markdown")
     p.add_argument("--figure", help="write the confusion matrix (of the first prediction, or one "
                    "panel per prediction) as an image (PNG/PDF/SVG)")
+    p.add_argument("--strict", action="store_true",
+                   help="exit with an error (2) when a prediction shares no evaluated voxel with the ground "
+                        "truth (default: a warning; its scores are 0 by construction, not by measurement)")
+    declare_paths(p, inputs=("gt", "pred", "transform"), outputs=("csv", "markdown", "figure"))
     p.set_defaults(func=run)
 
 
@@ -62,6 +69,39 @@ def results_table(results: dict[str, dict], *, per_class: bool = False):
     return pd.DataFrame(rows).set_index("prediction")
 
 
+def check_scorable(gt: str, results: dict[str, dict]) -> list[str]:
+    """Why scores of :func:`semmatch.metrics.compare` would be zeros that measure nothing.
+
+    Parameters
+    ----------
+    gt : str
+        The ground-truth file (for messages).
+    results : dict
+        Prediction name -> ``compare`` result.
+
+    Returns
+    -------
+    list of str
+        One message per prediction without a single evaluated voxel in common with the ground
+        truth (another label table, a map of void, another scene).
+
+    Raises
+    ------
+    ValueError
+        The ground truth has no voxel of an evaluated class (all void, or another label table):
+        no prediction can be scored against it.
+    """
+    from semmatch.metrics import EVAL_CLASSES
+
+    first = next(iter(results.values()), None)
+    if first is not None and first["counts"]["gt"] == 0:
+        raise ValueError(f"{gt}: the ground truth has no voxel of an evaluated class ({len(EVAL_CLASSES)} classes; "
+                         "all void, or a map of another label table): nothing can be scored against it")
+    return [f"{name}: no voxel with an evaluated class where {gt} has one ({s['counts']['pred']} evaluated voxels in "
+            "all): its scores are 0 by construction (a map of void, another label table or another scene?)"
+            for name, s in results.items() if s["counts"]["intersection"] == 0]
+
+
 def run(args: argparse.Namespace) -> int:
     """Evaluate every prediction and print the table."""
     import pandas as pd
@@ -75,6 +115,11 @@ def run(args: argparse.Namespace) -> int:
     for pred in args.pred:
         results[pred] = compare(gt, voxelize(pred, args.voxel_size, transform_matrix=T),
                                 args.voxel_size, union=args.union, min_overlap=args.min_overlap)
+    empty = check_scorable(args.gt, results)
+    if empty and args.strict:
+        raise ValueError("; ".join(empty) + " (--strict)")
+    for msg in empty:
+        warnings.warn(msg, UserWarning, stacklevel=1)
     # short unique names: file names when they are unique
     names = [Path(p).name for p in results]
     if len(set(names)) == len(names):

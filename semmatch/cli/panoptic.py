@@ -18,6 +18,7 @@ from pathlib import Path
 def register(sub) -> None:
     """Add the ``panoptic`` verb and its sub-commands."""
     from semmatch.cli import add_quiet, add_sequence
+    from semmatch.io.outputs import declare_paths
     from semmatch.transfer import DEFAULT_MAX_DISTANCE, available_methods
 
     p = sub.add_parser(
@@ -37,6 +38,7 @@ def register(sub) -> None:
                      help="clustering radius in metres (default %(default)s; notebook 10 chooses it on "
                      "validation scenes: figures/<profile>/validation_panoptic_clustering.csv)")
     seg.add_argument("--min-vertices", type=int, default=50, help="smallest instance kept (default %(default)s)")
+    declare_paths(seg, inputs=("map",), outputs=("out",))
     seg.set_defaults(func=run_segment)
 
     ref = s.add_parser("reference", help="fuse a sequence with its ground-truth classes and instances",
@@ -46,6 +48,7 @@ def register(sub) -> None:
     ref.add_argument("--out", required=True, help="panoptic PLY to write")
     ref.add_argument("--voxel-size", type=float, default=0.04, help="TSDF voxel in metres (default %(default)s)")
     ref.add_argument("--step", type=int, default=1, help="use every n-th frame for the instances (default 1)")
+    declare_paths(ref, inputs=("sequence", "sequence_flag"), outputs=("out",))
     ref.set_defaults(func=run_reference)
 
     tr = s.add_parser("transfer", help="transfer classes and instances into a sequence and fuse its panoptic map",
@@ -67,6 +70,7 @@ def register(sub) -> None:
     tr.add_argument("--min-vertices", type=int, default=50,
                     help="fragments smaller than this may join a touching instance (default %(default)s)")
     add_quiet(tr, "the progress bar")
+    declare_paths(tr, inputs=("map", "sequence", "sequence_flag"), outputs=("out",))
     tr.set_defaults(func=run_transfer)
 
     ev = s.add_parser("evaluate", help="panoptic quality of panoptic maps against ground truth",
@@ -77,15 +81,11 @@ def register(sub) -> None:
     ev.add_argument("--voxel-size", type=float, default=0.05, help="voxel edge in metres (default %(default)s)")
     ev.add_argument("--per-class", action="store_true", help="add PQ per class")
     ev.add_argument("--csv", help="write the table as CSV")
+    ev.add_argument("--warn-overlap", type=float, default=0.5, metavar="FRACTION",
+                    help="warn when the occupied voxels of a prediction and the ground truth overlap less than "
+                         "this (partial maps score low PQ for want of overlap; default %(default)s)")
+    declare_paths(ev, inputs=("gt", "pred"), outputs=("csv",))
     ev.set_defaults(func=run_evaluate)
-
-
-def _refuse_input(out: str, *inputs: str) -> None:
-    o = Path(out).resolve()
-    for i in inputs:
-        ip = Path(i).resolve()
-        if o == ip or ip in o.parents:
-            raise ValueError(f"--out {out}: refusing to write onto or inside the input {i}")
 
 
 def run_segment(args: argparse.Namespace) -> int:
@@ -96,7 +96,6 @@ def run_segment(args: argparse.Namespace) -> int:
     from semmatch.labels import NAMES
     from semmatch.panoptic import segment_instances
 
-    _refuse_input(args.out, args.map)
     m = segment_instances(read_map(args.map), eps=args.eps, min_vertices=args.min_vertices)
     write_map(args.out, m)
     ids = np.unique(m.instances[m.instances > 0])
@@ -114,7 +113,6 @@ def run_reference(args: argparse.Namespace) -> int:
     from semmatch.panoptic import fuse_instances, sequence_panoptic_frames
 
     seq_path = sequence_arg(args)
-    _refuse_input(args.out, seq_path)
     seq = read_sequence(seq_path)
     if not seq.has_labels:
         raise ValueError(f"{seq_path}: the sequence has no labels/ folder")
@@ -137,7 +135,6 @@ def run_transfer(args: argparse.Namespace) -> int:
     from ..progress import tqdm
 
     seq_path = sequence_arg(args)
-    _refuse_input(args.out, seq_path, args.map)
     upper = require_instances(read_map(args.map), "panoptic transfer")
     index = load_index(args.map, max_distance=args.max_distance, cache=not args.no_index_cache, semantic_map=upper)
     seq = read_sequence(seq_path)
@@ -156,6 +153,9 @@ def run_transfer(args: argparse.Namespace) -> int:
 
 def run_evaluate(args: argparse.Namespace) -> int:
     """Print panoptic quality per prediction."""
+    import warnings
+
+    import numpy as np
     import pandas as pd
 
     from semmatch.io import atomic_write_text
@@ -164,9 +164,16 @@ def run_evaluate(args: argparse.Namespace) -> int:
     gt = panoptic_voxels(args.gt, args.voxel_size)
     rows = []
     for pred in args.pred:
-        q = panoptic_quality(gt, pred, args.voxel_size)
+        pv = panoptic_voxels(pred, args.voxel_size)
+        both = int(np.isin(pv.keys, gt.keys).sum())
+        overlap = both / max(min(len(gt.keys), len(pv.keys)), 1)
+        if overlap < args.warn_overlap:
+            warnings.warn(f"{pred} vs {args.gt}: only {both} of min({len(gt.keys)}, {len(pv.keys)}) occupied voxels "
+                          f"overlap ({overlap:.1%}); a low PQ here measures the missing overlap (a partial map, "
+                          "another frame or units?) more than the instances", UserWarning, stacklevel=1)
+        q = panoptic_quality(gt, pv, args.voxel_size)
         row = {"prediction": Path(pred).name, **{k: q[k] for k in
-               ("pq", "sq", "rq", "pq_things", "sq_things", "rq_things", "pq_stuff")}}
+               ("pq", "sq", "rq", "pq_things", "sq_things", "rq_things", "pq_stuff")}, "overlap": overlap}
         if args.per_class:
             row.update({f"pq_{k}": v["pq"] for k, v in q["per_class"].items()})
         rows.append(row)

@@ -8,6 +8,7 @@ import argparse
 def register(sub) -> None:
     """Add ``semmatch predict``."""
     from semmatch.cli import add_quiet
+    from semmatch.io.outputs import declare_paths
 
     p = sub.add_parser(
         "predict",
@@ -26,6 +27,7 @@ def register(sub) -> None:
     p.add_argument("--overwrite", action="store_true",
                    help="replace an existing labels folder semmatch wrote at --out (anything else is refused)")
     add_quiet(p)
+    declare_paths(p, inputs=("sequence", "model"), outputs=("out",))
     p.set_defaults(func=run)
 
 
@@ -52,6 +54,8 @@ def run(args: argparse.Namespace) -> int:
     from semmatch.segment import predict_sequence
 
     seq = read_sequence(args.sequence)
+    if len(seq) == 0:
+        raise ValueError(f"{args.sequence}: the sequence has no frames (poses.txt lists none); nothing to predict")
     model = make_segmenter(args.model, seed=args.seed, device=args.device, flip=not args.no_flip)
     out = predict_sequence(model, seq, args.out, probs=args.probs, progress=not args.quiet,
                            overwrite=args.overwrite, inputs=[args.sequence])

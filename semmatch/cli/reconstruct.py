@@ -6,10 +6,13 @@ import argparse
 import json
 from pathlib import Path
 
+import numpy as np
+
 
 def register(sub) -> None:
     """Add ``semmatch reconstruct``."""
-    from semmatch.cli import add_quiet
+    from semmatch.cli import add_quiet, number
+    from semmatch.io.outputs import declare_paths
 
     p = sub.add_parser(
         "reconstruct",
@@ -23,11 +26,17 @@ def register(sub) -> None:
     p.add_argument("--out", required=True, help="semantic mesh PLY")
     p.add_argument("--rgb-out", help="also write the RGB mesh here")
     p.add_argument("--points-out", help="also write the semantic point cloud here")
-    p.add_argument("--voxel-size", type=float, default=0.04, help="voxel edge in metres (default 0.04)")
+    p.add_argument("--voxel-size", type=float, default=0.04,
+                   help="voxel edge in metres (default 0.04); the TSDF's memory is estimated from it and the "
+                        "scene's extent before any allocation and refused above --memory-budget")
     p.add_argument("--depth-max", type=float, default=6.0, help="ignore depth beyond this (m, default 6)")
-    p.add_argument("--trunc-voxels", type=float, default=4.0, help="TSDF truncation in voxels (default 4)")
+    p.add_argument("--trunc-voxels", type=number(float, lo=1.0, hi=64.0), default=4.0,
+                   help="TSDF truncation in voxels, 1..64 (default 4)")
     p.add_argument("--label-stride", type=int, default=2, help="label evidence every Nth pixel (default 2)")
-    p.add_argument("--min-weight", type=float, default=1.0, help="minimum surface weight (default 1)")
+    p.add_argument("--min-weight", type=number(float, lo=0.0, hi=1e6), default=1.0,
+                   help="minimum surface weight, >= 0 (default 1)")
+    p.add_argument("--memory-budget", type=number(float, lo=0.0, lo_open=True), default=None, metavar="GIB",
+                   help="largest estimated TSDF memory in GiB (default: 80 %% of the memory available now)")
     p.add_argument(
         "--estimate-poses", action="store_true",
         help="ignore the recorded poses and estimate them by RGB-D odometry, starting at the "
@@ -39,6 +48,7 @@ def register(sub) -> None:
     p.add_argument("--poses-out", help="with --estimate-poses: write the estimated trajectory (TUM)")
     p.add_argument("--device", help="Open3D device (default: CUDA:0 when available, else CPU:0)")
     add_quiet(p)
+    declare_paths(p, inputs=("seq", "labels"), outputs=("out", "rgb_out", "points_out", "poses_out"))
     p.set_defaults(func=run)
 
 
@@ -48,6 +58,80 @@ def open_any_sequence(path: str | Path):
     from semmatch.recordings import is_tum_rgbd, read_tum_rgbd
 
     return read_tum_rgbd(path) if is_tum_rgbd(path) else read_sequence(path)
+
+
+def available_memory() -> int:
+    """Bytes of memory available to a new allocation now (``MemAvailable``; free pages elsewhere)."""
+    import os
+
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+
+
+def estimate_tsdf_bytes(seq, voxel_size: float, *, depth_max: float = 6.0, trunc_voxels: float = 4.0,
+                        poses=None, samples: int = 8) -> tuple[float, np.ndarray]:
+    """An upper estimate of the semantic TSDF's memory, from a few frames, before any allocation.
+
+    The scene's extent is the box holding the 1st to 99th percentile of the points of up to
+    ``samples`` frames spread over the sequence (depth up to ``depth_max``); its surface area,
+    divided into blocks of 8x8 voxels and widened by the truncation band, gives the blocks the
+    grid may allocate (capped by one band of blocks per depth pixel of every frame). Each voxel
+    holds 5 + 21 float32 values (TSDF, weight, colour, class evidence).
+
+    Returns
+    -------
+    bytes : float
+    extent : ndarray (3,)
+        Metres.
+    """
+    from semmatch.labels import NUM_CLASSES
+
+    n = len(seq)
+    band = 1.0 + 2.0 * trunc_voxels / 8.0  # blocks a surface patch allocates across its truncation band
+    pts = []
+    for i in np.unique(np.linspace(0, n - 1, min(samples, n)).round().astype(int)):
+        f = seq[int(i)]
+        pose = f.pose if poses is None else poses[int(i)]
+        if pose is None or not np.isfinite(pose).all():
+            continue
+        d = f.depth[::4, ::4]
+        v, u = np.nonzero((d > 0) & (d <= depth_max))
+        z = d[v, u].astype(np.float64)
+        K = f.intrinsics
+        cam = np.c_[(4 * u - K.cx) * z / K.fx, (4 * v - K.cy) * z / K.fy, z]
+        pts.append(cam @ pose[:3, :3].T + pose[:3, 3])
+    if not pts or not sum(len(p) for p in pts):
+        return 0.0, np.zeros(3)
+    P = np.concatenate(pts)
+    lo, hi = np.percentile(P, [1, 99], axis=0)
+    block = 8 * voxel_size
+    e = np.maximum(hi - lo, block)
+    area = 2 * (e[0] * e[1] + e[1] * e[2] + e[0] * e[2])
+    h, w = seq[0].depth.shape
+    blocks = min(area / block**2, n * h * w) * band
+    return float(blocks * 512 * (5 + NUM_CLASSES) * 4), e
+
+
+def _check_memory(seq, args: argparse.Namespace, poses) -> None:
+    """Refuse a reconstruction whose estimated TSDF exceeds the memory budget (before allocation)."""
+    if not args.voxel_size > 0:
+        return  # the fusion's own message
+    need, extent = estimate_tsdf_bytes(seq, args.voxel_size, depth_max=args.depth_max,
+                                       trunc_voxels=args.trunc_voxels, poses=poses)
+    budget = args.memory_budget * 2**30 if args.memory_budget else 0.8 * available_memory()
+    if need > budget:
+        x, y, z = extent
+        raise ValueError(
+            f"{args.seq}: a {args.voxel_size:g} m voxel grid over this scene ({x:.1f} x {y:.1f} x {z:.1f} m) is "
+            f"estimated at {need / 2**30:.1f} GiB, above the budget of {budget / 2**30:.1f} GiB; choose a larger "
+            "--voxel-size (the default is 0.04), or raise --memory-budget if the machine has the memory"
+        )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -71,6 +155,7 @@ def run(args: argparse.Namespace) -> int:
             write_tum(args.poses_out, getattr(seq, "timestamps", range(len(poses))), poses)
         if gt is not None and len(gt) == len(poses):
             info.update(trajectory_errors(poses, gt))
+    _check_memory(seq, args, poses)
     vol = fuse(
         seq,
         labels=args.labels,

@@ -7,6 +7,9 @@ import argparse
 
 def register(sub) -> None:
     """Add ``semmatch show``."""
+    from semmatch.cli import number
+    from semmatch.io.outputs import declare_paths
+
     p = sub.add_parser(
         "show",
         help="write an interactive 3D view (self-contained HTML) of a semantic map",
@@ -26,8 +29,9 @@ def register(sub) -> None:
                         "shared plotly.min.js beside the pages (small pages, offline); cdn: loaded from "
                         "the internet (default %(default)s)")
     p.add_argument("--voxel-size", type=float, default=0.05, help="voxels of --reference (default %(default)s)")
-    p.add_argument("--max-vertices", type=int, default=150_000,
+    p.add_argument("--max-vertices", type=number(int, lo=1), default=150_000,
                    help="display budget; larger maps are decimated (default %(default)s)")
+    declare_paths(p, inputs=("map", "reference", "trajectory"), outputs=("html",))
     p.set_defaults(func=run)
 
 

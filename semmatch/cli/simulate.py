@@ -59,6 +59,7 @@ def _intrinsics(args) -> Intrinsics:
 def register(sub) -> None:
     """Add ``semmatch simulate``."""
     from semmatch.cli import add_quiet
+    from semmatch.io.outputs import declare_paths
 
     p = sub.add_parser(
         "simulate",
@@ -121,6 +122,7 @@ def register(sub) -> None:
                         "the lower camera follows the upper route there and back (ablation); also for --pair")
     d.add_argument("--route-ablation", action="store_true",
                    help="with --routes own, also write lower_shared/: the robot replaying the person's tour")
+    declare_paths(p, inputs=("ply", "intrinsics", "noise"), outputs=("out", "dataset", "save_scene"))
     p.set_defaults(func=run)
 
 

@@ -8,6 +8,7 @@ import argparse
 def register(sub) -> None:
     """Add ``semmatch train``."""
     from semmatch.cli import add_quiet
+    from semmatch.io.outputs import declare_paths
 
     p = sub.add_parser(
         "train",
@@ -43,6 +44,7 @@ def register(sub) -> None:
                    help="Dask scheduler address (tcp://host:8786) to render the views on; default "
                         "SEMMATCH_SCHEDULER, else --jobs local processes")
     add_quiet(p)
+    declare_paths(p, outputs=("out",))  # no file inputs (the views are rendered; --cache-dir is read and written)
     p.set_defaults(func=run)
 
 

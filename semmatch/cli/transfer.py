@@ -8,6 +8,7 @@ import json
 def register(sub) -> None:
     """Add the ``transfer`` verb."""
     from semmatch.cli import add_quiet, add_sequence
+    from semmatch.io.outputs import declare_paths
     from semmatch.transfer import DEFAULT_MAX_DISTANCE, available_methods
 
     p = sub.add_parser(
@@ -38,6 +39,7 @@ def register(sub) -> None:
     p.add_argument("--no-index-cache", action="store_true",
                    help="neither read nor write the map's index cache (.MAP.index-KEY.npz beside the map; "
                         "also off with SEMMATCH_NO_INDEX_CACHE)")
+    declare_paths(p, inputs=("sequence", "sequence_flag", "map", "probs"), outputs=("out",))
     p.set_defaults(func=run)
 
 

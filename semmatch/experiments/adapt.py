@@ -130,12 +130,12 @@ def _reuse_checkpoint(path: Path, target: Path, source_net: Path, source: str, r
     """Copy an adapted checkpoint to ``target`` after checking that its provenance is the request's."""
     import shutil
 
-    import torch
-
     from ..adapt import _file_digest
     from ..io.files import atomic_path
+    from ..segment.models import read_checkpoint
 
-    got = (torch.load(path, map_location="cpu", weights_only=False).get("adapted") or {})
+    ckpt = read_checkpoint(path)  # weights only: a checkpoint found in the data folder is data, never code
+    got = (ckpt.get("adapted") if isinstance(ckpt, dict) else None) or {}
     want = {**recipe, "label_source": source, "from_sha256": _file_digest(Path(source_net)),
             "scenes": list(robot.scenes), "frames": int(len(robot.views))}
     diff = {k: (got.get(k), v) for k, v in want.items() if got.get(k) != v}

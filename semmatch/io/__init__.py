@@ -3,7 +3,8 @@
 Submodules, by what they handle: :mod:`~semmatch.io.files` (atomic writes, output folders that
 never replace what semmatch did not write), :mod:`~semmatch.io.images` (RGB, depth and palette
 label PNGs), :mod:`~semmatch.io.sequences` (intrinsics, TUM poses, frames, sequence readers and
-the writer, label folders), :mod:`~semmatch.io.maps` (semantic maps as PLY). Every public name
+the writer, label folders), :mod:`~semmatch.io.maps` (semantic maps as PLY),
+:mod:`~semmatch.io.outputs` (the output policy of every command). Every public name
 is importable from ``semmatch.io`` itself.
 
 Writers never leave a half-written file behind: files are written to a temporary name in the
@@ -26,6 +27,7 @@ from .images import (
     read_depth,
     read_image,
     read_label_image,
+    read_rgb,
     write_depth,
     write_image,
     write_label_image,
@@ -38,6 +40,7 @@ from .sequences import (
     SequenceWriter,
     frame_index,
     is_sequence,
+    listed_file,
     read_intrinsics,
     read_labels_folder,
     read_sequence,
@@ -63,6 +66,8 @@ __all__ = [
     "read_tum",
     "write_tum",
     "read_image",
+    "read_rgb",
+    "listed_file",
     "write_image",
     "read_label_image",
     "write_label_image",

@@ -156,11 +156,16 @@ def _writer_lock(path: Path) -> Iterator[None]:
 def _recover(path: Path) -> None:
     """Clean up after a writer of ``path`` that was killed: drop partial folders, and bring back
     the previous output when the kill fell between moving it aside and moving the new one in."""
-    olds = sorted(path.parent.glob(f".{path.name}.*.old"))
+    from .outputs import _TEMP, glob_escape, sweep_stale
+
+    name = glob_escape(path.name)
+    olds = sorted(path.parent.glob(f".{name}.*.old"))
     if olds and not path.exists():
         os.replace(olds[-1], path)
         olds = olds[:-1]
-    for junk in [*path.parent.glob(f".{path.name}.*.partial"), *olds]:
+    sweep_stale(path)  # temporary folders of writers that are gone (those of live ones stay)
+    legacy = [p for p in path.parent.glob(f".{name}.*.partial") if not _TEMP.search(p.name)]
+    for junk in [*legacy, *olds]:
         shutil.rmtree(junk, ignore_errors=True)
 
 

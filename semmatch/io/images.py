@@ -10,7 +10,7 @@ import numpy as np
 
 from .files import atomic_path
 
-__all__ = ['read_image', 'write_image', 'read_label_image', 'write_label_image', 'read_depth', 'write_depth',
+__all__ = ['read_image', 'read_rgb', 'write_image', 'read_label_image', 'write_label_image', 'read_depth', 'write_depth',
            'depth_to_uint16']
 
 PathLike = str | os.PathLike
@@ -81,7 +81,17 @@ def read_label_image(path: PathLike) -> np.ndarray:
 
 
 def read_image(path: PathLike, *, flags: int = cv2.IMREAD_UNCHANGED) -> np.ndarray:
-    """Read a PNG/JPEG; colour images come back as RGB."""
+    """Read a PNG/JPEG; colour images come back as RGB.
+
+    Raises
+    ------
+    FileNotFoundError
+        No such file, or not an image OpenCV can read.
+    ValueError
+        Not a regular file (a FIFO would block the reader forever, a device never end).
+    """
+    if os.path.exists(path) and not os.path.isfile(path):
+        raise ValueError(f"{path}: not a regular file (a folder, a FIFO or a device); refusing to read it as an image")
     img = cv2.imread(str(path), flags)
     if img is None:
         raise FileNotFoundError(f"cannot read image {path}")
@@ -89,6 +99,33 @@ def read_image(path: PathLike, *, flags: int = cv2.IMREAD_UNCHANGED) -> np.ndarr
         img = img[..., 2::-1] if img.shape[2] >= 3 else img
         img = np.ascontiguousarray(img)
     return img
+
+
+def read_rgb(path: PathLike) -> np.ndarray:
+    """Read a colour frame as uint8 RGB (H,W,3), whatever its storage.
+
+    Grey images are repeated over three channels, alpha is dropped, and 16-bit images are
+    scaled to 8 bits (``round(v / 257)``: 65535 -> 255), never wrapped to their low byte.
+
+    Raises
+    ------
+    FileNotFoundError
+        Not a readable image.
+    ValueError
+        Not 8- or 16-bit, or not 1, 3 or 4 channels (the message names the file).
+    """
+    img = read_image(path)
+    if img.dtype == np.uint16:
+        img = ((img.astype(np.uint32) + 128) // 257).astype(np.uint8)
+    elif img.dtype != np.uint8:
+        raise ValueError(f"{path}: colour frames must be 8- or 16-bit, got {img.dtype}")
+    if img.ndim == 2:
+        img = np.repeat(img[..., None], 3, axis=2)
+    if img.ndim != 3 or img.shape[2] not in (1, 3, 4):
+        raise ValueError(f"{path}: colour frames must have 1, 3 or 4 channels, got shape {img.shape}")
+    if img.shape[2] == 1:
+        img = np.repeat(img, 3, axis=2)
+    return np.ascontiguousarray(img[..., :3])
 
 
 def depth_to_uint16(depth: np.ndarray, depth_scale: float = 1000.0) -> np.ndarray:

@@ -143,11 +143,16 @@ _PLY_SIZES = {"char": 1, "int8": 1, "uchar": 1, "uint8": 1, "short": 2, "int16":
               "int": 4, "int32": 4, "uint": 4, "uint32": 4, "float": 4, "float32": 4, "double": 8, "float64": 8}
 
 
+#: longest header line accepted (comments included); a header has any number of lines
+_PLY_MAX_LINE = 64 * 1024
+
+
 def check_ply_header(path: PathLike) -> None:
     """Refuse a PLY whose header claims more elements than the file can hold, before parsing it.
 
     A 250-byte file claiming 3*10^8 faces would otherwise make the parser allocate gigabytes.
-    The smallest possible size of every element (binary: its fixed properties plus each list's
+    The header is read to its ``end_header`` line, however many comment lines pad it. The
+    smallest possible size of every element (binary: its fixed properties plus each list's
     count; ASCII: two characters per value) times its count must fit in the bytes after the
     header.
 
@@ -159,13 +164,25 @@ def check_ply_header(path: PathLike) -> None:
     """
     path = Path(path)
     size = path.stat().st_size
-    with open(path, "rb") as fh:
-        head = fh.read(64 * 1024)
-    end = head.find(b"end_header")
-    if not head.startswith(b"ply") or end < 0:
-        return  # not a PLY header we can read: the parser gives its own error
-    body = size - (head.index(b"\n", end) + 1 if b"\n" in head[end:] else end + 10)
-    lines = head[:end].decode("ascii", errors="replace").splitlines()
+    if not path.is_file():
+        raise ValueError(f"{path}: not a regular file (a PLY map must be a file)")
+    raw: list[bytes] = []
+    with open(path, "rb") as fh:  # the header read to its end, however long (comments can pad it)
+        if fh.read(3) != b"ply":
+            return  # not a PLY header we can read: the parser gives its own error
+        fh.seek(0)
+        while True:
+            ln = fh.readline(_PLY_MAX_LINE + 1)
+            if not ln:
+                return  # no end_header: the parser gives its own error
+            if len(ln) > _PLY_MAX_LINE:
+                raise ValueError(f"{path}: PLY header line {len(raw) + 1} is longer than {_PLY_MAX_LINE:,} bytes: "
+                                 "not a PLY map")
+            if ln.strip() == b"end_header":
+                break
+            raw.append(ln)
+        body = size - fh.tell()
+    lines = [ln.decode("ascii", errors="replace") for ln in raw]
     fmt = next((ln.split()[1] for ln in lines if ln.startswith("format")), "ascii")
     need, elements = 0, []
     for ln in lines:

@@ -14,8 +14,6 @@ import contextlib
 import json
 import os
 import shutil
-import tempfile
-import uuid
 from collections.abc import Iterator
 from collections.abc import Sequence as _SequenceABC
 from concurrent.futures import ThreadPoolExecutor
@@ -27,16 +25,27 @@ import numpy as np
 from ..geometry import Intrinsics, check_pose, pose_from_tum, pose_to_tum
 from ..labels import NUM_CLASSES
 from .files import (
+    OUTPUT_MARKER,
     _recover,
     _writer_lock,
     atomic_write_text,
     check_output_dir,
+    output_kind,
     replace_output_dir,
     write_json,
 )
-from .images import read_depth, read_image, read_label_image, write_depth, write_image, write_label_image
+from .images import (
+    read_depth,
+    read_image,
+    read_label_image,
+    read_rgb,
+    write_depth,
+    write_image,
+    write_label_image,
+)
+from .outputs import temp_dir
 
-__all__ = ['Frame', 'SequenceReader', 'InMemorySequence', 'SequenceWriter', 'read_intrinsics', 'write_intrinsics', 'read_tum', 'write_tum', 'read_labels_folder', 'write_labels_folder', 'frame_index', 'is_sequence', 'read_sequence']
+__all__ = ['Frame', 'SequenceReader', 'InMemorySequence', 'SequenceWriter', 'read_intrinsics', 'write_intrinsics', 'read_tum', 'write_tum', 'read_labels_folder', 'write_labels_folder', 'frame_index', 'is_sequence', 'read_sequence', 'listed_file']
 
 PathLike = str | os.PathLike
 
@@ -129,6 +138,35 @@ class Frame:
 
 def _frame_name(i: int) -> str:
     return f"{i:06d}.png"
+
+
+def listed_file(folder: PathLike, name: str, where: str) -> Path:
+    """The file ``name`` of a list inside a recording ``folder`` (TUM ``rgb.txt``, ``depth.txt``).
+
+    Parameters
+    ----------
+    folder : path
+        The recording folder.
+    name : str
+        The entry as written in the list.
+    where : str
+        The list and line, for messages (e.g. ``"rgb.txt:12"``).
+
+    Returns
+    -------
+    Path
+        ``folder / name``.
+
+    Raises
+    ------
+    ValueError
+        An absolute entry, or one with ``..``: recordings are read from inside their folder only.
+    """
+    p = Path(name)
+    if p.is_absolute() or ".." in p.parts:
+        raise ValueError(f"{where}: {name!r} lies outside the recording folder {folder}; list entries must be "
+                         "relative paths inside it (no absolute paths, no '..')")
+    return Path(folder) / p
 
 
 def frame_index(i: int, n: int) -> int:
@@ -242,9 +280,7 @@ class SequenceReader(_SequenceABC):
         i = frame_index(i, len(self))
         rp = self.path / "rgb" / _frame_name(i)
         dp = self.path / "depth" / _frame_name(i)
-        rgb = read_image(rp)
-        if rgb.ndim != 3:
-            raise ValueError(f"{rp}: RGB frame must have 3 channels")
+        rgb = read_rgb(rp)
         depth = read_depth(dp, self.intrinsics.depth_scale)
         self._check_shape(rgb, rp, i)
         self._check_shape(depth, dp, i)
@@ -329,6 +365,23 @@ def read_sequence(path: PathLike, labels: PathLike | None = None) -> SequenceRea
     return SequenceReader(path, labels=labels)
 
 
+def _check_sequence_out(path: Path, overwrite: bool) -> None:
+    """Refuse a sequence output that would replace what semmatch did not write (or, without
+    ``overwrite``, anything at all)."""
+    if not path.exists() and not path.is_symlink():
+        return
+    if path.is_dir() and not path.is_symlink() and not any(path.iterdir()):
+        return
+    kind = "another sequence" if is_sequence(path) else "other files"
+    if not overwrite:
+        raise FileExistsError(f"{path}: output folder already holds {kind}; choose another folder "
+                              "or pass --overwrite (only a sequence semmatch wrote is replaced)")
+    if output_kind(path) != "sequence" or path.is_symlink():
+        raise FileExistsError(f"{path}: output folder already holds {kind} that semmatch did not write "
+                              f"(no {OUTPUT_MARKER} marker); refusing to replace it, even with --overwrite: "
+                              "choose another folder")
+
+
 class SequenceWriter:
     """Stream frames into a sequence folder; the folder appears only when :meth:`close` runs.
 
@@ -342,19 +395,14 @@ class SequenceWriter:
         Final sequence folder.
     intrinsics : Intrinsics
     overwrite : bool
-        Replace an existing sequence at ``path``. Without it an existing non-empty folder is an
-        error that names it.
+        Replace an existing sequence at ``path`` that semmatch wrote (its
+        :data:`~semmatch.io.OUTPUT_MARKER` says ``sequence``). Anything else there (a user's
+        folder, a sequence recorded elsewhere, a file) is refused, with or without it.
     """
 
     def __init__(self, path: PathLike, intrinsics: Intrinsics, *, overwrite: bool = False) -> None:
         self.path = Path(path)
-        if self.path.exists() and (not self.path.is_dir() or any(self.path.iterdir())):
-            if not overwrite:
-                kind = "another sequence" if is_sequence(self.path) else "other files"
-                raise FileExistsError(
-                    f"{self.path}: output folder already holds {kind}; choose another folder "
-                    "or pass overwrite"
-                )
+        _check_sequence_out(self.path, overwrite)
         self.intrinsics = intrinsics
         self.overwrite = overwrite
         self.path.parent.mkdir(parents=True, exist_ok=True)
@@ -362,7 +410,8 @@ class SequenceWriter:
         self._lock = contextlib.ExitStack()
         self._lock.enter_context(_writer_lock(self.path))
         _recover(self.path)
-        self._tmp = Path(tempfile.mkdtemp(prefix=f".{self.path.name}.", suffix=".partial", dir=self.path.parent))
+        _check_sequence_out(self.path, overwrite)  # again, under the lock
+        self._tmp = temp_dir(self.path)
         for sub in ("rgb", "depth"):
             (self._tmp / sub).mkdir()
         self._poses: list[np.ndarray] = []
@@ -410,13 +459,7 @@ class SequenceWriter:
             raise ValueError(f"{self.path}: refusing to write a sequence with no frames")
         write_intrinsics(self._tmp / "intrinsics.json", self.intrinsics)
         write_tum(self._tmp / "poses.txt", np.asarray(self._stamps), np.asarray(self._poses))
-        if self.path.exists():
-            old = self.path.with_name(f".{self.path.name}.{uuid.uuid4().hex[:6]}.old")
-            os.replace(self.path, old)
-            os.replace(self._tmp, self.path)
-            shutil.rmtree(old, ignore_errors=True)
-        else:
-            os.replace(self._tmp, self.path)
+        replace_output_dir(self._tmp, self.path, "sequence")
         self._closed = True
         self._lock.close()
         return self.path
@@ -472,7 +515,7 @@ def write_labels_folder(path: PathLike, labels: Iterator[np.ndarray] | list[np.n
     with _writer_lock(path):
         _recover(path)
         check_output_dir(path, "labels", overwrite=overwrite, inputs=inputs)
-        tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".partial", dir=path.parent))
+        tmp = temp_dir(path)
         try:
             # PNG encoding releases the GIL: a writer thread overlaps it with making the next label
             # image (a prediction, a transfer) or with the other writer
@@ -481,6 +524,8 @@ def write_labels_folder(path: PathLike, labels: Iterator[np.ndarray] | list[np.n
                            for i, lab in enumerate(labels)]
                 for fut in pending:
                     fut.result()
+            if not pending:
+                raise ValueError(f"{path}: no label images to write (a sequence without frames?)")
             for name, src in (extra_dirs or {}).items():
                 os.replace(src, tmp / name)
             replace_output_dir(tmp, path, "labels")

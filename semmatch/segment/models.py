@@ -28,7 +28,12 @@ from ..labels import NUM_CLASSES
 #: the ``format`` entry of a semmatch segmentation checkpoint
 CHECKPOINT_FORMAT = "semmatch-segment/1"
 
-__all__ = ["CHECKPOINT_FORMAT", "ARCHITECTURES", "ModelConfig", "build_network", "normalise_inputs", "CompactNet", "StrongNet", "count_parameters"]
+__all__ = ["CHECKPOINT_FORMAT", "ARCHITECTURES", "ModelConfig", "read_checkpoint", "build_network", "normalise_inputs", "CompactNet", "StrongNet", "count_parameters"]
+
+#: largest network input side a configuration may ask for (the views are 640x480 at most)
+MAX_INPUT_SIDE = 4096
+#: largest number of output classes a configuration may ask for
+MAX_CLASSES = 1024
 
 #: depth values are divided by this (metres) and clipped to [0, 2]
 DEPTH_NORM = 4.0
@@ -57,12 +62,19 @@ class ModelConfig:
     num_classes: int = NUM_CLASSES
 
     def __post_init__(self) -> None:
-        if self.arch not in ARCHITECTURES:
+        # checked before any network is built: a checkpoint's configuration is data, not trusted
+        if not isinstance(self.arch, str) or self.arch not in ARCHITECTURES:
             raise ValueError(f"unknown architecture {self.arch!r}; choose one of {', '.join(ARCHITECTURES)}")
-        if int(self.width) < 16 or int(self.height) < 16:
-            raise ValueError(f"network input must be at least 16x16, got {self.width}x{self.height}")
-        if int(self.num_classes) < 2:
-            raise ValueError(f"num_classes must be >= 2, got {self.num_classes}")
+        if not isinstance(self.use_depth, bool):
+            raise ValueError(f"use_depth must be true or false, got {self.use_depth!r}")
+        for name in ("width", "height", "num_classes"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int | np.integer):
+                raise ValueError(f"{name} must be an integer, got {v!r}")
+        if not (16 <= self.width <= MAX_INPUT_SIDE and 16 <= self.height <= MAX_INPUT_SIDE):
+            raise ValueError(f"network input must be 16..{MAX_INPUT_SIDE} pixels a side, got {self.width}x{self.height}")
+        if not 2 <= self.num_classes <= MAX_CLASSES:
+            raise ValueError(f"num_classes must be 2..{MAX_CLASSES}, got {self.num_classes}")
 
     @property
     def in_channels(self) -> int:
@@ -80,6 +92,39 @@ class ModelConfig:
         if unknown:
             raise ValueError(f"unknown model config keys: {', '.join(sorted(unknown))}")
         return cls(**d)
+
+
+def read_checkpoint(path) -> dict:
+    """Load a checkpoint file with ``torch.load(weights_only=True)``: data only, never code.
+
+    Parameters
+    ----------
+    path : path
+        An existing file.
+
+    Returns
+    -------
+    object
+        What the file holds (tensors, dictionaries, lists, numbers, strings).
+
+    Raises
+    ------
+    ValueError
+        A corrupt file, or a pickle of other Python objects (which could run code when loaded).
+    """
+    import pickle
+
+    try:
+        return torch.load(path, map_location="cpu", weights_only=True)
+    except pickle.UnpicklingError as e:
+        lines = [ln.strip() for ln in str(e).splitlines() if ln.strip()]
+        detail = next((lines[i + 1] for i, ln in enumerate(lines[:-1]) if "WeightsUnpickler error" in ln),
+                      lines[0][:200] if lines else "")
+        raise ValueError(f"{path}: not loadable as a weights-only checkpoint ({detail}): a corrupt file, or a "
+                         "pickle of other Python objects, which semmatch refuses to load (it could run code)") from None
+    except Exception as e:  # torch raises many types for a corrupt file
+        first = (str(e).strip().splitlines() or [""])[0][:200]
+        raise ValueError(f"{path}: not a readable PyTorch checkpoint ({type(e).__name__}: {first})") from None
 
 
 def normalise_inputs(rgb: torch.Tensor, depth: torch.Tensor | None) -> torch.Tensor:

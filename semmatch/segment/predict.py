@@ -20,7 +20,6 @@ network time. ``flip=False`` gives the single pass (used for validation during t
 from __future__ import annotations
 
 import os
-import pickle
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 
@@ -31,7 +30,7 @@ import torch.nn.functional as F
 from ..io import Frame, read_sequence, write_labels_folder
 from ..labels import NUM_CLASSES, table_fingerprint
 from ..progress import tqdm
-from .models import CHECKPOINT_FORMAT, ModelConfig, build_network, normalise_inputs
+from .models import CHECKPOINT_FORMAT, ModelConfig, build_network, normalise_inputs, read_checkpoint
 
 __all__ = ["Segmenter", "load_model", "training_histories", "predict_sequence", "check_rgb", "check_depth"]
 
@@ -234,17 +233,7 @@ def load_model(checkpoint: str | os.PathLike, *, arch: str | None = None, device
     path = Path(checkpoint)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such checkpoint")
-    try:
-        ckpt = torch.load(path, map_location="cpu", weights_only=True)
-    except pickle.UnpicklingError as e:
-        lines = [ln.strip() for ln in str(e).splitlines() if ln.strip()]
-        detail = next((lines[i + 1] for i, ln in enumerate(lines[:-1]) if "WeightsUnpickler error" in ln),
-                      lines[0][:200] if lines else "")
-        raise ValueError(f"{path}: not loadable as a weights-only checkpoint ({detail}): a corrupt file, or a "
-                         "pickle of other Python objects, which semmatch refuses to load (it could run code)") from None
-    except Exception as e:  # torch raises many types for a corrupt file
-        first = (str(e).strip().splitlines() or [""])[0][:200]
-        raise ValueError(f"{path}: not a readable PyTorch checkpoint ({type(e).__name__}: {first})") from None
+    ckpt = read_checkpoint(path)
     if not isinstance(ckpt, dict) or ckpt.get("format") != CHECKPOINT_FORMAT:
         raise ValueError(f"{path}: not a semmatch segmentation checkpoint (expected format {CHECKPOINT_FORMAT})")
     _check_table(ckpt.get("categories"), path)
@@ -328,12 +317,13 @@ def predict_sequence(
         ``out_dir``.
     """
     import shutil
-    import tempfile
+
+    from ..io.outputs import temp_dir
 
     frames: Iterable[Frame] = read_sequence(seq) if isinstance(seq, str | os.PathLike) else seq
     out_dir = Path(out_dir)
     out_dir.parent.mkdir(parents=True, exist_ok=True)
-    tmp_probs = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.probs.", dir=out_dir.parent)) if probs else None
+    tmp_probs = temp_dir(out_dir, "probs") if probs else None  # swept by the next writer if this one is killed
     total = len(frames) if hasattr(frames, "__len__") else None
 
     def labels():

@@ -237,19 +237,37 @@ class MapIndex:
         self._tree = None if self.is_mesh else cKDTree(self.samples)
 
     @classmethod
-    def _from_cache(cls, semantic_map: SemanticMap, path, *, workers: int = 1) -> MapIndex:
-        """An index of ``semantic_map`` from a cache file of :func:`load_index` (no grid build)."""
-        with np.load(path) as z:
-            data = {k: z[k] for k in z.files}
+    def _from_cache(cls, semantic_map: SemanticMap, path, *, map_digest: str, max_distance: float,
+                    voxel_size: float, workers: int = 1) -> MapIndex:
+        """An index of ``semantic_map`` from a cache file of :func:`load_index` (no grid build).
+
+        The file must be the cache of this map (``map_digest``) at these parameters, its arrays
+        must hash to the digest stored with them, and nothing in it may decompress to more than
+        the grid the map spans can hold (checked before decompressing).
+        """
         self = cls.__new__(cls)
         self.map = semantic_map
         self.source = semantic_map.source
-        self.max_distance = float(data["max_distance"])
+        self.max_distance = float(max_distance)
         self.workers = int(workers)
         self.is_mesh = semantic_map.is_mesh
-        self.samples = None if self.is_mesh else data["samples"]
-        self.sample_labels = None if self.is_mesh else data["sample_labels"]
-        if not self.is_mesh and len(self.samples) != len(semantic_map.points):
+        self.samples = None if self.is_mesh else semantic_map.points
+        self.sample_labels = None if self.is_mesh else semantic_map.labels
+        origin, shape, _ = _grid_geometry(*self._bounds(0.7 * voxel_size)[:2], self.max_distance, voxel_size)
+        nb = -(-shape // BLOCK)
+        n_table = int(np.prod(nb.astype(np.float64)))
+        data = _read_cache(path, limit=n_table * (4 + BLOCK**3) + 32 * len(semantic_map.points) + (1 << 20))
+        if str(data.pop("map_sha256", "")) != map_digest:
+            raise ValueError("it was made for another map or other parameters")
+        want = str(data.pop("content_sha256", ""))
+        if _arrays_digest(data) != want:
+            raise ValueError("its arrays do not match their stored digest (changed after it was written)")
+        if (float(data["max_distance"]) != self.max_distance or float(data["voxel_size"]) != float(voxel_size)
+                or tuple(int(x) for x in data["shape"]) != tuple(int(x) for x in shape)
+                or not np.allclose(data["origin"], origin)):
+            raise ValueError("its grid is not the grid of this map")
+        if not self.is_mesh and (len(data["samples"]) != len(semantic_map.points)
+                                 or not np.array_equal(data["sample_labels"], semantic_map.labels)):
             raise ValueError("the cached samples do not match the map")
         self._tree = None if self.is_mesh else cKDTree(self.samples)
         self._rc = None
@@ -317,11 +335,8 @@ class MapIndex:
         """
         s = voxel_size
         lo, hi, n_samples = self._bounds(0.7 * s)
-        margin = self.max_distance + 2 * s
-        extent = hi - lo + 2 * margin
+        self.origin, shape, extent = _grid_geometry(lo, hi, self.max_distance, s)
         self.voxel_size = s
-        self.origin = lo - margin
-        shape = np.ceil(extent / s).astype(np.int64) + 1
         self.shape = tuple(int(x) for x in shape)
         nb = -(-shape // BLOCK)
         n_table = int(np.prod(nb.astype(np.float64)))
@@ -801,6 +816,13 @@ class MapIndex:
         )
 
 
+def _grid_geometry(lo: np.ndarray, hi: np.ndarray, max_distance: float, s: float):
+    """Origin, shape (voxels per axis) and extent of the label grid around samples in [lo, hi]."""
+    margin = max_distance + 2 * s
+    extent = hi - lo + 2 * margin
+    return lo - margin, np.ceil(extent / s).astype(np.int64) + 1, extent
+
+
 def _voxel_keys(points: np.ndarray, labels: np.ndarray, origin: np.ndarray, s: float, shape) -> np.ndarray:
     """Sort keys of samples: voxel (linear index) << 16 | distance to the voxel centre in 1/1024
     voxel << 6 | label; the smallest key of a voxel is its sample nearest to the centre."""
@@ -939,14 +961,14 @@ def prepare(
 
 
 #: version of the index cache files (bump when the grid's meaning changes)
-INDEX_CACHE_VERSION = 2
+INDEX_CACHE_VERSION = 3
 #: environment variable that turns the index cache off (any non-empty value)
 NO_CACHE_ENV = "SEMMATCH_NO_INDEX_CACHE"
 _CACHED = ("table", "blocks", "origin", "shape", "voxel_size", "max_distance", "n_samples")
 
 
-def _cache_file(path: Path, max_distance: float, voxel_size: float) -> Path:
-    """``.<map>.index-<key>.npz`` beside the map: key = SHA-256 of its bytes and the parameters."""
+def _cache_file(path: Path, max_distance: float, voxel_size: float) -> tuple[Path, str]:
+    """``.<map>.index-<key>.npz`` beside the map, and the full key: SHA-256 of its bytes and the parameters."""
     import hashlib
 
     h = hashlib.sha256()
@@ -954,7 +976,31 @@ def _cache_file(path: Path, max_distance: float, voxel_size: float) -> Path:
         for block in iter(lambda: fh.read(1 << 20), b""):
             h.update(block)
     h.update(f"|{max_distance!r}|{voxel_size!r}|{INDEX_CACHE_VERSION}".encode())
-    return path.with_name(f".{path.name}.index-{h.hexdigest()[:16]}.npz")
+    return path.with_name(f".{path.name}.index-{h.hexdigest()[:16]}.npz"), h.hexdigest()
+
+
+def _arrays_digest(data: dict) -> str:
+    """SHA-256 of named arrays: names, dtypes, shapes and bytes, in name order."""
+    import hashlib
+
+    h = hashlib.sha256()
+    for k in sorted(data):
+        a = np.ascontiguousarray(data[k])
+        h.update(f"{k}|{a.dtype.str}|{a.shape}|".encode())
+        h.update(a.tobytes())
+    return h.hexdigest()
+
+
+def _read_cache(path: Path, *, limit: int) -> dict:
+    """The arrays of an ``.npz`` cache; refused when they would decompress to more than ``limit`` bytes."""
+    import zipfile
+
+    with zipfile.ZipFile(path) as zf:
+        size = sum(info.file_size for info in zf.infolist())
+    if size > limit:
+        raise ValueError(f"it would decompress to {size:,} bytes, more than the {limit:,} the map's grid can hold")
+    with np.load(path, allow_pickle=False) as z:
+        return {k: z[k] for k in z.files}
 
 
 def load_index(path, *, max_distance: float = DEFAULT_MAX_DISTANCE, voxel_size: float = 0.02,
@@ -989,21 +1035,22 @@ def load_index(path, *, max_distance: float = DEFAULT_MAX_DISTANCE, voxel_size: 
     m = read_map(path) if semantic_map is None else semantic_map
     if not cache or os.environ.get(NO_CACHE_ENV) or index_params.get("max_voxels") is not None:
         return MapIndex(m, max_distance=max_distance, voxel_size=voxel_size, **index_params)
-    cf = _cache_file(path, float(max_distance), float(voxel_size))
+    cf, digest = _cache_file(path, float(max_distance), float(voxel_size))
     if cf.is_file():
         try:
-            return MapIndex._from_cache(m, cf, **index_params)
-        except Exception as e:  # a truncated or foreign file: rebuild
-            warnings.warn(f"{cf}: unreadable index cache ({type(e).__name__}: {e}); rebuilding it", UserWarning,
+            return MapIndex._from_cache(m, cf, map_digest=digest, max_distance=float(max_distance),
+                                        voxel_size=float(voxel_size), **index_params)
+        except Exception as e:  # a truncated, foreign, tampered or oversized file: never trusted, rebuilt
+            warnings.warn(f"{cf}: unreadable index cache, or not this map's ({type(e).__name__}: {e}); rebuilding it", UserWarning,
                           stacklevel=2)
     index = MapIndex(m, max_distance=max_distance, voxel_size=voxel_size, **index_params)
+    arrays = {k: np.asarray(getattr(index, {"table": "_table", "blocks": "_blocks"}.get(k, k))) for k in _CACHED}
+    arrays["samples"] = index.samples if index.samples is not None else np.zeros((0, 3), np.float32)
+    arrays["sample_labels"] = index.sample_labels if index.sample_labels is not None else np.zeros(0, np.uint8)
     try:
         with atomic_path(cf) as tmp:
-            np.savez_compressed(tmp, **{k: np.asarray(getattr(index, {'table': '_table', 'blocks': '_blocks'}.get(k, k)))
-                                       for k in _CACHED},
-                                samples=index.samples if index.samples is not None else np.zeros((0, 3), np.float32),
-                                sample_labels=(index.sample_labels if index.sample_labels is not None
-                                               else np.zeros(0, np.uint8)))
+            np.savez_compressed(tmp, **arrays, map_sha256=np.asarray(digest),
+                                content_sha256=np.asarray(_arrays_digest(arrays)))
     except OSError:  # a read-only folder: no cache
         pass
     return index
