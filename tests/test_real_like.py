@@ -67,7 +67,8 @@ def test_chain_uses_no_true_pose_and_reports_the_registration(tiny_root, tmp_pat
     kw = dict(voxel_size=0.05, registration_voxel=0.1, registration_restarts=2, prior_tolerance=TOL, progress=False)
     table, traj, reg = evaluate_real_like(tiny_root, ["3d-neighborhood"], ["noisy"], **kw)
     assert set(zip(table["model"], table["method"])) == {
-        ("ground truth", "3d-neighborhood"), ("noisy", "lower"), ("noisy", "3d-neighborhood"), ("noisy", "fused")}
+        ("ground truth", "3d-neighborhood"), ("noisy", "lower"), ("noisy", "3d-neighborhood"), ("noisy", "fused"),
+        ("noisy", "upper")}  # the network's own upper map (claim C16), no ground-truth upper row
     assert table[["jaccard", "sorensen", "color_acc", "mean_acc"]].apply(lambda c: c.between(0, 1)).all().all()
     work = Layout(tiny_root).real_like / SCENE
     for name in ("upper", "lower"):

@@ -157,7 +157,8 @@ def evaluate_real_like(
     table : DataFrame
         scene, model, method, jaccard, sorensen, color_acc, mean_acc. ``model`` is
         ``ground truth`` or a network; ``method`` a transfer method, ``lower`` (the network on
-        the lower frames) or ``fused``.
+        the lower frames), ``fused``, or ``upper`` (each network's upper map scored against the
+        noisy upper frames fused with ground-truth labels, in the person's frame).
     trajectories : DataFrame
         scene, sequence (upper, lower), poses (recorded prior or estimated), ate_rmse (m,
         after rigid alignment), ate_rmse_unaligned (m, the trajectory placed at the true first
@@ -261,8 +262,12 @@ def _real_like_scene_chain(data_root: str, methods: tuple[str, ...], networks: t
     for net in networks:
         upper_labels[net] = work / f"upper_labels_{net}"
         predict_sequence(models[net], seqs["upper"], upper_labels[net], progress=False)
-    upper_maps = reconstruct_many(seqs["upper"], [upper_labels[s] for s in sources], voxel_size,
-                                  outs=[work / f"upper_{s}.ply" for s in sources])
+    # (plus, last, the upper reference: the noisy upper frames fused with ground-truth labels, which
+    # scores each network's own upper map, the `upper` rows; one fusion for every labeling)
+    upper_sources = [*sources, *([] if GT in sources else [GT])]
+    upper_maps = reconstruct_many(seqs["upper"], [upper_labels[s] for s in upper_sources], voxel_size,
+                                  outs=[work / f"upper_{s}.ply" for s in upper_sources])
+    upper_reference, upper_maps = upper_maps[upper_sources.index(GT)], upper_maps[:len(sources)]
     # the lower reference (own frame); its geometry is registered onto the upper map
     (reference,) = reconstruct_many(seqs["lower"], [None], voxel_size, outs=[work / "reference.ply"])
     reg = register_maps(reference, upper_maps[0], voxel_size=registration_voxel, seed=registration_seed,
@@ -320,6 +325,14 @@ def _real_like_scene_chain(data_root: str, methods: tuple[str, ...], networks: t
         s = compare(reference_voxels, pred, voxel_size=eval_voxel_size, grid_origin=eval_grid_origin(eval_voxel_size))
         rows.append(dict(scene=sid, model=model_name(source), method=method,
                          **{k: float(s[k]) for k in MEASURE_COLUMNS}))
+    # `upper` rows (claim C16): each network's upper map against the upper reference, in the
+    # person's own frame (the human perspective of the real-like chain)
+    upper_voxels = reference_grid(upper_reference, eval_voxel_size)
+    for source, upper_map in zip(sources, upper_maps, strict=True):
+        if source != GT:
+            s = compare(upper_voxels, upper_map, voxel_size=eval_voxel_size, grid_origin=eval_grid_origin(eval_voxel_size))
+            rows.append(dict(scene=sid, model=model_name(source), method="upper",
+                             **{k: float(s[k]) for k in MEASURE_COLUMNS}))
     return rows, traj_rows, reg_row
 
 
@@ -364,6 +377,9 @@ def score_real_like_against_mesh(
     layout = Layout(data_root)
     to_world = {r.scene: np.asarray(r.lower_to_world, dtype=np.float64) for r in registration.itertuples()}
     rows = []
+    # the `upper` rows have no mesh score: their maps lie in the person's frame, and the observed
+    # mesh reference is the robot's (claim C16 is judged under the fusion reference only)
+    per_scene = per_scene[per_scene["method"] != "upper"]
     for sid, group in per_scene.groupby("scene", sort=False):
         if sid not in to_world:
             raise ValueError(f"{sid}: no registration row (lower_to_world) to place its maps in the world")
