@@ -263,7 +263,21 @@ def _empty_sequence(b: Path, w: Path) -> Path:
     return s
 
 
+def _far_pose(b: Path, w: Path) -> Path:
+    """A copy of the sequence whose second pose lies 10^30 m away."""
+    s = w / "far"
+    shutil.copytree(b / "seq", s)
+    lines = (s / "poses.txt").read_text().splitlines()
+    k = [i for i, ln in enumerate(lines) if ln and not ln.startswith("#")][1]
+    v = lines[k].split()
+    lines[k] = " ".join([v[0], "1e30", *v[2:]])
+    (s / "poses.txt").write_text("\n".join(lines) + "\n")
+    return s
+
+
 INPUT_CASES = [
+    ("pose-far-away", lambda b, w: f"reconstruct {_far_pose(b, w)} --out {w}/m.ply",
+     r"far/poses\.txt:\d+ \(pose 1\): camera position \[1e\+30, .* beyond 10000 m"),
     ("ply-header-padded-past-64k", lambda b, w: f"show {_bomb_ply(w)} --html {w}/x.html",
      r"bomb\.ply: PLY header claims 300,000,000 face elements"),
     ("show-max-vertices-zero", "show {b}/map.ply --html {w}/x.html --max-vertices 0", r"--max-vertices: must be >= 1"),
@@ -484,3 +498,109 @@ def test_16_bit_colour_is_scaled_not_wrapped(base, tmp_path):
     cv2.imwrite(str(p), rgb8[..., ::-1].astype(np.uint16) * 257)  # the same picture at 16 bits
     np.testing.assert_array_equal(read_sequence(seq)[0].rgb, rgb8)
     np.testing.assert_array_equal(read_rgb(p), rgb8)
+
+
+# ------------------------------------------------------------------------------------------ fuzzing
+def _tiny_plys(d: Path) -> dict[str, bytes]:
+    from semmatch.io import SemanticMap, write_map
+
+    rng = np.random.default_rng(0)
+    pts = rng.random((12, 3)).astype(np.float32)
+    m = SemanticMap(pts, rng.integers(0, 21, 12).astype(np.uint8), faces=np.array([[0, 1, 2], [3, 4, 5], [6, 7, 8]]))
+    out = {}
+    for binary in (True, False):
+        p = d / f"t{int(binary)}.ply"
+        write_map(p, m, binary=binary)
+        out["binary" if binary else "ascii"] = p.read_bytes()
+    return out
+
+
+def _fuzz_settings():
+    from hypothesis import HealthCheck, settings
+
+    return settings(max_examples=40, deadline=None, derandomize=True,
+                    suppress_health_check=[HealthCheck.function_scoped_fixture])
+
+
+def test_fuzzed_ply_files_are_read_or_refused_clearly(tmp_path):
+    """Truncations, flipped bytes and rewritten counts: a map or a ValueError, never another error."""
+    from hypothesis import given
+    from hypothesis import strategies as st
+
+    from semmatch.io import read_map
+
+    plys = _tiny_plys(tmp_path)
+
+    @_fuzz_settings()
+    @given(kind=st.sampled_from(sorted(plys)), cut=st.integers(0, 2000),
+           flips=st.lists(st.tuples(st.integers(0, 2000), st.integers(0, 255)), max_size=4),
+           counts=st.lists(st.integers(-5, 10**12), min_size=2, max_size=2),
+           padding=st.integers(0, 4))  # 4 x 20 kB of comments: a header past 64 KiB
+    def check(kind, cut, flips, counts, padding):
+        data = bytearray(plys[kind])
+        head, sep, body = bytes(data).partition(b"end_header\n")
+        lines = head.decode().splitlines()
+        elements = [i for i, ln in enumerate(lines) if ln.startswith("element")]
+        for i, n in zip(elements, counts):
+            if n % 3 == 0:  # rewrite some counts only
+                name = lines[i].split()[1]
+                lines[i] = f"element {name} {n}"
+        lines[1:1] = ["comment " + "p" * 20000] * padding
+        data = bytearray("\n".join(lines).encode() + b"\n" + sep + body)
+        for pos, value in flips:
+            if pos < len(data):
+                data[pos] = value
+        if cut:
+            data = data[: max(len(data) - cut, 0)]
+        p = tmp_path / "fuzz.ply"
+        p.write_bytes(bytes(data))
+        try:
+            m = read_map(p, require_labels=False)
+        except ValueError:
+            return
+        assert len(m.points) <= 12 + 2000  # nothing larger than the file could hold
+
+    check()
+
+
+def test_fuzzed_trajectories_are_read_or_refused_clearly(tmp_path):
+    from hypothesis import given
+    from hypothesis import strategies as st
+
+    from semmatch.io import read_tum
+
+    token = st.one_of(st.floats(allow_nan=True, allow_infinity=True).map(repr), st.sampled_from(["", "#", "x", "1e400"]))
+
+    @_fuzz_settings()
+    @given(st.lists(st.lists(token, min_size=0, max_size=9).map(" ".join), max_size=6))
+    def check(lines):
+        p = tmp_path / "poses.txt"
+        p.write_text("\n".join(lines) + "\n")
+        try:
+            t, poses = read_tum(p)
+        except ValueError:
+            return
+        assert np.isfinite(poses).all() and np.abs(poses[:, :3, 3]).max(initial=0) <= 1e4
+        assert np.allclose(poses[:, :3, :3] @ poses[:, :3, :3].transpose(0, 2, 1), np.eye(3), atol=1e-6)
+
+    check()
+
+
+def test_fuzzed_list_entries_stay_inside_the_folder(tmp_path):
+    from hypothesis import given
+    from hypothesis import strategies as st
+
+    from semmatch.io import listed_file
+
+    part = st.sampled_from(["..", ".", "rgb", "a.png", "", "/", "~", "x..y"])
+
+    @_fuzz_settings()
+    @given(st.lists(part, min_size=1, max_size=5).map("/".join))
+    def check(name):
+        try:
+            p = listed_file(tmp_path, name, "rgb.txt:1")
+        except ValueError:
+            return
+        assert os.path.abspath(p).startswith(str(tmp_path))
+
+    check()

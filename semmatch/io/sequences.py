@@ -68,8 +68,15 @@ def write_intrinsics(path: PathLike, intr: Intrinsics) -> None:
     write_json(path, intr.to_dict())
 
 
+#: largest camera coordinate a trajectory may hold (metres): no recorded scene spans 10 km
+MAX_POSITION = 1e4
+
+
 def read_tum(path: PathLike) -> tuple[np.ndarray, np.ndarray]:
     """Read a TUM trajectory file (``t tx ty tz qx qy qz qw`` per line, ``#`` comments).
+
+    Positions must be finite and within :data:`MAX_POSITION` metres of the origin; the
+    rotation is the normalised quaternion (always rigid).
 
     Returns
     -------
@@ -91,6 +98,9 @@ def read_tum(path: PathLike) -> tuple[np.ndarray, np.ndarray]:
             raise ValueError(f"{path}:{lineno}: not a number in {line!r}") from None
         if not np.isfinite(v).all():
             raise ValueError(f"{path}:{lineno}: NaN or inf in pose")
+        if np.abs(v[1:4]).max() > MAX_POSITION:
+            raise ValueError(f"{path}:{lineno} (pose {len(poses)}): camera position {v[1:4].tolist()} lies beyond "
+                             f"{MAX_POSITION:g} m of the origin: a corrupt pose, or a trajectory in other units")
         try:
             poses.append(pose_from_tum(v[1:]))
         except ValueError as e:
