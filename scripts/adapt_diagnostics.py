@@ -82,11 +82,10 @@ def train_from_scratch(checkpoint: Path, heights: tuple[float, float], out: Path
     The views are rendered into ``out.parent / "cache"`` (not the profile's cache); the training
     scenes, frames, steps and seeds are the checkpoint's.
     """
-    import torch
-
+    from semmatch.segment.models import read_checkpoint
     from semmatch.segment.training import TrainConfig, train
 
-    rec = dict(torch.load(checkpoint, map_location="cpu", weights_only=False)["train_config"])
+    rec = dict(read_checkpoint(checkpoint)["train_config"])  # weights only: data, never code
     known = set(TrainConfig.__dataclass_fields__)
     cfg = TrainConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in rec.items() if k in known})
     cfg.heights, cfg.out, cfg.cache_dir, cfg.progress = tuple(heights), str(out), str(out.parent / "cache"), False

@@ -25,6 +25,7 @@ def main() -> None:
 
     from semmatch.experiments.pipeline import ROOT, notebook_parameters
     from semmatch.segment import pipeline_configs
+    from semmatch.segment.models import read_checkpoint
     from semmatch.segment.training import build_views, train
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -45,9 +46,9 @@ def main() -> None:
         t0 = time.perf_counter()
         train(cfg, views=views)
         minutes = (time.perf_counter() - t0) / 60
-        mine = torch.load(args.out / f"{net}.pt", weights_only=False)["state_dict"]
+        mine = read_checkpoint(args.out / f"{net}.pt")["state_dict"]
         theirs_path = data_root / "models" / f"{net}.pt"
-        theirs = torch.load(theirs_path, weights_only=False)["state_dict"] if theirs_path.is_file() else None
+        theirs = read_checkpoint(theirs_path)["state_dict"] if theirs_path.is_file() else None
         same = theirs is not None and mine.keys() == theirs.keys() and all(torch.equal(mine[k], theirs[k]) for k in mine)
         result[net] = {"minutes": round(minutes, 2), "identical_to_pipeline": same}
         print(net, result[net], flush=True)

@@ -423,9 +423,12 @@ def test_index_cache_that_lies_is_rebuilt_with_a_warning(base, tmp_path):
 
 # ------------------------------------------------------------------------------------------ code from data
 def test_no_checkpoint_is_loaded_with_pickle_code():
-    pkg = Path(__file__).resolve().parents[1] / "semmatch"
-    hits = [f"{p.relative_to(pkg.parent)}:{n}" for p in pkg.rglob("*.py")
-            for n, line in enumerate(p.read_text().splitlines(), 1) if re.search(r"weights_only\s*=\s*False", line)]
+    """The package, the scripts and the notebooks load checkpoints as data only (weights_only=True)."""
+    root = Path(__file__).resolve().parents[1]
+    files = [p for d in ("semmatch", "scripts", "notebooks") for p in (root / d).rglob("*")
+             if p.suffix in (".py", ".ipynb") and ".ipynb_checkpoints" not in p.parts]
+    hits = [f"{p.relative_to(root)}:{n}" for p in files
+            for n, line in enumerate(p.read_text().splitlines(), 1) if re.search(r"weights_only\W*=\W*False", line)]
     assert not hits, f"checkpoints loaded with weights_only=False: {hits}"
 
 
