@@ -339,26 +339,28 @@ def test_panoptic_evaluate_warns_on_low_overlap(base, tmp_path):
         assert main(["panoptic", "evaluate", str(pan), str(pan)]) == 0
 
 
-def test_a_killed_worker_is_a_clear_error(base, tmp_path, capsys, monkeypatch):
-    """A worker killed from outside (as by the out-of-memory killer): a message, exit 2, no output."""
-    import semmatch.transfer as transfer
+def test_a_killed_worker_is_a_clear_error_naming_the_frame(base, tmp_path, capsys, monkeypatch):
+    """transfer --jobs 2 whose worker is killed at frame 2 (as by the out-of-memory killer): a message
+    naming the sequence and the first frame not transferred, exit 2, no output, no traceback."""
+    import semmatch.transfer.sequence as ts
 
-    def killed(*a, **k):
-        from semmatch.workers import process_pool
-
-        with process_pool(2) as ex:
-            list(ex.map(_suicide, range(2)))
-
-    monkeypatch.setattr(transfer, "transfer_sequence", killed)
+    monkeypatch.setattr(ts, "_run_one", _killed_at_frame_2)
     rc, err = _run(["transfer", str(base / "low"), "--map", str(base / "map.ply"), "--method", "3d-neighborhood",
                     "--out", str(tmp_path / "out"), "--jobs", "2", "--quiet"], capsys)
-    assert rc == 2 and "Traceback" not in err
-    assert re.search(r"a worker process died .* rerun with fewer worker processes \(--jobs 2 now\)", err), err
-    assert not (tmp_path / "out").exists()
+    assert rc == 2 and "Traceback" not in err, err
+    assert re.search(r"a worker process died .*low: frame [0-2] of 4 \(3d-neighborhood\) and those after it were not "
+                     r"transferred.* rerun with fewer worker processes \(--jobs 2 now\)", err), err
+    assert sorted(tmp_path.iterdir()) == []
 
 
-def _suicide(i: int) -> None:
-    os.kill(os.getpid(), signal.SIGKILL)
+def _killed_at_frame_2(i: int):
+    """A transfer worker's task that dies (SIGKILL) on frame 2 (runs in a forked worker)."""
+    import semmatch.transfer.sequence as ts
+
+    if i == 2:
+        os.kill(os.getpid(), signal.SIGKILL)
+    w = ts._WORKER
+    return ts._transfer_one(w["seq"], w["poses"], w["index"], w["method"], w["params"], i)
 
 
 # ------------------------------------------------------------------------------------------ caches

@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import warnings
 from collections.abc import Sequence
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import replace
 from pathlib import Path
 
@@ -166,9 +167,15 @@ def transfer_sequence(
     if int(jobs) > 1 and source is not None:
         with process_pool(int(jobs), initializer=_init_worker, initargs=(index, source, method, params, poses)) as ex:
             results = ex.map(_run_one, range(n), chunksize=max(1, n // (4 * int(jobs))))
-            for i, lab, c, s, d in results:
-                labels[i], cov[i], secs[i], dropouts[i] = lab, c, s, d
-                bar.update()
+            done = 0  # results come in frame order: the first missing one names where a dead worker stopped
+            try:
+                for i, lab, c, s, d in results:
+                    labels[i], cov[i], secs[i], dropouts[i] = lab, c, s, d
+                    done = i + 1
+                    bar.update()
+            except BrokenProcessPool:
+                raise BrokenProcessPool(f"{seq_path or 'sequence'}: frame {done} of {n} ({method}) and those after it "
+                                        "were not transferred") from None
     else:
         for i in range(n):
             _, labels[i], cov[i], secs[i], dropouts[i] = _transfer_one(frames, poses, index, method, params, i)
