@@ -278,8 +278,10 @@ def full_table(with_upper: bool = True) -> pd.DataFrame:
 
 def test_every_claim_gets_rows_on_complete_data():
     fig3 = height_table({"compact": list(np.linspace(0.7, 0.8, 8)), "strong": list(np.linspace(0.7, 0.8, 8))})
-    res = check_claims(full_table(), full_table(), fig3, methods=ALL_METHODS)
+    drops = full_table().query("model == 'ground truth'")  # per-scene drops of the depth-noise study
+    res = check_claims(full_table(), full_table(), fig3, drops, methods=ALL_METHODS)
     assert [c.id for c in CLAIMS] == list(dict.fromkeys(res["claim"]))
+    assert len(rows_of(res, "C13-noise")) == 4 and set(rows_of(res, "C13-noise")["data"]) == {"depth noise"}
     assert set(res["verdict"]) <= {"holds", "does not hold", "equivalent", "inconclusive"}
     assert len(rows_of(res, "C1")) == 2 * 5 and len(rows_of(res, "C2")) == 3 * 4 and len(rows_of(res, "C4")) == 2 * 4
     assert set(rows_of(res, "C5")["model"]) == {"ground truth"}

@@ -76,7 +76,7 @@ _GT = "ground truth"
 #: columns that split a per-scene table into separate tables (never pooled)
 _SPLITS = ("reference", "route")
 _BASELINES = ("lower", "upper")
-_DATA = {"synthetic": "table2", "real-like": "table3", "height sweep": "fig3"}
+_DATA = {"synthetic": "table2", "real-like": "table3", "height sweep": "fig3", "depth noise": "noise"}
 _KINDS = ("beats", "best", "worst", "similar")
 _MODELS = ("networks", "ground truth", "all")
 _ROLES = ("primary", "secondary")
@@ -97,7 +97,9 @@ class Claim:
     section : str
         Where the paper makes it.
     data : str
-        ``"synthetic"`` (Table 2), ``"real-like"`` (Table 3) or ``"height sweep"`` (Fig. 3).
+        ``"synthetic"`` (Table 2), ``"real-like"`` (Table 3), ``"height sweep"`` (Fig. 3) or
+        ``"depth noise"`` (the depth-noise study's per-scene drops,
+        :func:`semmatch.experiments.depth_noise.noise_drops`).
     kind : str
         ``"beats"``, ``"best"``, ``"worst"`` or ``"similar"``.
     subjects : tuple
@@ -444,6 +446,7 @@ def check_claims(
     table2: pd.DataFrame | None = None,
     table3: pd.DataFrame | None = None,
     fig3: pd.DataFrame | None = None,
+    noise: pd.DataFrame | None = None,
     *,
     methods: Sequence[str],
     plan: AnalysisPlan | None = None,
@@ -464,6 +467,9 @@ def check_claims(
     fig3 : DataFrame, optional
         Per-scene height sweep: ``model``, ``scene``, ``height`` (m) and the measures (reference
         ``frames``: per-frame scores against the ground-truth label images).
+    noise : DataFrame, optional
+        Per-scene drops of the depth-noise study (``scene, model, method`` and the measures:
+        score clean minus score at the noisiest level; :func:`~semmatch.experiments.depth_noise.noise_drops`).
     methods : sequence of str
         The transfer methods configured; a claim on a method not listed (or without rows) is
         skipped, and "the other methods" are the listed ones.
@@ -492,7 +498,7 @@ def check_claims(
     claims = plan.claims if claims is None else claims
     references = plan.references if references is None else tuple(references)
     route = plan.route if route is None else route
-    frames = {"table2": table2, "table3": table3, "fig3": fig3}
+    frames = {"table2": table2, "table3": table3, "fig3": fig3, "noise": noise}
     allowed = set(methods) | set(_BASELINES)
     rows: list[dict] = []
     for claim in claims:
@@ -735,8 +741,8 @@ def judge_figures(figures_dir: str | Path, out_dir: str | Path | None = None, *,
                   methods: Sequence[str] | None = None, plan: AnalysisPlan | None = None) -> pd.DataFrame:
     """Every claim of the plan judged on the per-scene tables of one run, in one verdict table.
 
-    Reads ``table2_per_scene.csv``, ``table3_per_scene.csv``, ``fig3_height_per_scene.csv`` and
-    ``table1_speed.csv`` from ``figures_dir`` (those present) and writes into ``out_dir``:
+    Reads ``table2_per_scene.csv``, ``table3_per_scene.csv``, ``fig3_height_per_scene.csv``,
+    ``depth_noise.csv`` and ``table1_speed.csv`` from ``figures_dir`` (those present) and writes into ``out_dir``:
     ``claims_all.csv`` (every comparison), ``verdicts.csv`` / ``verdicts.md`` (one row per claim,
     the speed claims included), ``findings_all.md`` (:func:`claims_markdown`) and the declared
     secondary analyses ``secondary_s1_support`` (:func:`support_regression`, with
@@ -769,13 +775,17 @@ def judge_figures(figures_dir: str | Path, out_dir: str | Path | None = None, *,
     figures_dir = Path(figures_dir)
     out_dir = figures_dir if out_dir is None else Path(out_dir)
     read = {name: (pd.read_csv(figures_dir / f"{name}.csv") if (figures_dir / f"{name}.csv").is_file() else None)
-            for name in ("table2_per_scene", "table3_per_scene", "fig3_height_per_scene", "table1_speed")}
-    if all(v is None for k, v in read.items() if k != "table1_speed"):
+            for name in ("table2_per_scene", "table3_per_scene", "fig3_height_per_scene", "table1_speed",
+                         "depth_noise")}
+    if all(v is None for k, v in read.items() if k not in ("table1_speed", "depth_noise")):
         raise FileNotFoundError(f"judge_figures: no per-scene table (table2/table3/fig3 _per_scene.csv) in {figures_dir}")
     if methods is None:
         present = set().union(*(set(t["method"]) for k, t in read.items() if t is not None and "method" in t))
         methods = [m for m in ("2d-slic", "3d-projected-sp", "3d-slic", "dbscan", "3d-neighborhood") if m in present]
-    comps = check_claims(read["table2_per_scene"], read["table3_per_scene"], read["fig3_height_per_scene"],
+    from .depth_noise import noise_drops
+
+    drops = noise_drops(read["depth_noise"]) if read["depth_noise"] is not None else None
+    comps = check_claims(read["table2_per_scene"], read["table3_per_scene"], read["fig3_height_per_scene"], drops,
                          methods=methods, plan=plan)
     table = verdict_table(comps, plan=plan, data=list(_DATA))
     if read["table1_speed"] is not None:

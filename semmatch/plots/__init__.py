@@ -11,6 +11,7 @@ computing statistics stay in the modules that own them, which hand the results o
 
 from .charts import (
     confusion_figure,
+    plot_depth_noise,
     plot_height_study,
     plot_measure_bars,
     plot_misregistration,
@@ -23,6 +24,6 @@ from .charts import (
 from .images import floor_plans_figure, frame_figure, image_grid
 
 __all__ = [
-    "confusion_figure", "plot_height_study", "plot_measure_bars", "plot_misregistration", "plot_panoptic", "plot_speed", "plot_support",
+    "confusion_figure", "plot_depth_noise", "plot_height_study", "plot_measure_bars", "plot_misregistration", "plot_panoptic", "plot_speed", "plot_support",
     "plot_table", "plot_training_curves", "floor_plans_figure", "frame_figure", "image_grid",
 ]

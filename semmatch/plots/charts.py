@@ -11,7 +11,7 @@ import pandas as pd
 
 from ..io import save_figure
 
-__all__ = ["confusion_figure", "plot_height_study", "plot_misregistration", "plot_panoptic", "plot_speed",
+__all__ = ["confusion_figure", "plot_height_study", "plot_misregistration", "plot_depth_noise", "plot_panoptic", "plot_speed",
            "plot_support", "plot_table", "plot_training_curves", "plot_measure_bars"]
 
 
@@ -139,6 +139,56 @@ def plot_misregistration(df: pd.DataFrame, path: str | Path, *, measure: str = "
     axes[0].set_title("map translated")
     axes[1].set_title("map rotated about its centroid")
     axes[1].legend(fontsize="small")
+    fig.tight_layout()
+    return save_figure(fig, path)
+
+
+def plot_depth_noise(df: pd.DataFrame, path: str | Path, *, measure: str = "mean_acc",
+                     confidence: float = 0.95) -> Path:
+    """``measure`` of every method against the depth-noise level (mean over scenes, t band).
+
+    Parameters
+    ----------
+    df : DataFrame
+        :func:`semmatch.experiments.depth_noise.depth_noise_study`'s result.
+    path : path
+        Figure file (format from the suffix), written atomically.
+    measure : str
+        A column of ``df`` (default Mean Acc.).
+    confidence : float
+        Level of the band (t interval over scenes).
+
+    Returns
+    -------
+    Path
+
+    Raises
+    ------
+    ValueError
+        An empty ``df`` or a missing column.
+    """
+    import matplotlib.pyplot as plt
+
+    from ..stats import stratified_t_ci
+
+    need = {"method", "level", "depth_sigma_2m", measure}
+    if df.empty or not need <= set(df.columns):
+        raise ValueError(f"plot_depth_noise needs a non-empty table with {sorted(need)}, "
+                         f"got columns {list(df.columns)} and {len(df)} rows")
+    fig, ax = plt.subplots(figsize=(5.5, 3.8))
+    for method, g in df.groupby("method", sort=False):
+        xs = sorted(g["depth_sigma_2m"].unique())
+        stats = np.array([stratified_t_ci(g.loc[g["depth_sigma_2m"] == v, measure].to_numpy(), confidence=confidence)
+                          for v in xs])
+        xv = np.asarray(xs) * 100.0
+        (line,) = ax.plot(xv, stats[:, 0], marker="o", label=method)
+        ax.fill_between(xv, stats[:, 1], stats[:, 2], color=line.get_color(), alpha=0.15)
+    n = df["scene"].nunique() if "scene" in df.columns else 0
+    ax.set_xlabel("depth noise: standard deviation at 2 m (cm)")
+    ax.set_ylabel(f"{measure} (mean over {n} scenes, {confidence:.0%} t interval)")
+    ax.set_title("labels transferred from noisy depth, fused at clean depth")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize="small")
     fig.tight_layout()
     return save_figure(fig, path)
 
