@@ -120,3 +120,23 @@ def test_jupyterlab_has_no_build_request_from_dash():
     assert page_config.is_file(), f"{page_config} missing: run scripts/setup.sh"
     disabled = json.loads(page_config.read_text()).get("disabledExtensions", {})
     assert disabled.get("@plotly/dash-jupyterlab") is True
+
+
+def test_notebooks_give_dash_a_silent_comm(monkeypatch):
+    """Open3D imports Dash, which opens a `dash` comm in a kernel; no frontend handles it, so the
+    notebooks hand Dash a comm that sends nothing (no nbconvert warning) and leave other comms be."""
+    comm = pytest.importorskip("comm")
+    from semmatch.experiments.pipeline import _quiet_dash_comm
+
+    sent = []
+
+    def kernel_comm(*args, **kwargs):
+        sent.append(kwargs.get("target_name"))
+        return "a kernel comm"
+
+    monkeypatch.setattr(comm, "create_comm", kernel_comm)
+    _quiet_dash_comm()
+    _quiet_dash_comm()  # idempotent: wrapped once
+    assert isinstance(comm.create_comm(target_name="dash"), comm.DummyComm)
+    assert comm.create_comm(target_name="jupyter.widget") == "a kernel comm"
+    assert sent == ["jupyter.widget"]
