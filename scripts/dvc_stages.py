@@ -45,7 +45,6 @@ def modules(nb, figs):
     return stage_modules(nb, leave_out=DISPLAY_ONLY + (() if draws else ("semmatch.plots",)))
 
 
-
 stages = {
  "simulate": dict(
     nb="01_simulate", deps=[],
@@ -64,25 +63,25 @@ stages = {
     nb="04_label_transfer", deps=[f"data/{P}/scenes", f"data/{P}/models", f"data/{P}/upper"],
     params=["profile", *common("methods", "networks", "fused_base"), f"profiles.{P}.label_transfer"],
     outs=[f"data/{P}/lower_labels"],
-    figs=[*tbl("table1_speed", "support_per_scene"), "table1_speed.png", "support_per_scene.png",
+    figs=[*tbl("table1_speed", "support_per_scene", "claims_speed"), "table1_speed.png", "support_per_scene.png",
           "fig_transferred_frames.png"]),
  "evaluate_synthetic": dict(
     nb="05_evaluate_synthetic", deps=[f"data/{P}/scenes", f"data/{P}/upper", f"data/{P}/lower_labels"],
     params=["profile", *common("methods", "networks", "voxel_size", "eval_voxel_size", "fused_base"), f"profiles.{P}.evaluate_synthetic"],
     outs=[f"data/{P}/lower_maps"],
-    figs=[*tbl("table2_per_scene", "table2_synthetic", "table2_mesh_reference", "table2_route_ablation", "claims_synthetic", "table2_training_seeds"),
+    figs=[*tbl("table2_per_scene", "table2_synthetic", "table2_mesh_reference", "table2_route_ablation", "claims_synthetic", "verdicts_synthetic", "table2_training_seeds"),
           "table2_synthetic.png", "table2_mesh_reference.png", "findings_synthetic.md"]),
  "height_study": dict(
     nb="06_height_study", deps=[f"data/{P}/scenes", f"data/{P}/models"],
     params=["profile", *common("networks"), f"profiles.{P}.height_study"],
-    outs=[], figs=[*tbl("fig3_height", "fig3_height_per_scene", "claims_height", "fig3_training_seeds"), "fig3_height.png", "findings_height.md"]),
+    outs=[], figs=[*tbl("fig3_height", "fig3_height_per_scene", "claims_height", "verdicts_height", "fig3_training_seeds"), "fig3_height.png", "findings_height.md"]),
  "real_data": dict(
     nb="07_real_data", deps=[f"data/{P}/scenes", f"data/{P}/models", f"data/{P}/upper", f"data/{P}/lower_maps"],
     params=["profile", *common("methods", "networks", "voxel_size", "eval_voxel_size", "fused_base"), f"profiles.{P}.real_data"],
     outs=[f"data/{P}/real_like"],
     figs=[*tbl("table3_per_scene", "table3_real", "table3_mesh_reference", "trajectory_error", "validation_odometry_gate",
-               "misregistration", "claims_real", "trajectory_error_summary", "registration_error"),
-          "table3_real.png", "misregistration.png", "findings_real.md"]),
+               "misregistration", "claims_real", "verdicts_real", "depth_noise", "claims_depth_noise", "trajectory_error_summary", "registration_error"),
+          "table3_real.png", "misregistration.png", "depth_noise.png", "findings_real.md"]),
  "qualitative": dict(
     nb="08_qualitative", deps=[f"data/{P}/scenes", f"data/{P}/lower_maps"],
     params=["profile", *common("methods"), f"profiles.{P}.qualitative"],
@@ -131,13 +130,17 @@ def with_overrides(params):
     return [*params, *dict.fromkeys(extra)]
 
 
+#: data files a module reads at run time: a stage that runs the module depends on them too
+MODULE_DATA = {"semmatch/experiments/claims.py": ["semmatch/experiments/analysis_plan.yaml"]}
+
 out = {"stages": {}}
 for name, st in stages.items():
     plots = {f: v for f, v in PLOTS.items() if v[0] == name}
     figs = [f for f in st["figs"] if f not in plots]
     stage = {
         "cmd": f"python -m semmatch.experiments run {st['nb']}",
-        "deps": [f"notebooks/{st['nb']}.ipynb", *modules(st["nb"], st["figs"]), *st["deps"]],
+        "deps": [f"notebooks/{st['nb']}.ipynb", *(mods := modules(st["nb"], st["figs"])),
+                 *(f for m in mods for f in MODULE_DATA.get(m, ())), *st["deps"]],
         "params": with_overrides(st["params"]),
         "outs": [*st["outs"], f"reports/{P}/{st['nb']}.ipynb", *fig(*figs)],
     }
