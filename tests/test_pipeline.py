@@ -119,17 +119,19 @@ def test_readme_results_section_is_generated_from_figures(tmp_path):
     r = tmp_path / "README.md"
     r.write_text(f"# x\n{readme.BEGIN}\nold\n{readme.END}\nrest\n")
     assert readme.update_readme(r, fig)
-    text = r.read_text()
-    assert "old" not in text and "| 1 |" in text and "](figures/full/table2_synthetic.png)" in text
+    text, doc = r.read_text(), (tmp_path / "docs" / "results.md").read_text()
+    # the README's headline: the figure and a link; the results document: every table
+    assert "old" not in text and "](figures/full/table2_synthetic.png)" in text and "](docs/results.md)" in text
+    assert "| 1 |" in doc and "](../figures/full/table2_synthetic.png)" in doc
     assert text.endswith("rest\n") and not readme.update_readme(r, fig)
-    assert "Training variance" not in text
+    assert "Training variance" not in doc
     var = tmp_path / "figures" / "variance"
     var.mkdir()
     (var / "table2_training_seeds.md").write_text("| arch | mean |\n|---|---|\n")  # header only: not shown
     assert not readme.update_readme(r, fig)
     (var / "fig3_training_seeds.md").write_text("| arch | height | mean |\n|---|---|---|\n| compact | 0.2 | 0.5 |\n")
     assert readme.update_readme(r, fig)
-    text = r.read_text()
+    text = (tmp_path / "docs" / "results.md").read_text()
     assert "Training variance" in text and "| compact | 0.2 | 0.5 |" in text and "arch | mean" not in text
     import pandas as pd
 
@@ -138,7 +140,7 @@ def test_readme_results_section_is_generated_from_figures(tmp_path):
                   "verdict": ["holds", "holds", "holds", "not resolved"]}).to_csv(var / "claims_synthetic.csv")
     assert readme.update_readme(r, fig)
     assert "1 of 2 comparisons get the same verdict with every seed; they differ for C2 c - d (mean_acc: holds, " \
-           "not resolved)." in r.read_text()
+           "not resolved)." in (tmp_path / "docs" / "results.md").read_text()
 
 
 def test_protocol_refuses_bad_splits_before_any_work(tmp_path):

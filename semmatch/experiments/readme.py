@@ -1,16 +1,17 @@
-"""Write the results section of ``README.md`` from the tables and figures under ``figures/<profile>/``.
-
-The section lives between ``<!-- RESULTS:BEGIN -->`` and ``<!-- RESULTS:END -->``; everything
-in it is generated, so the README shows exactly what the last ``dvc repro`` produced.
+"""Write the results from the tables and figures under ``figures/<profile>/``: every table and
+figure into ``docs/results.md`` (generated whole), and a headline (Table 2's figure and the
+claims' verdicts) into ``README.md`` between ``<!-- RESULTS:BEGIN -->`` and ``<!-- RESULTS:END -->``.
+Everything there is generated, so both show exactly what the last run produced.
 """
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 from ..io import atomic_write_text
 
-__all__ = ["results_markdown", "variance_markdown", "update_readme"]
+__all__ = ["results_markdown", "headline_markdown", "variance_markdown", "update_readme"]
 
 BEGIN, END = "<!-- RESULTS:BEGIN -->", "<!-- RESULTS:END -->"
 
@@ -20,6 +21,7 @@ _SECTIONS = (
     ("support_per_scene.png", None, "Share of the robot's pixels (with depth) that the person's map supports, per evaluation scene, on the robot's own tour and on the replayed route."),
     ("fig_transferred_frames.png", None, "Robot frames of one evaluation scene: RGB, ground truth and the labels each method transferred from the ground-truth upper map (black: no support in the person's map)."),
     ("table1_speed.png", "table1_speed.md", "**Table 1 (speed).** Transfer methods on 640x480 frames, one process on this 2-core machine, beside the paper's server numbers and the reference closest-point backend measured in the same run."),
+    (None, "claims_speed.md", "The paper's speed statements judged on Table 1 by the analysis plan:"),
     ("table2_synthetic.png", "table2_synthetic.md", "**Table 2 (synthetic).** Lower-view semantic reconstructions on the robot's own tour, scored against the lower frames fused with ground-truth labels (5 cm voxels): mean [95% interval] over the evaluation scenes; `fused` = transferred labels where the person's map supports a pixel, the lower-view network elsewhere; `paper_mean_acc`: the paper's value (compact ~ Mask R-CNN, strong ~ Transfiner)."),
     (None, "findings_synthetic.md", None),
     (None, "table2_mesh_reference.md", "**Table 2 against an independent reference**: the ground-truth mesh where the robot's camera observed it (geometry errors of the fusion count)."),
@@ -30,12 +32,13 @@ _SECTIONS = (
     (None, "table3_mesh_reference.md", "**Table 3 against the ground-truth mesh** (observed part; the robot's map brought into the world frame for scoring only)."),
     (None, "trajectory_error_summary.md", "Trajectory and registration errors of the real-like chain (m, deg; mean over scenes):"),
     ("misregistration.png", None, "**Misregistration study.** Mean Acc. of every method when the ground-truth upper map is shifted or rotated against the robot's frames (mean and 95% interval over scenes)."),
+    ("depth_noise.png", None, "**Depth-noise study (claim C13-noise).** Mean Acc. of every method when the robot's depth gets the simulator's Kinect-like noise times 0, 1 and 4 (labels transferred from the ground-truth map with the noisy depth, fused at the clean depth; mean and 95% interval over scenes)."),
     (None, "findings_real.md", None),
     ("fig4_qualitative.png", None, "**Fig. 4 (qualitative).** Lower-view semantic maps of one scene per method."),
-    ("adapt_height.png", "adapt_gap.md", "**The robot learns (the paper's future work, [docs/adapt.md](docs/adapt.md)).** The compact network fine-tuned on the robot's frames of training scenes with labels from each of the profile's sources (the full profile: `3d-neighborhood` transfer, self-training, ground truth as the ceiling; `large`: every transfer method and `fused` too), scored on the evaluation scenes' height sweep: mIoU at 0.2 m and 1.6 m, the gain at 0.2 m and the change at 1.6 m against the unadapted network (paired, 95% intervals) and the share of its viewpoint gap closed."),
+    ("adapt_height.png", "adapt_gap.md", "**The robot learns (the paper's future work, [adapt.md](adapt.md)).** The compact network fine-tuned on the robot's frames of training scenes with labels from each of the profile's sources (the full profile: `3d-neighborhood` transfer, self-training, ground truth as the ceiling; `large`: every transfer method and `fused` too), scored on the evaluation scenes' height sweep: mIoU at 0.2 m and 1.6 m, the gain at 0.2 m and the change at 1.6 m against the unadapted network (paired, 95% intervals) and the share of its viewpoint gap closed."),
     (None, "table2_adapted.md", "The adapted networks' own lower-view maps as Table 2 rows, beside the unadapted network (`lower`), transfer from the person's map and `fused`:"),
     (None, "table2_adapted_vs_transfer.md", "Does the adapted robot beat transfer on its own? Each adapted network's own map against the unadapted network, transfer (`3d-neighborhood`) and `fused`: paired per-scene differences of Mean Acc. (95% intervals):"),
-    ("table_panoptic.png", "table_panoptic.md", "**Panoptic transfer (the paper's future work, [docs/panoptic.md](docs/panoptic.md)).** Panoptic quality of the robot's map (PQ = SQ x RQ on 5 cm voxels; thing classes, stuff, all) per transfer method and upper-map source (`oracle`: ground-truth classes and instances; `gt+clustering`: ground-truth classes, instances by 3D clustering; a network: its classes, clustered instances): mean [95% interval] over the evaluation scenes. The clustering radius was chosen on the validation scenes."),
+    ("table_panoptic.png", "table_panoptic.md", "**Panoptic transfer (the paper's future work, [panoptic.md](panoptic.md)).** Panoptic quality of the robot's map (PQ = SQ x RQ on 5 cm voxels; thing classes, stuff, all) per transfer method and upper-map source (`oracle`: ground-truth classes and instances; `gt+clustering`: ground-truth classes, instances by 3D clustering; a network: its classes, clustered instances): mean [95% interval] over the evaluation scenes. The clustering radius was chosen on the validation scenes."),
     ("fig_panoptic.png", None, "Instances in the robot's map of one evaluation scene (one colour per instance, stuff in its class colour)."),
     ("training_curves.png", "segmentation_validation.md", "Segmentation networks: training curves and validation at human height (validation scenes; the best validation checkpoint is kept)."),
     (None, "validation_flip_summary.md", "Test-time mirror averaging, chosen on the validation scenes' height sweeps (mIoU over all heights; the full profile reads every 2nd sweep frame, `flip_frame_step`):"),
@@ -60,10 +63,9 @@ def variance_markdown(variance_dir: str | Path, readme_dir: str | Path) -> str:
     variance_dir = Path(variance_dir)
     if not any(_has_rows(variance_dir / md) for md, _ in _VARIANCE_SECTIONS):
         return ""
-    rel = variance_dir.resolve().relative_to(Path(readme_dir).resolve()) if variance_dir.is_absolute() else variance_dir
-    parts = [f"### Training variance (profile `variance`, from `{rel}/`)\n",
+    parts = [f"### Training variance (profile `variance`, from `{_shown(variance_dir)}/`)\n",
              "The protocol run again with the compact network trained from three seeds (`compact`, `compact@1`, "
-             "`compact@2`; notebooks 01-06; [docs/protocol.md](docs/protocol.md)).\n"]
+             "`compact@2`; notebooks 01-06; [protocol.md](protocol.md)).\n"]
     for md, caption in _VARIANCE_SECTIONS:
         if _has_rows(variance_dir / md):
             parts += [caption + "\n", (variance_dir / md).read_text().strip() + "\n"]
@@ -98,8 +100,8 @@ def results_markdown(figures_dir: str | Path, readme_dir: str | Path) -> str:
     """The generated results section (links relative to ``readme_dir``), with the training
     variance of ``<figures_dir>/../variance`` when that profile has run."""
     figures_dir, readme_dir = Path(figures_dir), Path(readme_dir)
-    rel = figures_dir.resolve().relative_to(readme_dir.resolve()) if figures_dir.is_absolute() else figures_dir
-    parts = [f"## Results (generated by `make repro` from `{rel}/`)\n"]
+    rel = _rel(figures_dir, readme_dir)
+    parts = [f"## Results (generated by `make repro` from `{_shown(figures_dir)}/`)\n"]
     missing = []
     for png, md, caption in _SECTIONS:
         have_png = png is not None and (figures_dir / png).is_file()
@@ -123,16 +125,104 @@ def results_markdown(figures_dir: str | Path, readme_dir: str | Path) -> str:
     return "\n".join(parts)
 
 
-def update_readme(readme: str | Path, figures_dir: str | Path) -> bool:
-    """Replace the results section of ``readme``; return True when it changed."""
-    readme = Path(readme)
-    text = readme.read_text()
+def _rel(path: Path, start: Path) -> str:
+    """``path`` as a link relative to the folder ``start`` (``../figures/full`` from ``docs/``)."""
+    if not path.is_absolute():
+        return path.as_posix()
+    return Path(os.path.relpath(path.resolve(), start.resolve())).as_posix()
+
+
+def _shown(figures_dir: Path) -> str:
+    """The figures folder as a reader names it (from the repository root when it lies inside one)."""
+    parts = figures_dir.resolve().parts
+    return "/".join(parts[parts.index("figures"):]) if "figures" in parts else figures_dir.as_posix()
+
+
+def headline_markdown(figures_dir: str | Path, readme_dir: str | Path, results_doc: str | Path) -> str:
+    """The README's headline: Table 2's figure and the claims' verdicts, then a link to all results.
+
+    Parameters
+    ----------
+    figures_dir : path
+        A run's figures folder; ``verdicts.md`` there (:func:`semmatch.experiments.claims.judge_figures`)
+        gives the verdict table.
+    readme_dir : path
+        The folder of the README (links are relative to it).
+    results_doc : path
+        The generated results document to link to.
+
+    Returns
+    -------
+    str
+    """
+    figures_dir, readme_dir = Path(figures_dir), Path(readme_dir)
+    rel = _rel(figures_dir, readme_dir)
+    parts = []
+    if (figures_dir / "table2_synthetic.png").is_file():
+        parts.append("**Table 2 (synthetic)**: lower-view semantic reconstructions of the robot's own tour, "
+                     "mean and 95 % interval over the evaluation scenes (`fused`: transferred labels where the "
+                     "person's map supports a pixel, the robot's network elsewhere).\n")
+        parts.append(f"![table2_synthetic.png]({rel}/table2_synthetic.png)\n")
+    if (figures_dir / "verdicts.md").is_file():
+        parts.append("**The paper's claims**, judged by the analysis plan ([docs/analysis_plan.md](docs/analysis_plan.md)): "
+                     "one verdict per claim under the `fusion` reference, the `mesh` one beside it, and how many "
+                     f"of the paper's own differences lie inside our intervals (from `{_shown(figures_dir)}/`; "
+                     "every comparison: `findings_all.md` there).\n")
+        parts.append((figures_dir / "verdicts.md").read_text().strip() + "\n")
+    if not parts:
+        parts.append(f"_No results yet: run `make repro` to fill `{_shown(figures_dir)}/`._\n")
+    parts.append(f"All tables and figures: [{_rel(Path(results_doc).resolve(), readme_dir)}]"
+                 f"({_rel(Path(results_doc).resolve(), readme_dir)}).\n")
+    return "\n".join(parts)
+
+
+def _replace_between_markers(path: Path, body: str) -> str:
+    text = path.read_text()
     if BEGIN not in text or END not in text:
-        raise ValueError(f"{readme}: no {BEGIN} ... {END} markers")
+        raise ValueError(f"{path}: no {BEGIN} ... {END} markers")
     head, rest = text.split(BEGIN, 1)
     _, tail = rest.split(END, 1)
-    new = f"{head}{BEGIN}\n{results_markdown(figures_dir, readme.parent)}{END}{tail}"
-    if new != text:
-        atomic_write_text(readme, new)
-        return True
-    return False
+    return f"{head}{BEGIN}\n{body}{END}{tail}"
+
+
+def update_readme(readme: str | Path, figures_dir: str | Path, *, results_doc: str | Path | None = None,
+                  judge: bool = True) -> bool:
+    """Write the results document and the README's headline from ``figures_dir``.
+
+    Parameters
+    ----------
+    readme : path
+        The README (must hold the markers).
+    figures_dir : path
+        A run's figures folder.
+    results_doc : path, optional
+        The generated results document (default ``docs/results.md`` beside the README).
+    judge : bool, optional
+        First judge the plan's claims on the folder's per-scene tables
+        (:func:`semmatch.experiments.claims.judge_figures`, writing ``verdicts.md`` there);
+        skipped when the folder has none.
+
+    Returns
+    -------
+    bool
+        True when the README or the results document changed.
+    """
+    readme, figures_dir = Path(readme), Path(figures_dir)
+    results_doc = readme.parent / "docs" / "results.md" if results_doc is None else Path(results_doc)
+    if judge:
+        from .claims import judge_figures
+
+        try:
+            judge_figures(figures_dir)
+        except FileNotFoundError:
+            pass  # no per-scene tables yet: no verdicts
+    doc = ("<!-- Generated by `python -m semmatch.experiments readme` (run by `make repro`): do not edit. -->\n\n"
+           + results_markdown(figures_dir, results_doc.parent).replace("## Results", "# Results", 1))
+    new_readme = _replace_between_markers(readme, headline_markdown(figures_dir, readme.parent, results_doc))
+    changed = False
+    for path, text in ((results_doc, doc), (readme, new_readme)):
+        if not path.is_file() or path.read_text() != text:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            atomic_write_text(path, text)
+            changed = True
+    return changed
