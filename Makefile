@@ -2,8 +2,11 @@
 VENV ?= .venv
 PY := $(VENV)/bin/python
 PROFILE ?=
+TRAIN ?=
+SEEDS ?=
+NAME ?=
 
-.PHONY: setup test test-fast repro smoke lint clean-data
+.PHONY: setup test test-fast repro confirm smoke lint clean-data
 
 setup:
 	@bash scripts/setup.sh
@@ -17,10 +20,21 @@ test-fast: setup
 	$(PY) -m pytest -q -m "not notebooks"
 
 ## regenerate every table and figure: dvc repro (profile from params.yaml; PROFILE=smoke to override)
+## with the shipped networks (models/<profile>/); TRAIN=1 reruns every stage and trains every network
 repro: setup
 	@if [ -n "$(PROFILE)" ]; then $(PY) -m semmatch.experiments set-profile $(PROFILE); fi
+ifeq ($(TRAIN),1)
+	PATH="$(CURDIR)/$(VENV)/bin:$$PATH" SEMMATCH_TRAIN=1 $(VENV)/bin/dvc repro --force
+else
 	PATH="$(CURDIR)/$(VENV)/bin:$$PATH" $(VENV)/bin/dvc repro
+endif
 	$(PY) -m semmatch.experiments readme
+
+## confirmatory run: every evaluation study of the full profile on scenes of fresh seeds, with the
+## shipped networks -> figures/confirm/NAME/ (docs/confirm.md); e.g. make confirm SEEDS="9101 9102 9103"
+confirm: setup
+	@if [ -z "$(SEEDS)" ]; then echo 'usage: make confirm SEEDS="9101 9102 9103" [NAME=mine]' >&2; exit 2; fi
+	PATH="$(CURDIR)/$(VENV)/bin:$$PATH" $(PY) -m semmatch.experiments confirm --seeds $(SEEDS) $(if $(NAME),--name $(NAME),)
 
 lint: setup
 	$(VENV)/bin/ruff check semmatch tests

@@ -1,7 +1,8 @@
-"""``python -m semmatch.experiments``: run notebooks with a profile of ``params.yaml``."""
+"""``python -m semmatch.experiments``: run notebooks with a profile of ``params.yaml``; ``confirm`` and ``ship``."""
 
 import sys
 
+from semmatch.experiments.confirm import add_confirm_parser, add_ship_parser
 from semmatch.experiments.pipeline import main
 
-sys.exit(main())
+sys.exit(main(extra_commands=(add_confirm_parser, add_ship_parser)))

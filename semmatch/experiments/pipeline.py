@@ -19,6 +19,7 @@ import argparse
 import os
 import sys
 import time
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import yaml
@@ -30,6 +31,7 @@ __all__ = [
     "NOTEBOOKS",
     "ROOT",
     "ROOT_ENV",
+    "TRAIN_ENV",
     "find_root",
     "NotebookFailed",
     "section_of",
@@ -84,6 +86,9 @@ def find_root(start: str | os.PathLike | None = None) -> Path:
 
 
 ROOT = find_root()
+
+#: environment variable that makes every pipeline run train its networks (``make repro TRAIN=1``)
+TRAIN_ENV = "SEMMATCH_TRAIN"
 
 #: the notebooks in run order
 NOTEBOOKS: tuple[str, ...] = (
@@ -178,6 +183,7 @@ def notebook_parameters(
     params["profile"] = p["profile"]
     params.setdefault("data_root", f"data/{p['profile']}")
     params.setdefault("figures_dir", f"figures/{p['profile']}")
+    params.setdefault("shipped_models", f"models/{p['profile']}")  # notebook 02: the shipped networks
     params.update({k: v for k, v in overrides.items() if v is not None})
     return params
 
@@ -364,8 +370,13 @@ def set_profile(profile: str, params_file: str | os.PathLike = ROOT / "params.ya
     atomic_write_text(params_file, "".join(lines))
 
 
-def main(argv: list[str] | None = None) -> int:
-    """``python -m semmatch.experiments``."""
+def main(argv: list[str] | None = None, extra_commands: Sequence[Callable] = ()) -> int:
+    """``python -m semmatch.experiments``.
+
+    ``extra_commands``: functions that each add a subcommand to the subparsers, setting a
+    ``handler(args) -> int`` default (the runner's ``__main__`` adds ``confirm`` and ``ship``,
+    kept out of this module so that editing them reruns no pipeline stage).
+    """
     ap = argparse.ArgumentParser(prog="python -m semmatch.experiments", description=__doc__.split("\n")[0])
     sub = ap.add_subparsers(dest="cmd", required=True)
     r = sub.add_parser("run", help="run one notebook")
@@ -380,9 +391,14 @@ def main(argv: list[str] | None = None) -> int:
         p.add_argument("--reports-dir", help="where executed notebooks go (default reports/<profile>)")
         p.add_argument("--quiet", action="store_true",
                        help="do not stream the cells' output (progress lines, tables) to the console")
+        p.add_argument("--train", action="store_true", default=os.environ.get(TRAIN_ENV) == "1",
+                       help=f"train every network instead of using the shipped ones (default: on when ${TRAIN_ENV}=1, "
+                            f"as `make repro TRAIN=1` sets it)")
         p.add_argument("--scheduler", help="Dask scheduler address (tcp://host:8786) to run the per-scene tasks on "
                                            "(default: the profile's common.scheduler, else local processes)")
     sub.add_parser("profiles", help="list the profiles of params.yaml")
+    for add in extra_commands:  # subcommands defined elsewhere (confirm, ship: __main__)
+        add(sub)
     sp = sub.add_parser("set-profile", help="select the profile dvc repro runs")
     sp.add_argument("name")
     rd = sub.add_parser("readme", help="write README.md's results section from figures/<profile>/")
@@ -396,6 +412,8 @@ def main(argv: list[str] | None = None) -> int:
             data = yaml.safe_load((ROOT / "params.yaml").read_text())
             print("\n".join(sorted(data.get("profiles", {}))))
             return 0
+        if getattr(args, "handler", None) is not None:  # an extra command
+            return args.handler(args)
         if args.cmd == "set-profile":
             set_profile(args.name)
             return 0
@@ -415,6 +433,8 @@ def main(argv: list[str] | None = None) -> int:
             return 0
         kw = dict(params_file=args.params, reports_dir=args.reports_dir, data_root=args.data_root,
                   figures_dir=args.figures_dir, log_output=not args.quiet, scheduler=args.scheduler)
+        if args.train:  # notebook 02 trains every network (the only notebook with a `retrain` parameter)
+            kw["retrain"] = True
         if not args.quiet:
             import logging
 

@@ -16,7 +16,7 @@ from __future__ import annotations
 import copy
 import os
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 
@@ -37,7 +37,8 @@ from .scores import confusion, scores
 
 __all__ = [
     "TrainConfig", "PROFILES", "make_config", "network_spec", "pipeline_configs", "train", "train_or_load", "validation_table", "augment",
-    "evaluate_views", "build_views", "optimisation_step", "CHECKPOINT_FORMAT",
+    "evaluate_views", "build_views", "optimisation_step", "CHECKPOINT_FORMAT", "config_differences", "config_record",
+    "views_digest", "machine_record",
 ]
 
 
@@ -543,6 +544,7 @@ def train(config: TrainConfig, *, views: tuple[D.Views, D.Views] | None = None) 
     # uninitialised memory, which no op here does): 5-13% of a CPU training step, so off
     torch.utils.deterministic.fill_uninitialized_memory = False
     t0 = time.perf_counter()
+    machine = machine_record(device)
     train_views, val_views = views if views is not None else build_views(config)
     if train_views.shape != (config.height, config.width):
         raise ValueError(f"training views are {train_views.shape}, config says {config.height}x{config.width}")
@@ -594,11 +596,71 @@ def train(config: TrainConfig, *, views: tuple[D.Views, D.Views] | None = None) 
         "n_parameters": count_parameters(net),
         "train_seconds": time.perf_counter() - t0,
         "device": str(device),
+        "views_sha256": views_digest(train_views, val_views),
+        "finished_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+        # load average at the start and at the end of training (a busy machine trains slower)
+        "machine": dict(machine, load_average_end=machine_record(device)["load_average"]),
     }
     out = Path(config.out)
     with atomic_path(out) as tmp:
         torch.save(ckpt, tmp)
     return out
+
+
+def views_digest(*views: D.Views) -> str:
+    """SHA-256 (hex) over the arrays of rendered views: rgb, depth and labels of each, in order.
+
+    Identifies the exact training data of a checkpoint (``views_sha256``: the training views,
+    then the validation views). Rendering is seeded, so the same configuration and code give
+    the same digest on one machine; another machine's floating point may change a few pixels
+    and with them the digest, which the stored configuration and code version then explain.
+    """
+    import hashlib
+
+    h = hashlib.sha256()
+    for v in views:
+        for arr in (v.rgb, v.depth, v.labels):
+            a = np.ascontiguousarray(arr)
+            h.update(f"{a.dtype.str}{a.shape}".encode())
+            h.update(memoryview(a).cast("B"))
+    return h.hexdigest()
+
+
+def machine_record(device: torch.device | str) -> dict:
+    """Where a network is trained: device, CPU model, cores, torch threads and the load average.
+
+    Stored in each checkpoint (``machine``) so that its training time can be read against the
+    machine and how busy it was (``load_average``: 1, 5 and 15 minutes, ``None`` where the
+    platform has none).
+
+    Parameters
+    ----------
+    device : torch.device or str
+
+    Returns
+    -------
+    dict
+        ``device``, ``device_name`` (the GPU's or the CPU's model), ``cpu_count``,
+        ``torch_threads``, ``load_average``, ``platform``, ``torch``.
+    """
+    import platform
+
+    device = torch.device(device)
+    cpu = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    name = torch.cuda.get_device_name(device) if device.type == "cuda" else cpu
+    try:
+        load = [round(x, 2) for x in os.getloadavg()]
+    except OSError:
+        load = None
+    return dict(device=str(device), device_name=name, cpu_count=os.cpu_count(), torch_threads=torch.get_num_threads(),
+                load_average=load, platform=platform.platform(), torch=str(torch.__version__))
 
 
 def _config_record(config: TrainConfig) -> dict:
@@ -610,38 +672,70 @@ def _config_record(config: TrainConfig) -> dict:
 _NOT_IDENTITY = ("out", "progress", "threads", "cache_dir", "device")
 
 
-def _same_run(a: dict, b: dict) -> bool:
-    return {k: v for k, v in a.items() if k not in _NOT_IDENTITY} == {
-        k: v for k, v in b.items() if k not in _NOT_IDENTITY
-    }
+def config_differences(stored: dict, wanted: dict) -> list[str]:
+    """The training-configuration entries in which two ``train_config`` records differ.
+
+    Fields that do not change the trained weights (output path, progress, threads, cache,
+    device) are ignored.
+
+    Parameters
+    ----------
+    stored, wanted : dict
+        ``train_config`` records (a checkpoint's, and :func:`config_record` of a config).
+
+    Returns
+    -------
+    list of str
+        ``"key: stored -> wanted"`` for every differing key (empty: the same training run).
+    """
+    keys = sorted((set(stored) | set(wanted)) - set(_NOT_IDENTITY))
+    return [f"{k}: {stored.get(k, '(absent)')!r} -> {wanted.get(k, '(absent)')!r}"
+            for k in keys if stored.get(k) != wanted.get(k)]
+
+
+def config_record(config: TrainConfig) -> dict:
+    """The ``train_config`` record a checkpoint stores for ``config`` (plain lists and dicts)."""
+    return _config_record(config)
 
 
 def train_or_load(config: TrainConfig, *, retrain: bool = False,
-                  views: tuple[D.Views, D.Views] | None = None) -> Path:
-    """Return ``config.out`` when it holds a checkpoint trained with the same config, else train.
+                  views: tuple[D.Views, D.Views] | Callable[[], tuple[D.Views, D.Views]] | None = None,
+                  shipped: str | os.PathLike | None = None) -> Path:
+    """Return a checkpoint trained with ``config``: the shipped one, the one at ``config.out``, or train.
 
     Parameters
     ----------
     config : TrainConfig
     retrain : bool
-        Train even when a matching checkpoint exists.
-    views : (Views, Views), optional
-        Passed to :func:`train`.
+        Train even when a matching checkpoint exists (``shipped`` is then ignored).
+    views : (Views, Views) or callable returning them, optional
+        Passed to :func:`train`; a callable is called only when training (the views are then
+        rendered only when needed).
+    shipped : path, optional
+        A shipped checkpoint of the same configuration
+        (:func:`semmatch.segment.shipping.shipped_checkpoint` finds and checks it): copied to
+        ``config.out`` (unless that already holds the same bytes) instead of training.
 
     Returns
     -------
     Path
-        The checkpoint.
+        The checkpoint (``config.out``).
     """
     out = Path(config.out)
-    if out.is_file() and not retrain:
+    if retrain:
+        return train(config, views=views() if callable(views) else views)
+    if shipped is not None:
+        from .shipping import install_checkpoint
+
+        return install_checkpoint(shipped, out)
+    if out.is_file():
         try:
             stored = load_model(out).info.get("train_config")
         except ValueError:
             stored = None
-        if stored is not None and _same_run(stored, _config_record(config)):
+        if stored is not None and not config_differences(stored, _config_record(config)):
             return out
-    return train(config, views=views)
+    return train(config, views=views() if callable(views) else views)
 
 
 def validation_table(checkpoints: dict) -> pd.DataFrame:

@@ -1,0 +1,265 @@
+"""Confirmatory runs: every evaluation study of a profile on fresh scenes, with the shipped networks.
+
+``make confirm SEEDS="9101 9102 9103" [NAME=mine]`` runs
+``python -m semmatch.experiments confirm --seeds ... --name ...``: the base profile (``full``)
+with its evaluation seeds replaced by the given ones (each seed gives one scene of every kind),
+the networks and flip choice shipped in ``models/<profile>/`` (nothing is trained), and every
+other choice as the profile makes it on its validation scenes (the odometry gate of notebook 07,
+the panoptic clustering radius of notebook 10). It writes
+
+* ``data/confirm/<name>/`` the data (and ``params.yaml``, the parameters it ran with),
+* ``figures/confirm/<name>/`` the tables, per-scene CSVs, claims and verdict tables, figures and
+  ``confirm.json`` (seeds, networks' SHA-256, code version, wall time per stage),
+* ``reports/confirm/<name>/`` the executed notebooks.
+
+Stage 09 (robot-view adaptation) is skipped: it fine-tunes networks, and no adapted networks are
+shipped yet. Seeds used for training, validation or development are refused
+(:func:`semmatch.experiments.protocol.check_confirm_seeds`). ``ship`` writes a shipped folder
+from trained checkpoints (:func:`semmatch.segment.shipping.ship_networks`).
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import os
+import subprocess
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+
+import yaml
+
+from ..io import atomic_write_text
+from .pipeline import NOTEBOOKS, ROOT, notebook_parameters, run_notebook
+from .protocol import check_confirm_seeds, check_protocol
+
+__all__ = ["SKIPPED", "confirm_name", "write_confirm_params", "unshipped_networks", "run_confirm",
+           "code_version", "add_confirm_parser", "add_ship_parser"]
+
+#: notebooks a confirmatory run leaves out, and why (printed when skipped)
+SKIPPED: dict[str, str] = {
+    "09_adapt_robot_view": "skipped: it fine-tunes networks, and no adapted networks are shipped yet "
+                           "(a confirmatory run trains nothing)",
+}
+
+
+def confirm_name(seeds: Sequence[int]) -> str:
+    """The default run name of a seed list: ``seeds-9101-9102`` (``seeds-9101-9124-n24`` for many)."""
+    seeds = [int(s) for s in seeds]
+    if len(seeds) <= 6:
+        return "seeds-" + "-".join(map(str, seeds))
+    return f"seeds-{min(seeds)}-{max(seeds)}-n{len(seeds)}"
+
+
+def code_version(root: str | os.PathLike = ROOT) -> str | None:
+    """``git describe --always --dirty`` of the checkout (None outside git)."""
+    try:
+        out = subprocess.run(["git", "describe", "--always", "--dirty", "--abbrev=40"], cwd=root,
+                             capture_output=True, text=True, timeout=30)
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return out.stdout.strip() or None if out.returncode == 0 else None
+
+
+def write_confirm_params(seeds: Sequence[int], out: str | os.PathLike, *, base_profile: str = "full",
+                         params_file: str | os.PathLike = ROOT / "params.yaml") -> Path:
+    """Write the parameter file of a confirmatory run: the base profile with ``eval_seeds = seeds``.
+
+    The base profile is taken as written in ``params_file`` (its top-level overrides, meant for
+    quick experiments, do not apply).
+
+    Parameters
+    ----------
+    seeds : sequence of int
+        Checked with :func:`~semmatch.experiments.protocol.check_confirm_seeds`.
+    out : path
+        The file to write.
+    base_profile : str
+    params_file : path
+
+    Returns
+    -------
+    Path
+
+    Raises
+    ------
+    ValueError
+        An unknown profile, refused seeds, or splits that break the protocol.
+    """
+    data = yaml.safe_load(Path(params_file).read_text())
+    profiles = data.get("profiles") or {}
+    if base_profile not in profiles:
+        raise ValueError(f"{params_file}: profile {base_profile!r} does not exist; valid profiles: "
+                         f"{', '.join(sorted(profiles))}")
+    seeds = check_confirm_seeds(seeds, profiles, where=str(params_file))
+    profile = copy.deepcopy(profiles[base_profile])
+    profile["common"]["eval_seeds"] = seeds
+    check_protocol(profile["common"], where=f"confirmatory run on seeds {seeds}")
+    header = (f"# Confirmatory run: profile {base_profile!r} of {Path(params_file).name} with eval_seeds = {seeds}\n"
+              f"# (written by python -m semmatch.experiments confirm; not meant to be edited)\n")
+    out = Path(out)
+    atomic_write_text(out, header + yaml.safe_dump({"profile": base_profile, "profiles": {base_profile: profile}},
+                                                   sort_keys=False, default_flow_style=None, width=120))
+    return out
+
+
+def unshipped_networks(params_file: str | os.PathLike, profile: str, data_root: str | os.PathLike,
+                       shipped_dir: str | os.PathLike) -> dict[str, str]:
+    """The networks of ``profile`` that ``shipped_dir`` does not hold trained with its configuration.
+
+    Returns
+    -------
+    dict
+        Network name -> why it is not shipped (empty: every network is).
+    """
+    from ..segment.shipping import shipped_checkpoint
+    from ..segment.training import pipeline_configs
+
+    p = notebook_parameters("02_train_segmentation", profile, params_file, data_root=str(data_root))
+    configs = pipeline_configs(
+        p["networks"], train_profile=p["train_profile"], seed=p["seed"], kinds=p["kinds"],
+        train_seeds=p["train_seeds"], val_seeds=p["val_seeds"], eval_seeds=p["eval_seeds"], width=p["width"],
+        height=p["height"], steps=p.get("steps"), out_dir=Path(data_root) / "models",
+        cache_dir=Path(data_root) / "cache" / "segment")
+    missing = {}
+    for net, cfg in configs.items():
+        path, why = shipped_checkpoint(cfg, shipped_dir)
+        if path is None:
+            missing[net] = why
+    return missing
+
+
+def run_confirm(seeds: Sequence[int], *, name: str | None = None, base_profile: str = "full",
+                allow_training: bool = False, params_file: str | os.PathLike = ROOT / "params.yaml",
+                out_root: str | os.PathLike | None = None, log_output: bool = False,
+                scheduler: str | None = None) -> dict:
+    """Run every evaluation study of ``base_profile`` on the scenes of ``seeds``.
+
+    Parameters
+    ----------
+    seeds : sequence of int
+        Fresh scene seeds (each: one scene of every kind of the profile).
+    name : str, optional
+        Run name (default :func:`confirm_name`).
+    base_profile : str
+        The profile whose studies and settings are run (``full``).
+    allow_training : bool
+        Train the networks that are not shipped (a profile without shipped networks, e.g. the
+        smoke test's); without it such a network is an error.
+    params_file : path
+    out_root : path, optional
+        Where ``data/``, ``figures/`` and ``reports/`` go (default: the repository root).
+    log_output : bool
+        Stream the notebooks' output to the console.
+    scheduler : str, optional
+        Dask scheduler address for the per-scene tasks.
+
+    Returns
+    -------
+    dict
+        The run record written to ``figures/confirm/<name>/confirm.json``.
+
+    Raises
+    ------
+    ValueError
+        Refused seeds, or networks that are not shipped (without ``allow_training``).
+    NotebookFailed
+        A notebook failed (naming it and the cell).
+    """
+    seeds = [int(s) for s in seeds]
+    data = yaml.safe_load(Path(params_file).read_text())
+    seeds = check_confirm_seeds(seeds, data.get("profiles") or {}, where=str(params_file))
+    name = name or confirm_name(seeds)
+    if not name.replace("-", "").replace("_", "").replace(".", "").isalnum():
+        raise ValueError(f"run name {name!r}: use letters, digits, '-', '_' and '.' only")
+    # relative to the repository root (the notebooks' working directory) unless out_root is given
+    dirs = {k: str(Path(out_root or "") / sub / "confirm" / name)
+            for k, sub in (("data_root", "data"), ("figures_dir", "figures"), ("reports_dir", "reports"))}
+    where = {k: ROOT / v for k, v in dirs.items()}  # an absolute out_root stays as it is
+    data_root = where["data_root"]
+    params = write_confirm_params(seeds, data_root / "params.yaml", base_profile=base_profile,
+                                  params_file=params_file)
+    shipped_dir = Path("models") / base_profile
+    missing = unshipped_networks(params, base_profile, dirs["data_root"], ROOT / shipped_dir)
+    if missing and not allow_training:
+        raise ValueError(
+            "a confirmatory run uses the shipped networks, but "
+            + "; ".join(f"{n}: {why}" for n, why in missing.items())
+            + f". Restore {shipped_dir}/ from git, or pass --allow-training to train them (then it does not "
+              f"confirm the shipped networks)")
+    for d in where.values():
+        d.mkdir(parents=True, exist_ok=True)
+    say = print
+    say(f"[confirm] {name}: profile {base_profile}, seeds {seeds} x {len(data['profiles'][base_profile]['common']['kinds'])} "
+        f"kinds; networks: " + (f"trained here ({', '.join(missing)})" if missing else f"shipped ({shipped_dir}/)"),
+        file=sys.stderr)
+    t0, walls = time.perf_counter(), {}
+    started = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
+    for nb in NOTEBOOKS:
+        if nb in SKIPPED:
+            say(f"[confirm] {nb}: {SKIPPED[nb]}", file=sys.stderr)
+            continue
+        t = time.perf_counter()
+        run_notebook(nb, base_profile, params_file=params, reports_dir=dirs["reports_dir"], cwd=ROOT,
+                     data_root=dirs["data_root"], figures_dir=dirs["figures_dir"], log_output=log_output,
+                     scheduler=scheduler)
+        walls[nb] = round(time.perf_counter() - t, 1)
+    from ..segment.shipping import file_sha256
+
+    models = data_root / "models"
+    record = {
+        "name": name, "base_profile": base_profile, "seeds": seeds,
+        "kinds": data["profiles"][base_profile]["common"]["kinds"],
+        "networks": {p.stem: file_sha256(p) for p in sorted(models.glob("*.pt"))},
+        "networks_from": "trained here" if missing else str(shipped_dir),
+        "skipped": SKIPPED, "code_version": code_version(), "started": started,
+        "wall_seconds": walls, "total_seconds": round(time.perf_counter() - t0, 1),
+    }
+    atomic_write_text(where["figures_dir"] / "confirm.json", json.dumps(record, indent=2) + "\n")
+    say(f"[confirm] {name}: done in {record['total_seconds'] / 60:.1f} min -> {dirs['figures_dir']}", file=sys.stderr)
+    return record
+
+
+def add_confirm_parser(sub) -> None:
+    """The ``confirm`` subcommand of ``python -m semmatch.experiments``."""
+    c = sub.add_parser("confirm", help="every evaluation study on fresh scenes with the shipped networks "
+                                       "(make confirm SEEDS=...)")
+    c.add_argument("--seeds", nargs="+", required=True, help="fresh scene seeds (each: one scene of every kind)")
+    c.add_argument("--name", help="run name: figures/confirm/NAME/ (default seeds-...)")
+    c.add_argument("--base-profile", default="full", help="profile whose studies are run (default full)")
+    c.add_argument("--allow-training", action="store_true",
+                   help="train networks that are not shipped (for profiles without shipped networks)")
+    c.add_argument("--params", default=str(ROOT / "params.yaml"))
+    c.add_argument("--quiet", action="store_true", help="do not stream the notebooks' output")
+    c.add_argument("--scheduler", help="Dask scheduler address for the per-scene tasks")
+    c.set_defaults(handler=_confirm_main)
+
+
+def _confirm_main(args) -> int:
+    run_confirm(args.seeds, name=args.name, base_profile=args.base_profile, allow_training=args.allow_training,
+                params_file=args.params, log_output=not args.quiet, scheduler=args.scheduler)
+    return 0
+
+
+def add_ship_parser(sub) -> None:
+    """The ``ship`` subcommand: copy trained checkpoints into ``models/<profile>/`` with manifests."""
+    s = sub.add_parser("ship", help="copy trained networks into a shipped folder (models/<profile>/) with manifests")
+    s.add_argument("--models", required=True, help="folder of the trained checkpoints (data/<profile>/models)")
+    s.add_argument("--to", required=True, help="the shipped folder, e.g. models/full")
+    s.add_argument("--networks", nargs="+", default=["compact", "strong"])
+    s.set_defaults(handler=_ship_main)
+
+
+def _ship_main(args) -> int:
+    from ..segment.shipping import ship_networks
+
+    src = Path(args.models)
+    missing = [n for n in args.networks if not (src / f"{n}.pt").is_file()]
+    if missing:
+        raise FileNotFoundError(f"{src}: no checkpoint for {', '.join(missing)}")
+    for p in ship_networks({n: src / f"{n}.pt" for n in args.networks}, args.to, recipe=src / "recipe.json",
+                           code_version=code_version()):
+        print(p)
+    return 0
