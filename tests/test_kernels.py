@@ -56,6 +56,18 @@ def test_dbscan_labels_equal_open3d_on_surfaces():
         np.testing.assert_array_equal(dbscan_labels(p, eps, m), _open3d_dbscan(p, eps, m))
 
 
+def test_dbscan_labels_equal_open3d_in_a_sparse_box():
+    """Blobs tens of metres apart at a small eps: too many cells for the dense cell table, so
+    the neighbouring cells come from binary searches; the labels are Open3D's all the same."""
+    rng = np.random.default_rng(2)
+    centres = rng.uniform(-40, 40, (6, 3))
+    p = np.concatenate([c + rng.normal(0, 0.05, (150, 3)) for c in centres])
+    eps = 0.03
+    assert np.prod(np.ptp(p, axis=0) / eps) > 8 * len(p) + 1_000_000  # the sparse path
+    np.testing.assert_array_equal(dbscan_labels(p, eps, 3), _open3d_dbscan(p, eps, 3))
+    assert dbscan_labels(p, eps, 3).max() >= 5
+
+
 def test_dbscan_labels_edge_cases():
     assert dbscan_labels(np.zeros((0, 3)), 0.1, 10).shape == (0,)
     np.testing.assert_array_equal(dbscan_labels(np.zeros((1, 3)), 0.1, 1), [0])

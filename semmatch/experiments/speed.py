@@ -1,4 +1,5 @@
-"""Table 1: the transfer methods timed on 640x480 lower frames of a generated scene (04)."""
+"""Table 1: the transfer methods timed on one core (CPU time) on 640x480 lower frames of an
+evaluation scene (04)."""
 
 from __future__ import annotations
 
@@ -48,19 +49,26 @@ def _frames_at(sd: Path, n_frames: int, width: int, height: int) -> list:
 
 def measure_speed(data_root: str | Path, methods: Sequence[str], *, n_frames: int = 30, scene: int = 0,
                   width: int = 640, height: int = 480) -> pd.DataFrame:
-    """Median per-frame time of each method and of the reference backend, in one process.
+    """Table 1: the rate of each method on one core, from its CPU time, in one process.
 
     The ground-truth upper map of one evaluation scene is indexed once; ``n_frames`` lower
     frames (evenly spaced; rendered at ``width`` x ``height``, the paper's 640x480, when the
-    profile records smaller frames) are labelled by each method after one warm-up frame.
+    profile records smaller frames) are labelled by each method after one warm-up frame, on one
+    thread (:func:`semmatch.transfer.benchmark.time_methods`, as ``semmatch bench transfer``).
+    The rate is 1 / the median CPU time of the method per frame: what one free core delivers,
+    whatever else the machine runs. The wall rate and the machine's load stand beside it.
 
     Returns
     -------
     DataFrame
-        Table 1: method, fps, ms_per_frame, paper_fps, speedup_vs_paper, speedup_vs_reference
-        (the reference is ``3d-neighborhood`` with Open3D closest-point queries on the mesh,
-        as the authors' code).
+        Table 1: method, fps (= cpu_fps), cpu_fps, ms_per_frame (CPU), wall_fps, load_average
+        (1-minute load average while the method ran), cpu_share (CPU time / wall time), paper_fps,
+        speedup_vs_paper, speedup_vs_reference (CPU rates; the reference is ``3d-neighborhood``
+        with Open3D closest-point queries on the mesh, as the authors' code). ``attrs``:
+        ``reference_fps``, ``frames``, ``cpus``.
     """
+    import os
+
     from ..transfer import load_index
     from ..transfer.benchmark import time_methods
 
@@ -71,8 +79,12 @@ def measure_speed(data_root: str | Path, methods: Sequence[str], *, n_frames: in
 
     timing = time_methods(frames, index, methods, exact_variant=False)
     ref_fps = timing["reference"]["fps"]
-    fps = {m: timing["methods"][m]["fps"] for m in methods}
-    df = speed_table(fps, ref_fps)
+    rows = timing["methods"]
+    df = speed_table({m: rows[m]["fps"] for m in methods}, ref_fps)
+    df.insert(2, "cpu_fps", df["fps"])
+    for col in ("wall_fps", "load_average", "cpu_share"):
+        df[col] = [rows[m][col] for m in methods]
     df.attrs["reference_fps"] = ref_fps
     df.attrs["frames"] = len(frames)
+    df.attrs["cpus"] = os.cpu_count()
     return df

@@ -57,17 +57,21 @@ def fuse(
         raise ValueError(f"probs have {C} channels; expected 1..{NUM_CLASSES} (channel = category id)")
     if not np.isfinite(probs).all():
         raise ValueError("probs hold NaN or inf")
-    if C > 1:
-        net = (np.argmax(probs[..., 1:], axis=2) + 1).astype(np.uint8)
-    else:
-        net = np.zeros(labels.shape, np.uint8)
     keep = labels > 0
     if purity is not None:
         purity = np.asarray(purity)
         if purity.shape != labels.shape:
             raise ValueError(f"purity is {purity.shape}, labels are {labels.shape}")
         keep &= purity >= min_purity
-    return np.where(keep, labels, net).astype(np.uint8)
+    out = np.where(keep, labels, 0).astype(np.uint8)
+    if C > 1:
+        # the network's class only where it decides: an argmax over a 21-channel image costs
+        # more than the transfer itself, and the map keeps most pixels
+        need = np.flatnonzero(~keep)
+        if len(need):
+            rows = probs.reshape(-1, C).take(need, axis=0)
+            out.reshape(-1)[need] = np.argmax(rows[:, 1:], axis=1) + 1
+    return out
 
 
 def fuse_labels(transferred: np.ndarray, predicted: np.ndarray) -> np.ndarray:

@@ -66,9 +66,17 @@ def vote(
 
 
 def paint(groups: np.ndarray, values: np.ndarray, fill=0) -> np.ndarray:
-    """Per-element ``values[groups]``, ``fill`` where the group is negative."""
+    """Per-element ``values[groups]``, ``fill`` where the group is negative.
+
+    With no groups at all (``values`` empty: e.g. a ``dbscan`` frame whose every point is
+    clustering noise) every element gets ``fill``.
+    """
     g = np.asarray(groups)
     values = np.asarray(values)
+    if values.size == 0:
+        if g.size and g.max() >= 0:
+            raise IndexError(f"paint: group {int(g.max())} of no group values")
+        return np.full(g.shape, fill, dtype=values.dtype)
     if g.size == 0 or g.min() >= 0:
         return values[g]
     out = values[np.maximum(g, 0)]
