@@ -3,7 +3,8 @@
 A ``ProcessPoolExecutor`` worker outlives a parent killed with SIGKILL (nothing runs in the
 parent to stop it): it keeps its CPU and memory forever. Every pool of semmatch is made by
 :func:`process_pool`, whose workers ask the kernel (Linux ``prctl(PR_SET_PDEATHSIG)``) for
-SIGKILL when their parent dies, and exit at once when the parent is already gone.
+SIGKILL when their parent dies, and exit at once when the parent is already gone. Each worker
+runs on the workers' thread limit (:func:`semmatch.threads.configure`, ``"worker"``).
 """
 
 from __future__ import annotations
@@ -47,7 +48,10 @@ def die_with_parent(parent_pid: int | None = None) -> bool:
 
 
 def _start(parent_pid: int, initializer: Callable | None, initargs: tuple) -> None:
+    from .threads import configure
+
     die_with_parent(parent_pid)
+    configure("worker")  # one thread per worker process (semmatch.threads), as Dask workers
     if initializer is not None:
         initializer(*initargs)
 

@@ -1,11 +1,10 @@
-"""Per-scene work on Dask (semmatch.engine): the same files serially, on a local cluster and on a
-scheduler + worker processes started separately on localhost; clear errors; no orphans; a killed
-worker's task reruns elsewhere."""
+"""Per-scene work on Dask (semmatch.engine): the same files serially and on a local cluster; clear
+errors; no orphans; a killed worker's task reruns elsewhere. A scheduler and workers started
+separately: tests/test_dask_cluster.py."""
 
 from __future__ import annotations
 
 import hashlib
-import json
 import os
 import signal
 import subprocess
@@ -58,45 +57,12 @@ def test_local_cluster_writes_the_same_files_as_a_serial_run(serial, tmp_path):
     assert engine._LOCAL["cluster"] is cluster  # two workers are enough: the running cluster is reused
 
 
-def test_a_scheduler_and_workers_started_separately_give_the_same_files(serial, tmp_path):
-    sched_file = tmp_path / "scheduler.json"
-    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
-    procs = [subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1",
-                               "--port", "0", "--no-dashboard", "--scheduler-file", str(sched_file)],
-                              env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)]
-    try:
-        deadline = time.time() + 60
-        while not sched_file.is_file() and time.time() < deadline:
-            time.sleep(0.2)
-        address = json.loads(sched_file.read_text())["address"]
-        assert address.startswith("tcp://127.0.0.1:")
-        for _ in range(2):  # two worker processes, each its own `dask worker`
-            procs.append(subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_worker", address,
-                                           "--nthreads", "1", "--no-dashboard", "--host", "127.0.0.1"],
-                                          env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                                          start_new_session=True))
-        from distributed import Client
-
-        with Client(address, timeout="30s") as c:
-            c.wait_for_workers(2, timeout=60)
-        out = tmp_path / "data"
-        generate_dataset(out, scheduler=address, **TINY)
-        assert digests(out) == serial
-    finally:
-        for p in procs:
-            try:
-                os.killpg(p.pid, signal.SIGKILL)
-            except ProcessLookupError:
-                pass
-            p.wait(timeout=30)
-
-
 def test_an_unreachable_scheduler_is_a_clear_error_before_anything_is_written(tmp_path, monkeypatch):
     monkeypatch.setenv(engine.SCHEDULER_ENV, "tcp://127.0.0.1:9")  # the discard port: nothing listens
     t = time.perf_counter()
     with pytest.raises(ValueError, match=r"cannot reach the Dask scheduler at 'tcp://127.0.0.1:9' within 6 s"):
         generate_dataset(tmp_path / "data", **TINY)
-    assert time.perf_counter() - t < 10
+    assert time.perf_counter() - t < 20  # the 6 s connect timeout and start-up on a loaded machine; Dask alone waits 30 s
     assert not (tmp_path / "data").exists() or not any((tmp_path / "data").rglob("*.png"))
 
 
@@ -203,7 +169,7 @@ def test_the_runner_refuses_an_unreachable_scheduler_before_running_a_notebook(t
     t = time.perf_counter()
     rc = main(["run", "04_label_transfer", "--profile", "smoke", "--reports-dir", str(reports),
                "--scheduler", "tcp://127.0.0.1:9", "--quiet"])
-    assert rc != 0 and time.perf_counter() - t < 10
+    assert rc != 0 and time.perf_counter() - t < 20  # as above: no 30 s wait
     assert not reports.exists()  # nothing written, no kernel started
     assert engine.map_tasks(abs, [-1, 2], jobs=None, progress=False) == [1, 2]  # None: one worker per core
 

@@ -66,3 +66,19 @@ def test_workers_die_when_the_parent_is_killed(tmp_path, spawn):
     while any(_alive(p) for p in pids) and time.monotonic() < deadline:
         time.sleep(0.1)
     assert not any(_alive(p) for p in pids), "workers outlived their killed parent"
+
+
+def _omp_threads(_: int) -> str | None:
+    return os.environ.get("OMP_NUM_THREADS")
+
+
+def test_pool_workers_run_on_one_thread(monkeypatch):
+    from semmatch.threads import ENV_VARS, THREADS_ENV
+
+    for name in (THREADS_ENV, *ENV_VARS):
+        monkeypatch.delenv(name, raising=False)
+    with process_pool(2, spawn=True) as pool:
+        assert set(pool.map(_omp_threads, range(2))) == {"1"}
+    monkeypatch.setenv(THREADS_ENV, "2")
+    with process_pool(1, spawn=True) as pool:
+        assert list(pool.map(_omp_threads, range(1))) == ["2"]

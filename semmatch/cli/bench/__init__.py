@@ -41,3 +41,82 @@ def emit(result: dict, as_json: bool, table: str) -> int:
     else:
         print(table)
     return 0
+
+
+#: the environments of ``--thread-rows``: (row label, thread variables set; the others removed)
+THREAD_ROWS = (
+    ("default environment", {}),
+    ("OMP_NUM_THREADS=1", {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}),
+    ("no limit (SEMMATCH_THREADS=0)", {"SEMMATCH_THREADS": "0"}),
+)
+
+
+def add_thread_flags(parser, what: str) -> None:
+    """``--threads N`` and ``--thread-rows`` of a benchmark that runs torch / Open3D / BLAS code."""
+    parser.add_argument("--threads", type=int, default=None,
+                        help="CPU threads of torch, Open3D, OpenMP and the BLAS (default: semmatch's setting, "
+                             "SEMMATCH_THREADS, else 1; semmatch.threads)")
+    parser.add_argument("--thread-rows", action="store_true",
+                        help=f"run this {what} benchmark in fresh processes with no thread variable set (semmatch's "
+                             "default), with OMP_NUM_THREADS=1, and with no limit (SEMMATCH_THREADS=0: the "
+                             "libraries' defaults), and print one row each")
+    parser.set_defaults(_bench_parser=parser)
+
+
+def apply_threads(args) -> dict:
+    """Set ``args.threads`` (when given) through :func:`semmatch.threads.configure`; the limits now in force."""
+    from semmatch.threads import configure, current
+
+    if args.threads is not None:
+        if args.threads < 0:
+            raise ValueError(f"--threads must be >= 0, got {args.threads}")
+        configure("cli", n=args.threads)
+    return current()
+
+
+def _argv_of(args) -> list[str]:
+    """The options of ``args`` that differ from their defaults, as command-line words (without
+    ``--json``, ``--threads`` and ``--thread-rows``)."""
+    out: list[str] = []
+    for action in args._bench_parser._actions:
+        dest, flags = action.dest, [f for f in action.option_strings if f.startswith("--")]
+        if not flags or dest in ("help", "json", "threads", "thread_rows"):
+            continue
+        value = getattr(args, dest, action.default)
+        if value == action.default:
+            continue
+        if action.nargs == 0:  # store_true / store_false
+            out.append(flags[0])
+        elif isinstance(value, list | tuple):
+            out += [flags[0], *map(str, value)]
+        else:
+            out += [flags[0], str(value)]
+    return out
+
+
+def thread_rows(args, what: str, timeout_s: float = 1800) -> list[dict]:
+    """Run ``semmatch bench <what>`` with the options of ``args`` once per :data:`THREAD_ROWS`
+    environment, each in a fresh process (thread variables are read when libraries load).
+
+    Returns
+    -------
+    list of dict
+        Per environment: ``row`` (its label), ``env`` (the variables set) and the benchmark's JSON.
+    """
+    import os
+    import subprocess
+
+    from semmatch.threads import ENV_VARS, THREADS_ENV
+
+    code = "import sys; from semmatch.cli import main; sys.exit(main(sys.argv[1:]))"
+    cmd = [sys.executable, "-c", code, "bench", what, "--json", *_argv_of(args)]
+    rows = []
+    for label, extra in THREAD_ROWS:
+        env = {k: v for k, v in os.environ.items() if k not in (THREADS_ENV, *ENV_VARS)}
+        env.update(extra)
+        done = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=timeout_s)
+        if done.returncode != 0:
+            raise ValueError(f"semmatch bench {what} with {label} failed (exit {done.returncode}): "
+                             f"{done.stderr.strip()[-400:]}")
+        rows.append({"row": label, "env": extra, **json.loads(done.stdout.strip().splitlines()[-1])})
+    return rows

@@ -5,7 +5,6 @@ from __future__ import annotations
 import argparse
 import os
 import resource
-import sys
 import time
 
 
@@ -34,11 +33,11 @@ def register(sub) -> None:
                    help="also fuse this many labelings of the frames (the labels with 0%%, 10%%, ... "
                    "of the pixels set to random ids) as separate reconstruct() calls and as one "
                    "reconstruct_many() call, and time both (default 0: skip)")
-    p.add_argument("--threads", type=int, default=1,
-                   help="CPU threads (default 1; applies when Open3D is not yet loaded)")
     p.add_argument("--seed", type=int, default=0, help="scene seed (default 0)")
-    add = __import__("semmatch.cli.bench", fromlist=["add_json_flag"]).add_json_flag
-    add(p)
+    from semmatch.cli.bench import add_json_flag, add_thread_flags
+
+    add_thread_flags(p, "fusion")
+    add_json_flag(p)
     p.set_defaults(func=run)
 
 
@@ -61,14 +60,14 @@ def run(args: argparse.Namespace) -> int:
     """Time the integration and print a table or JSON."""
     if args.frames < 1:
         raise ValueError("--frames must be >= 1")
-    if args.threads and "open3d" not in sys.modules:
-        os.environ["OMP_NUM_THREADS"] = str(args.threads)
-    import torch
+    from semmatch.cli.bench import apply_threads, emit
 
-    from semmatch.cli.bench import emit
+    if args.thread_rows:
+        return _print_thread_rows(args)
+    apply_threads(args)  # before Open3D and torch load
     from semmatch.fusion import SemanticTSDF
+    from semmatch.threads import current
 
-    torch.set_num_threads(max(args.threads or 1, 1))
     frames = render_frames(args.scene, args.frames, args.width, args.height, args.camera_height, args.seed)
     labels = [_as_probabilities(f.labels) if args.probabilities else f.labels for f in frames]
     rss0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
@@ -99,7 +98,7 @@ def run(args: argparse.Namespace) -> int:
         "labels": "probabilities" if args.probabilities else "ids",
         "label_stride": args.label_stride,
         "trunc_voxels": args.trunc_voxels,
-        "threads": args.threads,
+        "threads": current(),  # the limits in force while the frames were fused
         "blocks": vol.n_blocks,
         "volume_mb": vol.memory_bytes / 2**20,
         "peak_rss_mb": peak / 1024,
@@ -115,6 +114,24 @@ def run(args: argparse.Namespace) -> int:
         f"{k:16s} {v:.3f}" if isinstance(v, float) else f"{k:16s} {v}" for k, v in result.items()
     )
     return emit(result, args.json, table)
+
+
+def _print_thread_rows(args: argparse.Namespace) -> int:
+    """``--thread-rows``: the benchmark in a fresh process per thread environment, one row each."""
+    from semmatch.cli.bench import emit, thread_rows
+
+    rows = thread_rows(args, "fusion")
+    lines = [f"{'environment':<30} {'FPS':>7} {'CPU-FPS':>8} {'load':>5} {'torch':>5} {'Open3D':>6} {'BLAS/OpenMP':>12}"]
+    for r in rows:
+        th = r["threads"]
+        rt = "/".join(str(v) for v in th.get("runtimes", {}).values()) or "-"
+        lines.append(f"{r['row']:<30} {r['fps']:7.1f} {r['cpu_fps']:8.1f} {r['load_average']:5.1f} "
+                     f"{th.get('torch', '-')!s:>5} {th.get('open3d', '-')!s:>6} {rt:>12}")
+    base = rows[1]["cpu_fps"]
+    lines.append(f"({args.frames} frames {args.width}x{args.height}, voxel {args.voxel_size} m; default "
+                 f"environment at {rows[0]['cpu_fps'] / base:.2f}x and no limit at {rows[2]['cpu_fps'] / base:.2f}x "
+                 f"the CPU-FPS of OMP_NUM_THREADS=1; {os.cpu_count()} CPUs)")
+    return emit({"rows": rows}, args.json, "\n".join(lines))
 
 
 def _as_probabilities(labels):

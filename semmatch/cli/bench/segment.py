@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 import argparse
+import os
 import time
 
-from . import add_json_flag, emit
+from . import add_json_flag, add_thread_flags, apply_threads, emit, thread_rows
 
 
 def register(sub) -> None:
@@ -15,10 +16,10 @@ def register(sub) -> None:
                    help="checkpoints to time (default: untrained compact and strong networks at the full "
                         "training profile's input size; speed does not depend on the weights)")
     p.add_argument("--frames", type=int, default=20, help="timed frames per size (default 20)")
-    p.add_argument("--threads", type=int, help="torch threads (default: torch's choice)")
     p.add_argument("--device", choices=("auto", "cpu", "cuda"), default="cpu", help="default %(default)s")
     p.add_argument("--no-flip", action="store_true",
                    help="time one network pass (default: with the mirror-image average, as predictions run)")
+    add_thread_flags(p, "segment")
     add_json_flag(p)
     p.set_defaults(func=run)
 
@@ -40,6 +41,9 @@ def time_predict(segmenter, width: int, height: int, frames: int, *, seed: int =
 
 def run(args: argparse.Namespace) -> int:
     """Time every network and print a table or JSON."""
+    if args.thread_rows:
+        return _print_thread_rows(args)
+    limits = apply_threads(args)
     import torch
 
     from semmatch.segment import load_model
@@ -49,8 +53,6 @@ def run(args: argparse.Namespace) -> int:
 
     if args.frames < 1:
         raise ValueError("--frames must be >= 1")
-    if args.threads:
-        torch.set_num_threads(args.threads)
     device = None if args.device == "auto" else args.device
     nets = {}
     if args.model:
@@ -62,7 +64,8 @@ def run(args: argparse.Namespace) -> int:
             torch.manual_seed(0)
             cfg = make_config("full", arch=arch).model_config()
             nets[arch] = Segmenter(build_network(cfg), cfg, device=device or "cpu", flip=not args.no_flip)
-    result = {"networks": {}, "threads": torch.get_num_threads(), "frames": args.frames}
+    result = {"networks": {}, "threads": torch.get_num_threads(), "limits": limits, "frames": args.frames,
+              "load_average": os.getloadavg()[0]}
     rows = []
     for name, seg in nets.items():
         r = {f"fps_{w}x{h}": round(time_predict(seg, w, h, args.frames), 2) for w, h in ((320, 240), (640, 480))}
@@ -74,3 +77,16 @@ def run(args: argparse.Namespace) -> int:
     table = "\n".join([f"{'network':<12} {'runs at':>9} {'FPS 320x240':>12} {'FPS 640x480':>12}", *rows,
                        f"(torch threads: {result['threads']}, {args.frames} frames per size)"])
     return emit(result, args.json, table)
+
+
+def _print_thread_rows(args: argparse.Namespace) -> int:
+    """``--thread-rows``: the benchmark in a fresh process per thread environment, one row each."""
+    rows = thread_rows(args, "segment")
+    nets = list(rows[0]["networks"])
+    head = " ".join(f"{n + ' ' + s:>20}" for n in nets for s in ("320x240", "640x480"))
+    lines = [f"{'environment':<30} {'torch':>5} {'load':>5} {head}"]
+    for r in rows:
+        fps = " ".join(f"{r['networks'][n][f'fps_{s}']:20.2f}" for n in nets for s in ("320x240", "640x480"))
+        lines.append(f"{r['row']:<30} {r['threads']:>5} {r['load_average']:5.1f} {fps}")
+    lines.append(f"(frames per second, {args.frames} frames per size; {os.cpu_count()} CPUs)")
+    return emit({"rows": rows}, args.json, "\n".join(lines))
