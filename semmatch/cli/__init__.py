@@ -103,6 +103,13 @@ def main(argv: list[str] | None = None) -> int:
     from concurrent.futures.process import BrokenProcessPool
 
     from semmatch.io.outputs import check_cli_paths, terminate_as_interrupt
+    from semmatch.threads import configure
+
+    try:  # threads set once, before the verbs load torch, Open3D or a BLAS (semmatch.threads)
+        configure("cli")
+    except ValueError as e:
+        print(f"semmatch: error: {e}", file=sys.stderr)
+        return 2
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
