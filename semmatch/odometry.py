@@ -2,8 +2,8 @@
 
 Tracker (:func:`estimate_poses`): multi-scale frame-to-frame RGB-D odometry with the kernels of
 ``open3d.t.pipelines.odometry``, made repeatable run to run by :mod:`semmatch.rgbd_odometry`
-(point-to-plane, with a hybrid depth + intensity alternative
-chosen per frame by photometric and depth misfit), chained, then refined by a pose graph
+(the hybrid depth + intensity residual, with point-to-plane where it fails; docs/recordings.md
+says how this was chosen on real and simulated frames), chained, then refined by a pose graph
 (:func:`semmatch.pose_graph.refine_pose_graph`). The first pose is ``init_pose`` (identity by
 default; pass the known start pose, :func:`start_pose`, to build maps in the world frame).
 Trajectory errors against ground truth are :mod:`semmatch.trajectory_metrics`; how much drift
@@ -22,13 +22,17 @@ import numpy as np
 from .fusion import check_depth_units, default_device
 from .geometry import check_pose
 from .io import Frame, depth_to_uint16
-from .pose_graph import refine_pose_graph
+from .pose_graph import CompressedDepths, refine_pose_graph
 from .trajectory_metrics import align_trajectory, rotation_deg, trajectory_errors
 
-__all__ = ["estimate_poses", "shrink_frame", "ground_truth_poses", "start_pose", "real_like_chain"]
+__all__ = ["estimate_poses", "shrink_frame", "ground_truth_poses", "start_pose", "anchor_to_ground_truth",
+           "real_like_chain"]
 
 #: a frame with fewer valid depth pixels than this share is a sensor dropout (as in fusion)
 MIN_VALID_DEPTH = 0.001
+
+#: how :func:`estimate_poses` picks among its residuals' estimates of one frame pair
+SELECTIONS = ("first", "misfit")
 
 
 def _depth_mm(depth: np.ndarray, where: str) -> np.ndarray:
@@ -39,8 +43,9 @@ def _depth_mm(depth: np.ndarray, where: str) -> np.ndarray:
 def estimate_poses(
     seq: Iterable[Frame],
     *,
-    residual: str = "point-to-plane",
+    residual: str = "hybrid",
     robust: bool = True,
+    select: str = "first",
     max_step: float = 0.5,
     prior: np.ndarray | None = None,
     prior_tolerance: tuple[float, float] | None = (0.1, 10.0),
@@ -58,15 +63,21 @@ def estimate_poses(
     seq : sequence or iterable of Frame
         Frames with metric depth and RGB (e.g. :func:`semmatch.io.read_sequence`,
         :func:`semmatch.recordings.read_tum_rgbd`).
-    residual : {"point-to-plane", "hybrid", "intensity"}
-        Residual of the frame-to-frame odometry (Open3D ``Method``): geometric, geometric +
-        photometric, or photometric. Point-to-plane is the most accurate on simulated frames
-        (textures are weak, depth is metric).
+    residual : {"hybrid", "point-to-plane", "intensity"}
+        Residual of the frame-to-frame odometry (Open3D ``Method``): geometric + photometric,
+        geometric, or photometric. Hybrid is the default: on real Kinect frames (7-Scenes red
+        kitchen, frames 0-499) point-to-plane drifts (docs/recordings.md).
     robust : bool
-        Frame-to-frame: also run the point-to-plane/hybrid alternative and keep the estimate
-        whose warped intensities and depths fit the previous frame best (point-to-plane alone
-        slides along planar views; hybrid alone is less precise elsewhere), each started from
-        the previous motion (constant velocity); from rest only when nothing converged.
+        Frame-to-frame: also run the point-to-plane/hybrid alternative (point-to-plane alone
+        slides along planar views; hybrid alone fails where the image has no texture), each
+        started from the previous motion (constant velocity); from rest only when nothing
+        converged.
+    select : {"first", "misfit"}
+        With ``robust``: "first" keeps ``residual``'s estimate whenever it is plausible and
+        uses the alternative only when it is not (diverged, no correspondences, rejected by the
+        prior); "misfit" keeps the estimate whose warped intensities and depths fit the previous
+        frame best (the earlier rule: on real frames it picks point-to-plane's smoother but
+        drifting estimates).
     max_step : float
         Largest plausible motion between consecutive frames (metres; rotations up to 90
         degrees); larger estimates are rejected as divergence.
@@ -101,8 +112,8 @@ def estimate_poses(
     Raises
     ------
     ValueError
-        Unknown residual, empty sequence, depth in the wrong unit, a prior of the
-        wrong shape, frames of different sizes.
+        Unknown residual or selection, empty sequence, depth in the wrong unit, a prior of
+        the wrong shape, frames of different sizes.
 
     Warns
     -----
@@ -120,11 +131,13 @@ def estimate_poses(
     if int(downsample) < 1:
         raise ValueError(f"downsample must be an integer >= 1, got {downsample}")
     name = str(getattr(seq, "path", "sequence"))
-    tracker = _Tracker(residual=residual, robust=robust, max_step=max_step, prior=prior,
+    if select not in SELECTIONS:
+        raise ValueError(f"select must be one of {SELECTIONS}, got {select!r}")
+    tracker = _Tracker(residual=residual, robust=robust, select=select, max_step=max_step, prior=prior,
                        prior_tolerance=prior_tolerance, depth_max=depth_max, device=device,
                        T=np.eye(4) if init_pose is None else check_pose(init_pose, what="init_pose").copy())
     poses: list[np.ndarray] = []
-    depths_mm: list[np.ndarray] = []  # kept for the pose graph (depth only: 2 bytes a pixel)
+    depths_mm = CompressedDepths()  # kept for the pose graph (depth only, losslessly compressed)
     intrinsics = None
     frames = seq if int(downsample) == 1 else (shrink_frame(f, int(downsample)) for f in seq)
     for i, f in enumerate(tqdm(frames, total=n, desc="odometry", disable=not progress, leave=False)):
@@ -157,7 +170,7 @@ class _Tracker:
     (dropouts) and frames where nothing converged (lost) are collected for one warning each.
     """
 
-    def __init__(self, *, residual: str, robust: bool, max_step: float, prior: np.ndarray | None,
+    def __init__(self, *, residual: str, robust: bool, select: str, max_step: float, prior: np.ndarray | None,
                  prior_tolerance: tuple[float, float] | None, depth_max: float, device: str | None,
                  T: np.ndarray) -> None:
         from .rgbd_odometry import METHODS
@@ -169,7 +182,7 @@ class _Tracker:
         extra = ["point-to-plane", "hybrid"] if robust else []
         self.methods = [residual] + [m for m in extra if m != residual]
         self.iterations = (30, 15, 8)  # per pyramid level, coarsest first
-        self.robust, self.max_step, self.depth_max = robust, max_step, depth_max
+        self.robust, self.select, self.max_step, self.depth_max = robust, select, max_step, depth_max
         self.prior, self.prior_tolerance = prior, prior_tolerance
         self.device = device or default_device()
         self.T = T
@@ -242,6 +255,8 @@ class _Tracker:
             if (prior_motion is not None and self.prior_tolerance is not None
                     and not _agrees(Tm, prior_motion, *self.prior_tolerance)):
                 continue
+            if self.select == "first":
+                return Tm  # the first plausible estimate, in the order of self.methods
             cost = _misfit(f, self.prev_frame, Tm, self.depth_max) if self.robust else 0.0
             if cost < best_cost:
                 best, best_cost = Tm, cost
@@ -394,6 +409,46 @@ def start_pose(true_poses: np.ndarray | None) -> np.ndarray | None:
     return np.asarray(true_poses[0], dtype=np.float64).copy()
 
 
+def anchor_to_ground_truth(poses: np.ndarray, true_poses: np.ndarray | None,
+                           *, name: str = "sequence") -> tuple[np.ndarray, int | None]:
+    """Move an estimated trajectory so that it starts where the ground truth starts.
+
+    When the ground truth's first frame has a pose, :func:`estimate_poses` already started there
+    (``init_pose=start_pose(...)``) and nothing changes. When the ground truth starts later
+    (a recording whose motion capture begins after the camera), the whole chain is moved
+    rigidly so that the first frame with ground truth sits at its true pose, and a warning says
+    so (otherwise the chain would start at the identity, far from the ground truth's frame).
+
+    Parameters
+    ----------
+    poses : ndarray (N, 4, 4)
+        Estimated ``T_world_camera``.
+    true_poses : ndarray (N, 4, 4) or None
+        Ground truth with NaN rows where unknown.
+    name : str
+        What the recording is, for the warning.
+
+    Returns
+    -------
+    (poses, first)
+        The anchored poses and the index of the first frame with ground truth (None: none has).
+    """
+    import warnings
+
+    if true_poses is None:
+        return poses, None
+    ok = np.flatnonzero(np.isfinite(np.asarray(true_poses)).all(axis=(1, 2)))
+    if len(ok) == 0:
+        return poses, None
+    k = int(ok[0])
+    if k == 0:
+        return poses, 0
+    warnings.warn(f"{name}: the ground truth starts at frame {k}, not 0; the estimated trajectory is anchored "
+                  f"at frame {k}'s true pose (frames 0-{k - 1} are placed by odometry alone, and ATE/RPE use only "
+                  "frames with ground truth)", UserWarning, stacklevel=2)
+    return np.asarray(true_poses[k]) @ np.linalg.inv(poses[k]) @ poses, k
+
+
 def real_like_chain(
     seq,
     *,
@@ -461,6 +516,7 @@ def real_like_chain(
             raise ValueError(f"prior must be an (N,4,4) array, 'recorded' (with a sequence that has poses) or None, got {prior!r}")
         prior = seq.poses
     est = estimate_poses(seq, init_pose=init, prior=prior, progress=progress)
+    est = anchor_to_ground_truth(est, gt_poses, name=str(getattr(seq, "path", "sequence")))[0]
     m = reconstruct(seq, labels=labels, voxel_size=voxel_size, poses=est, progress=progress, **fusion_options)
     errors = trajectory_errors(est, gt_poses) if gt_poses is not None else None
     if reference is None and gt_poses is not None and np.isfinite(gt_poses).all():

@@ -5,11 +5,19 @@ surfaces, each a point-to-plane RGB-D registration started from the chained esti
 only when it converged close to it, optimised by Open3D's ``global_optimization``
 (Levenberg-Marquardt with line-process pruning of wrong loop closures), as Open3D's
 reconstruction system does for its fragments.
+
+Memory does not grow with the pyramids: a frame's depth pyramid (about 14 MB at 640x480 with its
+normal maps) is rebuilt on demand and only the most recently used ``cache`` of them are kept
+(the current frame, its neighbours, the keyframes it is registered to); the graph keeps the
+16-bit depth of the keyframes (0.6 MB each at 640x480, one frame in ``loop_stride``) for the
+overlap tests and of the last ``neighbours`` frames. A pyramid is a deterministic function of
+its depth image, so the poses do not depend on ``cache``.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections import OrderedDict
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -17,11 +25,61 @@ from .fusion import default_device
 from .rgbd_odometry import multi_scale_odometry, open3d_threads, rgbd_pyramid
 from .trajectory_metrics import rotation_deg
 
-__all__ = ["refine_pose_graph"]
+__all__ = ["refine_pose_graph", "CompressedDepths"]
+
+
+class CompressedDepths(Sequence):
+    """16-bit depth images kept PNG-compressed in memory (lossless; a third to a fifth of the raw size).
+
+    ``append`` a (H, W) uint16 image; ``depths[i]`` decodes it again.
+    """
+
+    def __init__(self) -> None:
+        self._png: list[bytes] = []
+
+    def append(self, depth: np.ndarray) -> None:
+        """Compress and keep one (H, W) uint16 depth image."""
+        import cv2
+
+        ok, buf = cv2.imencode(".png", np.ascontiguousarray(depth, dtype=np.uint16), [cv2.IMWRITE_PNG_COMPRESSION, 1])
+        if not ok:
+            raise RuntimeError("could not compress a depth image")
+        self._png.append(buf.tobytes())
+
+    def __len__(self) -> int:
+        return len(self._png)
+
+    def __getitem__(self, i):  # type: ignore[override]
+        import cv2
+
+        if isinstance(i, slice):
+            return [self[j] for j in range(*i.indices(len(self)))]
+        return cv2.imdecode(np.frombuffer(self._png[i], np.uint8), cv2.IMREAD_UNCHANGED)
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes held."""
+        return sum(len(b) for b in self._png)
+
+
+class _LRU:
+    """The ``size`` most recently used values of ``make(key)``."""
+
+    def __init__(self, make: Callable, size: int) -> None:
+        self.make, self.size, self.items = make, max(1, int(size)), OrderedDict()
+
+    def __call__(self, key):
+        if key in self.items:
+            self.items.move_to_end(key)
+        else:
+            self.items[key] = self.make(key)
+            if len(self.items) > self.size:
+                self.items.popitem(last=False)
+        return self.items[key]
 
 
 def _overlap(points_i: np.ndarray, depth_j: np.ndarray, T_j_i: np.ndarray, intr, tol: float = 0.1) -> float:
-    """Share of frame i's sample points (camera i) that frame j sees at the same depth (within ``tol`` m)."""
+    """Share of frame i's sample points (camera i) that frame j (depth in mm) sees at the same depth (within ``tol`` m)."""
     from .geometry import project
 
     if len(points_i) == 0:
@@ -31,7 +89,7 @@ def _overlap(points_i: np.ndarray, depth_j: np.ndarray, T_j_i: np.ndarray, intr,
     v = np.rint(uv[:, 1]).astype(np.int64)
     H, W = intr.shape
     ok = (z > 0) & (u >= 0) & (u < W) & (v >= 0) & (v < H)
-    dz = depth_j[v[ok], u[ok]]
+    dz = depth_j[v[ok], u[ok]].astype(np.float32) / 1000.0
     return float(((dz > 0) & (np.abs(dz - z[ok]) < tol)).sum() / len(points_i))
 
 
@@ -49,6 +107,7 @@ def refine_pose_graph(
     min_fitness: float = 0.3,
     depth_max: float = 5.0,
     device: str | None = None,
+    cache: int = 8,
     progress: bool = False,
     name: str = "sequence",
 ) -> np.ndarray:
@@ -70,7 +129,8 @@ def refine_pose_graph(
     Parameters
     ----------
     depths : sequence of ndarray (H, W) uint16
-        Depth images in millimetres (0 = no measurement), one per pose.
+        Depth images in millimetres (0 = no measurement), one per pose; read once each, in
+        order (e.g. a :class:`CompressedDepths`, or a lazy reader).
     intrinsics : Intrinsics
         Camera intrinsics shared by all frames.
     poses : (N, 4, 4)
@@ -90,6 +150,8 @@ def refine_pose_graph(
         Ignore depth beyond this (metres).
     device : str, optional
         Open3D device of the registrations.
+    cache : int
+        Depth pyramids kept (least recently used dropped); the result does not depend on it.
     progress : bool
         Show a tqdm bar.
     name : str
@@ -118,23 +180,26 @@ def refine_pose_graph(
     if len(depths) != n or n < 2:
         raise ValueError(f"{name}: need one depth image per pose and at least 2 ({len(depths)} depths, {n} poses)")
     H, W = intrinsics.shape
-    for i, d in enumerate(depths):
+
+    def _checked(d: np.ndarray, i: int) -> np.ndarray:
         if d.shape != (H, W):
             raise ValueError(f"{name} frame {i}: depth is {d.shape}, the intrinsics say {(H, W)}")
+        return d
+
     dev = o3c.Device(device or default_device())
     K = o3c.Tensor(intrinsics.K)
-    imgs = [o3d.t.geometry.Image(o3c.Tensor(d)).to(dev) for d in depths]
-    metres = [d.astype(np.float32) / 1000.0 for d in depths]
-    samples = [backproject(np.where(m <= depth_max, m, 0), intrinsics, stride=8)[0] for m in metres]
     criteria = [o3d.t.pipelines.odometry.OdometryConvergenceCriteria(k) for k in (30, 15, 8)]
-    pyramids: dict[int, object] = {}  # depth-only pyramids (point-to-plane), built on first use
+    kept: dict[int, np.ndarray] = {}  # depth (mm) of the keyframes and the last `neighbours` frames
 
-    def pyramid(i: int):
-        if i not in pyramids:
-            pyramids[i] = rgbd_pyramid(depths[i], None, intrinsics.K, levels=len(criteria), depth_max=depth_max,
-                                       device=str(dev))
-        return pyramids[i]
+    def depth(i: int) -> np.ndarray:
+        return kept[i]
 
+    def image(i: int):
+        return o3d.t.geometry.Image(o3c.Tensor(depth(i))).to(dev)
+
+    # depth-only pyramids (point-to-plane), least recently used dropped
+    pyramid = _LRU(lambda i: rgbd_pyramid(depth(i), None, intrinsics.K, levels=len(criteria), depth_max=depth_max,
+                                          device=str(dev)), cache)
     odo = o3d.t.pipelines.odometry
     max_t, max_r = max_correction
 
@@ -149,24 +214,30 @@ def refine_pose_graph(
         if (not np.isfinite(T).all() or fitness < min_fitness or np.linalg.norm(D[:3, 3]) > max_t
                 or rotation_deg(D[:3, :3]) > max_r):
             return None
-        info = odo.compute_odometry_information_matrix(imgs[i], imgs[j], K, o3c.Tensor(T), 0.07, 1000.0, depth_max)
+        info = odo.compute_odometry_information_matrix(image(i), image(j), K, o3c.Tensor(T), 0.07, 1000.0, depth_max)
         return T, info.cpu().numpy().astype(np.float64)
 
     with open3d_threads(1):  # repeatable sums (semmatch.rgbd_odometry)
         graph = reg.PoseGraph()
         for p in poses:
             graph.nodes.append(reg.PoseGraphNode(p))
+        kept[0] = _checked(depths[0], 0)
         for i in tqdm(range(1, n), desc="pose graph", disable=not progress, leave=False):
+            kept[i] = _checked(depths[i], i)
+            for old in [k for k in kept if k < i - neighbours and k % loop_stride]:
+                del kept[old]  # neither a keyframe nor a neighbour of any later frame
+            m_i = depth(i).astype(np.float32) / 1000.0
+            samples = backproject(np.where(m_i <= depth_max, m_i, 0), intrinsics, stride=8)[0]
             pairs = [j for j in range(max(0, i - neighbours), i - 1)
-                     if _overlap(samples[i], metres[j], np.linalg.inv(poses[j]) @ poses[i], intrinsics) >= min_overlap]
+                     if _overlap(samples, depth(j), np.linalg.inv(poses[j]) @ poses[i], intrinsics) >= min_overlap]
             if i % loop_stride == 0:
-                loops = [(_overlap(samples[i], metres[j], np.linalg.inv(poses[j]) @ poses[i], intrinsics), j)
+                loops = [(_overlap(samples, depth(j), np.linalg.inv(poses[j]) @ poses[i], intrinsics), j)
                          for j in range(0, i - neighbours - 5, loop_stride)]
                 pairs += [j for ov, j in sorted(loops, reverse=True)[:loop_candidates] if ov >= loop_overlap]
             for j in [i - 1] + pairs:
                 if j == i - 1:  # the chained motion itself (chosen robustly by the tracker, not re-registered)
                     T = np.linalg.inv(poses[j]) @ poses[i]
-                    info = odo.compute_odometry_information_matrix(imgs[i], imgs[j], K, o3c.Tensor(T), 0.07, 1000.0,
+                    info = odo.compute_odometry_information_matrix(image(i), image(j), K, o3c.Tensor(T), 0.07, 1000.0,
                                                                    depth_max).cpu().numpy().astype(np.float64)
                     edge = (T, info if np.isfinite(info).all() and info.any() else np.eye(6))
                 else:

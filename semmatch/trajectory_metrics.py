@@ -2,7 +2,8 @@
 
 ATE: RMSE of the camera positions after a least-squares rigid (or similarity) alignment
 (Umeyama [2]_ / Horn); RPE: the relative motion errors over ``delta`` frames. Frames whose true
-pose is not finite are skipped.
+pose is not finite are skipped, and an RPE pair is two frames ``delta`` apart in the recording
+that both have ground truth (no pair spans a gap in the ground truth).
 
 References
 ----------
@@ -15,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["align_trajectory", "ate", "rpe", "trajectory_errors", "rotation_deg"]
+__all__ = ["align_trajectory", "ate", "rpe", "rpe_pairs", "trajectory_errors", "rotation_deg"]
 
 
 def rotation_deg(R: np.ndarray) -> float:
@@ -78,14 +79,33 @@ def ate(est: np.ndarray, gt: np.ndarray, *, align: bool = True) -> float:
     return float(np.sqrt(np.mean(np.sum((a - gt[:, :3, 3]) ** 2, axis=1))))
 
 
+def rpe_pairs(est: np.ndarray, gt: np.ndarray, delta: int = 1) -> np.ndarray:
+    """The RPE pairs: indices ``i`` whose frames ``i`` and ``i + delta`` both have finite estimates and ground truth."""
+    _valid_pairs(est, gt)  # shape checks
+    ok = np.isfinite(np.asarray(gt, dtype=np.float64)).all(axis=(1, 2)) & np.isfinite(
+        np.asarray(est, dtype=np.float64)).all(axis=(1, 2))
+    return np.flatnonzero(ok[:-delta] & ok[delta:]) if len(ok) > delta else np.zeros(0, np.int64)
+
+
 def rpe(est: np.ndarray, gt: np.ndarray, *, delta: int = 1) -> tuple[float, float]:
-    """Relative pose error over ``delta`` frames: (translation RMSE in metres, mean rotation in degrees)."""
-    est, gt = _valid_pairs(est, gt)
-    if len(est) <= delta:
-        raise ValueError(f"need more than {delta} poses for RPE")
+    """Relative pose error over ``delta`` frames: (translation RMSE in metres, mean rotation in degrees).
+
+    Pairs are frames ``i`` and ``i + delta`` of the recording that both have ground truth, so
+    that no pair spans a gap in it.
+
+    Raises
+    ------
+    ValueError
+        No such pair.
+    """
+    est = np.asarray(est, dtype=np.float64)
+    gt = np.asarray(gt, dtype=np.float64)
+    i = rpe_pairs(est, gt, delta)
+    if len(i) == 0:
+        raise ValueError(f"need two frames {delta} apart with ground truth for RPE")
     inv = np.linalg.inv
-    d_est = inv(est[:-delta]) @ est[delta:]
-    d_gt = inv(gt[:-delta]) @ gt[delta:]
+    d_est = inv(est[i]) @ est[i + delta]
+    d_gt = inv(gt[i]) @ gt[i + delta]
     E = inv(d_gt) @ d_est
     trans = float(np.sqrt(np.mean(np.sum(E[:, :3, 3] ** 2, axis=1))))
     cos = np.clip((np.trace(E[:, :3, :3], axis1=1, axis2=2) - 1) / 2, -1.0, 1.0)
@@ -93,7 +113,7 @@ def rpe(est: np.ndarray, gt: np.ndarray, *, delta: int = 1) -> tuple[float, floa
 
 
 def trajectory_errors(est: np.ndarray, gt: np.ndarray, *, delta: int = 1) -> dict:
-    """``ate_rmse`` (aligned), ``ate_rmse_unaligned``, ``rpe_trans``, ``rpe_rot_deg``, ``n_frames``."""
+    """``ate_rmse`` (aligned), ``ate_rmse_unaligned``, ``rpe_trans``, ``rpe_rot_deg``, ``n_frames`` (with ground truth)."""
     t, r = rpe(est, gt, delta=delta)
     e, g = _valid_pairs(est, gt)
     return {

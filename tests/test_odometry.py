@@ -176,3 +176,58 @@ def test_sensor_dropouts_are_bridged_not_tracked(recwarn):
     assert ate(est[6:], gt[6:], align=False) < 0.03 + ate(clean[6:], gt[6:], align=False)
     with pytest.raises(ValueError, match="none of its 12 frame"):
         estimate_poses([replace(f, depth=np.zeros_like(f.depth)) for f in frames], pose_graph=False, progress=False)
+
+
+def test_rpe_pairs_never_span_a_gap_in_the_ground_truth():
+    from semmatch.trajectory_metrics import rpe_pairs
+
+    gt = circle_poses(10)
+    est = gt.copy()
+    est[6:, 0, 3] += 0.5  # a 50 cm jump between frames 4 and 6, across frame 5 that has no ground truth
+    gt_gap = gt.copy()
+    gt_gap[5] = np.nan
+    assert list(rpe_pairs(est, gt_gap)) == [0, 1, 2, 3, 6, 7, 8]
+    t, _ = rpe(est, gt_gap)
+    assert t == pytest.approx(0.0, abs=1e-9)  # pair (4, 6) would have counted the jump
+    assert rpe(est, gt)[0] > 0.1  # with frame 5 known, the jump is a real error
+    gt_gap[1::2] = np.nan
+    with pytest.raises(ValueError, match="two frames 1 apart with ground truth"):
+        rpe(est, gt_gap)
+
+
+def test_chain_is_anchored_where_the_ground_truth_starts():
+    from semmatch.odometry import anchor_to_ground_truth
+
+    gt = circle_poses(8)
+    S = look_at([1.0, 2.0, 0.5], [3.0, 1.0, 0.0])
+    est = S @ gt  # a perfect estimate in another frame (e.g. started at the identity)
+    late = gt.copy()
+    late[:3] = np.nan  # ground truth starts at frame 3
+    with pytest.warns(UserWarning, match="ground truth starts at frame 3, not 0; .* anchored at frame 3"):
+        out, first = anchor_to_ground_truth(est, late)
+    assert first == 3 and np.allclose(out, gt, atol=1e-9)
+    assert trajectory_errors(out, late)["ate_rmse_unaligned"] == pytest.approx(0.0, abs=1e-9)
+    same, first = anchor_to_ground_truth(est, gt)  # ground truth from frame 0: the start pose was known
+    assert first == 0 and same is est
+    assert anchor_to_ground_truth(est, None) == (est, None)
+
+
+def test_pose_graph_memory_is_bounded_and_does_not_change_the_poses():
+    from semmatch.odometry import _depth_mm
+    from semmatch.pose_graph import CompressedDepths
+
+    frames, gt = rendered_slide(160, 120, 13)
+    intr = frames[0].intrinsics
+    depths = [_depth_mm(f.depth, f"frame {f.index}") for f in frames]
+    packed = CompressedDepths()
+    for d in depths:
+        packed.append(d)
+    assert all(np.array_equal(a, b) for a, b in zip(packed, depths)) and packed.nbytes < sum(d.nbytes for d in depths)
+    step = np.eye(4)
+    step[:3, 3] = [0.01, 0.0, 0.0]
+    drifted = np.stack([gt[0]] + [gt[i] @ np.linalg.matrix_power(step, i) for i in range(1, len(gt))])
+    # every pyramid kept (as before the cache) vs one kept: frames 9 and 12 close loops to keyframes 0 and 3
+    everything = refine_pose_graph(depths, intr, drifted, cache=len(gt))
+    one = refine_pose_graph(packed, intr, drifted, cache=1)
+    np.testing.assert_array_equal(everything, one)
+    assert not np.allclose(everything, drifted)

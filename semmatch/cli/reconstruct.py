@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -46,6 +48,13 @@ def register(sub) -> None:
     p.add_argument("--prior", action="store_true",
                    help="with --estimate-poses: seed the odometry with the recorded (rough) poses")
     p.add_argument("--poses-out", help="with --estimate-poses: write the estimated trajectory (TUM)")
+    from semmatch.rgbd_odometry import METHODS
+
+    p.add_argument("--residual", choices=METHODS, default="hybrid",
+                   help="with --estimate-poses: residual of the frame-to-frame odometry (default hybrid; "
+                        "point-to-plane is the fallback where it fails)")
+    p.add_argument("--no-pose-graph", dest="pose_graph", action="store_false",
+                   help="with --estimate-poses: chained odometry only, no pose-graph refinement")
     p.add_argument("--device", help="Open3D device (default: CUDA:0 when available, else CPU:0)")
     add_quiet(p)
     declare_paths(p, inputs=("seq", "labels"), outputs=("out", "rgb_out", "points_out", "poses_out"))
@@ -53,11 +62,35 @@ def register(sub) -> None:
 
 
 def open_any_sequence(path: str | Path):
-    """A sequence folder (``intrinsics.json``) or a TUM RGB-D folder (``rgb.txt``)."""
-    from semmatch.io import read_sequence
-    from semmatch.recordings import is_tum_rgbd, read_tum_rgbd
+    """A sequence folder, a TUM RGB-D, 7-Scenes or plain folder (:func:`semmatch.recordings.read_recording`)."""
+    from semmatch.recordings import read_recording
 
-    return read_tum_rgbd(path) if is_tum_rgbd(path) else read_sequence(path)
+    return read_recording(path)
+
+
+def _missing_poses(seq) -> str | None:
+    """Why the frames cannot be fused at their recorded poses (None: every frame has one)."""
+    poses = getattr(seq, "poses", None)
+    if poses is None:
+        return "has no recorded poses"
+    bad = np.flatnonzero(~np.isfinite(np.asarray(poses, dtype=np.float64)).all(axis=(1, 2)))
+    if len(bad):
+        return f"has no recorded pose for {len(bad)} of {len(seq)} frames (first: frame {bad[0]})"
+    return None
+
+
+@contextlib.contextmanager
+def _plain_warnings(verb: str) -> Iterator[None]:
+    """Print warnings as one line each, ``semmatch VERB: warning: ...`` (no Python source lines)."""
+    import sys
+    import warnings
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        print(f"semmatch {verb}: warning: {message}", file=file or sys.stderr)
+
+    with warnings.catch_warnings():
+        warnings.showwarning = show
+        yield
 
 
 def available_memory() -> int:
@@ -135,26 +168,35 @@ def _check_memory(seq, args: argparse.Namespace, poses) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Reconstruct and print a one-line JSON summary."""
+    """Reconstruct and print a one-line JSON summary (warnings as plain lines)."""
+    with _plain_warnings("reconstruct"):
+        return _run(args)
+
+
+def _run(args: argparse.Namespace) -> int:
     from semmatch.fusion import extract, fuse
     from semmatch.io import write_map
 
     seq = open_any_sequence(args.seq)
+    if not args.estimate_poses and (why := _missing_poses(seq)):
+        raise ValueError(f"{args.seq} {why}; pass --estimate-poses to estimate the poses by RGB-D odometry")
     poses = None
     info: dict = {}
     if args.estimate_poses:
 
         from semmatch.io import write_tum
-        from semmatch.odometry import estimate_poses, ground_truth_poses, start_pose
+        from semmatch.odometry import anchor_to_ground_truth, estimate_poses, ground_truth_poses, start_pose
         from semmatch.trajectory_metrics import trajectory_errors
 
         gt = ground_truth_poses(seq)  # for the start pose and the report only
         prior = seq.poses if args.prior and getattr(seq, "poses", None) is not None else None
-        poses = estimate_poses(seq, init_pose=start_pose(gt), prior=prior, progress=not args.quiet)
+        poses = estimate_poses(seq, init_pose=start_pose(gt), prior=prior, residual=args.residual,
+                               pose_graph=args.pose_graph, progress=not args.quiet)
+        poses, first = anchor_to_ground_truth(poses, gt, name=str(args.seq))
         if args.poses_out:
             write_tum(args.poses_out, getattr(seq, "timestamps", range(len(poses))), poses)
         if gt is not None and len(gt) == len(poses):
-            info.update(trajectory_errors(poses, gt))
+            info.update(trajectory_errors(poses, gt), gt_first_frame=first)
     _check_memory(seq, args, poses)
     vol = fuse(
         seq,
