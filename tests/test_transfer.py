@@ -448,6 +448,32 @@ def test_time_methods_reports_cpu_and_wall_rates_on_one_thread(frames, index):
     np.testing.assert_array_equal(p, bench_probs(frames[0]))  # seeded
 
 
+def test_table1_is_the_cpu_rate_with_the_wall_rate_and_load_beside_it(frames, gt_map, monkeypatch, tmp_path):
+    """Table 1 (notebook 04) comes from the same timing as ``bench transfer``: ``fps`` is the
+    CPU-time rate of one core, the wall rate and the load stand beside it."""
+    import semmatch.experiments.speed as speed
+    import semmatch.transfer as transfer_pkg
+
+    class _Layout:  # one evaluation scene whose ground-truth upper map is gt_map
+        def __init__(self, root):
+            pass
+
+        def scene_dirs(self, split):
+            return [tmp_path / "apartment_7001"]
+
+        def upper_map(self, name, which):
+            return gt_map
+
+    monkeypatch.setattr(speed, "Layout", _Layout)
+    monkeypatch.setattr(speed, "_frames_at", lambda sd, n, w, h: frames[:n])
+    monkeypatch.setattr(transfer_pkg, "load_index", lambda m: MapIndex(m, **FAST))
+    df = speed.measure_speed(tmp_path, ["3d-projected-sp", "dbscan"], n_frames=2)
+    assert list(df["method"]) == ["3d-projected-sp", "dbscan"]
+    assert (df["fps"] == df["cpu_fps"]).all() and (df["ms_per_frame"] == 1000 / df["cpu_fps"]).all()
+    assert (df["wall_fps"] > 0).all() and (df["load_average"] >= 0).all() and (df["cpu_share"] > 0).all()
+    assert df.attrs["frames"] == 2 and df.attrs["reference_fps"] > 0 and df.attrs["cpus"] >= 1
+
+
 def test_fuse_labels_keeps_supported_transfer_and_fills_the_rest():
     from semmatch.transfer import fuse_labels
 
