@@ -21,7 +21,7 @@ message, no traceback from the CLI) when a task has killed ``distributed.schedul
 + 1 workers (it names the item), when the scheduler goes away, or when the cluster has had no
 worker for ``worker_timeout`` seconds (``SEMMATCH_WORKER_TIMEOUT``, default 300). On any failure,
 Ctrl-C included, the run's unfinished tasks are cancelled and the workers still executing one are
-ended (their nannies start new ones), so that nothing of the run keeps writing after the error is reported. Every task
+ended (their nannies start new ones; a local cluster is closed), so that nothing of the run keeps writing after the error is reported. Every task
 runs with the thread limits of :func:`semmatch.threads.configure` (``"worker"``).
 
 The per-frame pool inside one sequence (``transfer_sequence(..., jobs=N)``) stays a process pool
@@ -247,6 +247,24 @@ def _stop(client, futures: list) -> None:
                       "tasks already running may still finish and write their outputs", RuntimeWarning, stacklevel=3)
 
 
+def _end_local_workers(futures: list) -> None:
+    """After a failed run on the local cluster: kill its worker processes (children of this
+    process) when a task of the run may still be running, and close the cluster (the next run
+    starts a new one). Faster than :func:`_stop`, and it works when Ctrl-C reached the workers too."""
+    if all(f.done() for f in futures) or _LOCAL.get("pid") != os.getpid():
+        return
+    import signal
+
+    for nanny in list(getattr(_LOCAL.get("cluster"), "workers", {}).values()):
+        pid = getattr(nanny, "pid", None)
+        if pid:
+            try:
+                os.kill(pid, signal.SIGKILL)
+            except (ProcessLookupError, PermissionError):
+                pass
+    close_local_cluster()
+
+
 def _n_workers(client) -> int:
     """Workers the scheduler knows now (0 when the client has lost its scheduler)."""
     if client.status != "running":
@@ -380,7 +398,10 @@ def map_tasks(fn: Callable[..., Any], items: Iterable[Any], *, jobs: int | None 
         futures = client.map(partial(_call, fn), items, pure=False)
         return _gather(client, futures, items, where=where, desc=desc, progress=progress, timeout=wait_s)
     except BaseException:
-        _stop(client, futures)
+        if address:
+            _stop(client, futures)
+        else:
+            _end_local_workers(futures)
         raise
     finally:
         if address:

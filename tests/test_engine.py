@@ -90,6 +90,26 @@ def test_a_killed_worker_s_task_reruns_and_the_output_is_complete(serial, tmp_pa
     engine.close_local_cluster()
 
 
+def _sleep_write(args: tuple[str, int]) -> int:
+    """Item -1 fails at once; the others sleep 30 s, then write a file."""
+    folder, i = args
+    if i < 0:
+        raise RuntimeError("task -1 fails on purpose")
+    time.sleep(30)
+    (Path(folder) / f"{i}.txt").write_text(str(i))
+    return i
+
+
+def test_a_failed_local_run_ends_its_running_tasks_before_the_error(tmp_path):
+    pids = list(engine._local_client(2).run(os.getpid).values())
+    with pytest.raises(RuntimeError, match="fails on purpose"):
+        engine.map_tasks(_sleep_write, [(str(tmp_path), -1), (str(tmp_path), 1), (str(tmp_path), 2)], jobs=2,
+                         progress=False)
+    assert not engine._LOCAL  # the cluster was closed
+    assert not any(_alive(pid) for pid in pids)  # its workers, one of them inside a task, are gone
+    assert not list(tmp_path.iterdir())
+
+
 def test_local_workers_die_with_a_killed_parent(tmp_path):
     script = tmp_path / "parent.py"
     script.write_text(
