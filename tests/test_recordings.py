@@ -222,3 +222,19 @@ def test_cli_points_to_estimate_poses_and_prints_plain_warnings(tmp_path, capsys
     assert "semmatch reconstruct: warning: " in err and "ASSUMING the Microsoft 7-Scenes Kinect" in err
     assert "warnings.warn" not in err and "UserWarning" not in err  # no Python source lines
     assert "has no recorded poses; pass --estimate-poses" in err and "semmatch.odometry" not in err
+
+
+def test_cli_anchors_the_chain_where_the_ground_truth_starts(tmp_path, capsys):
+    import json
+
+    from semmatch.cli import main
+
+    write_7scenes(tmp_path / "k", 5)
+    for i in (0, 1):  # the motion capture starts at frame 2
+        (tmp_path / "k" / f"frame-{i:06d}.pose.txt").unlink()
+    assert main(["reconstruct", str(tmp_path / "k"), "--estimate-poses", "--out", str(tmp_path / "m.ply"),
+                 "--voxel-size", "0.1", "--quiet"]) == 0
+    out, err = capsys.readouterr()
+    assert "warning: " in err and "the ground truth starts at frame 2, not 0" in err
+    info = json.loads(out.strip().splitlines()[-1])
+    assert info["gt_first_frame"] == 2 and info["n_frames"] == 3

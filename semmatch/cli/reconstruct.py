@@ -186,7 +186,7 @@ def _run(args: argparse.Namespace) -> int:
 
         from semmatch.io import write_tum
         from semmatch.odometry import anchor_to_ground_truth, estimate_poses, ground_truth_poses, start_pose
-        from semmatch.trajectory_metrics import trajectory_errors
+        from semmatch.trajectory_metrics import rpe_pairs, trajectory_errors
 
         gt = ground_truth_poses(seq)  # for the start pose and the report only
         prior = seq.poses if args.prior and getattr(seq, "poses", None) is not None else None
@@ -195,8 +195,15 @@ def _run(args: argparse.Namespace) -> int:
         poses, first = anchor_to_ground_truth(poses, gt, name=str(args.seq))
         if args.poses_out:
             write_tum(args.poses_out, getattr(seq, "timestamps", range(len(poses))), poses)
-        if gt is not None and len(gt) == len(poses):
+        scorable = gt is not None and len(gt) == len(poses) and len(rpe_pairs(poses, gt)) and int(
+            np.isfinite(gt).all(axis=(1, 2)).sum()) >= 3
+        if scorable:
             info.update(trajectory_errors(poses, gt), gt_first_frame=first)
+        elif gt is not None:
+            import warnings
+
+            warnings.warn(f"{args.seq}: the ground truth has fewer than 3 frames or no two consecutive ones; "
+                          "no ATE/RPE is reported", UserWarning, stacklevel=2)
     _check_memory(seq, args, poses)
     vol = fuse(
         seq,
