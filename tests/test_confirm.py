@@ -84,10 +84,12 @@ def test_a_smoke_sized_confirm_run_writes_every_table(tmp_path):
     assert json.loads((figures / "confirm.json").read_text()) == rec
     assert rec["seeds"] == [9101] and rec["networks_from"] == "trained here"
     assert "09_adapt_robot_view" in rec["skipped"] and "09_adapt_robot_view" not in rec["wall_seconds"]
+    assert (figures / "verdicts.md").is_file()
     assert sorted(p.stem for p in reports.glob("*.ipynb")) == [n for n in pipeline.NOTEBOOKS if n not in confirm.SKIPPED]
     assert yaml.safe_load((data / "params.yaml").read_text())["profiles"]["smoke"]["common"]["eval_seeds"] == [9101]
     for table in ("table2_per_scene", "table2_synthetic", "table3_per_scene", "table3_real", "fig3_height_per_scene",
-                  "claims_synthetic", "claims_real", "claims_height", "table_panoptic_per_scene"):
+                  "claims_synthetic", "claims_real", "claims_height", "table_panoptic_per_scene", "verdicts",
+                  "claims_all"):
         assert (figures / f"{table}.csv").is_file(), table
     scenes = set(_scene_column(figures / "table2_per_scene.csv"))
     assert scenes and all(s.endswith("_9101") for s in scenes), scenes

@@ -8,8 +8,10 @@ other choice as the profile makes it on its validation scenes (the odometry gate
 the panoptic clustering radius of notebook 10). It writes
 
 * ``data/confirm/<name>/`` the data (and ``params.yaml``, the parameters it ran with),
-* ``figures/confirm/<name>/`` the tables, per-scene CSVs, claims and verdict tables, figures and
-  ``confirm.json`` (seeds, networks' SHA-256, code version, wall time per stage),
+* ``figures/confirm/<name>/`` the tables, per-scene CSVs, claims tables, figures, the analysis
+  plan's verdict per claim (``verdicts.csv`` / ``.md``,
+  :func:`semmatch.experiments.claims.judge_figures`) and ``confirm.json`` (seeds, networks'
+  SHA-256, code version, wall time per stage),
 * ``reports/confirm/<name>/`` the executed notebooks.
 
 Stage 09 (robot-view adaptation) is skipped: it fine-tunes networks, and no adapted networks are
@@ -168,7 +170,6 @@ def run_confirm(seeds: Sequence[int], *, name: str | None = None, base_profile: 
     NotebookFailed
         A notebook failed (naming it and the cell).
     """
-    seeds = [int(s) for s in seeds]
     data = yaml.safe_load(Path(params_file).read_text())
     seeds = check_confirm_seeds(seeds, data.get("profiles") or {}, where=str(params_file))
     name = name or confirm_name(seeds)
@@ -191,22 +192,27 @@ def run_confirm(seeds: Sequence[int], *, name: str | None = None, base_profile: 
               f"confirm the shipped networks)")
     for d in where.values():
         d.mkdir(parents=True, exist_ok=True)
-    say = print
-    say(f"[confirm] {name}: profile {base_profile}, seeds {seeds} x {len(data['profiles'][base_profile]['common']['kinds'])} "
+    print(f"[confirm] {name}: profile {base_profile}, seeds {seeds} x {len(data['profiles'][base_profile]['common']['kinds'])} "
         f"kinds; networks: " + (f"trained here ({', '.join(missing)})" if missing else f"shipped ({shipped_dir}/)"),
         file=sys.stderr)
     t0, walls = time.perf_counter(), {}
     started = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
     for nb in NOTEBOOKS:
         if nb in SKIPPED:
-            say(f"[confirm] {nb}: {SKIPPED[nb]}", file=sys.stderr)
+            print(f"[confirm] {nb}: {SKIPPED[nb]}", file=sys.stderr)
             continue
         t = time.perf_counter()
         run_notebook(nb, base_profile, params_file=params, reports_dir=dirs["reports_dir"], cwd=ROOT,
                      data_root=dirs["data_root"], figures_dir=dirs["figures_dir"], log_output=log_output,
                      scheduler=scheduler)
         walls[nb] = round(time.perf_counter() - t, 1)
+    # every claim of the analysis plan judged on this run's per-scene tables (verdicts.csv/.md)
     from ..segment.shipping import file_sha256
+    from .claims import judge_figures
+
+    t = time.perf_counter()
+    judge_figures(where["figures_dir"])
+    walls["verdicts"] = round(time.perf_counter() - t, 1)
 
     models = data_root / "models"
     record = {
@@ -218,7 +224,7 @@ def run_confirm(seeds: Sequence[int], *, name: str | None = None, base_profile: 
         "wall_seconds": walls, "total_seconds": round(time.perf_counter() - t0, 1),
     }
     atomic_write_text(where["figures_dir"] / "confirm.json", json.dumps(record, indent=2) + "\n")
-    say(f"[confirm] {name}: done in {record['total_seconds'] / 60:.1f} min -> {dirs['figures_dir']}", file=sys.stderr)
+    print(f"[confirm] {name}: done in {record['total_seconds'] / 60:.1f} min -> {dirs['figures_dir']}", file=sys.stderr)
     return record
 
 
