@@ -16,7 +16,8 @@ def register(sub) -> None:
         description="Render consecutive frames of a procedural scene (not timed), then time their "
         "integration (depth, colour and label evidence) into the semantic TSDF. fps is wall-clock; "
         "cpu_fps counts CPU seconds of this process (closer to an idle machine when others load "
-        "the CPU; with --threads 1 both measure one core).",
+        "the CPU; on one thread, semmatch's default, both measure one core). --thread-rows compares "
+        "thread settings, each in a fresh process.",
     )
     p.add_argument("--frames", type=int, default=60, help="timed frames (default 60)")
     p.add_argument("--voxel-size", type=float, default=0.04, help="voxel edge, metres (default 0.04)")
