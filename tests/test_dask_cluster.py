@@ -54,7 +54,9 @@ def _processes(tmp_path_factory):
     sched_file = tmp_path_factory.mktemp("dask") / "scheduler.json"
     # the scheduler and the workers import this module (its task functions) as pytest does
     path = os.pathsep.join(p for p in (str(Path(__file__).parent), os.environ.get("PYTHONPATH")) if p)
-    env = {**os.environ, "PYTHONUNBUFFERED": "1", "PYTHONPATH": path}
+    # a task is given up after its second worker died under it (Dask's default: the fourth)
+    env = {**os.environ, "PYTHONUNBUFFERED": "1", "PYTHONPATH": path,
+           "DASK_DISTRIBUTED__SCHEDULER__ALLOWED_FAILURES": "1"}
     env.pop(engine.SCHEDULER_ENV, None)
     popen = dict(env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
     procs: dict[str, subprocess.Popen] = {}
@@ -117,6 +119,13 @@ def _write(args: tuple[str, int, float]) -> int:
     return i * i
 
 
+def _crash_on_3(i: int) -> int:
+    """Task 3 ends its worker process, as the out-of-memory killer would; the others return i."""
+    if i == 3:
+        os._exit(1)
+    return i
+
+
 def _digests(root: Path) -> dict[str, str]:
     return {p.relative_to(root).as_posix(): hashlib.sha256(p.read_bytes()).hexdigest()
             for p in sorted(root.rglob("*")) if p.is_file()}
@@ -173,6 +182,11 @@ def test_a_failed_run_stops_its_running_tasks_before_the_error_is_reported(clust
         engine.map_tasks(_write, items, scheduler=cluster["address"], progress=False)
     time.sleep(4.0)  # longer than a running task would need to write
     assert not list(out.iterdir()), "a task of the failed run wrote after the error"
+
+
+def test_a_task_that_kills_its_workers_is_a_clear_error_naming_it(cluster):
+    with pytest.raises(engine.ClusterError, match=r"task 3 \(3\) was running on every worker that died under it"):
+        engine.map_tasks(_crash_on_3, range(5), scheduler=cluster["address"], progress=False)
 
 
 def test_a_run_whose_workers_all_vanish_fails_after_its_timeout(cluster, tmp_path):
