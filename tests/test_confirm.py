@@ -67,6 +67,24 @@ def test_a_profile_without_shipped_networks_needs_allow_training(tmp_path):
     assert not (tmp_path / "figures").exists()
 
 
+def test_notebook_02_declares_the_train_switch_and_the_shipped_folder(monkeypatch):
+    import papermill as pm
+
+    # a parameter papermill cannot parse is silently not declared, and --train would never reach it
+    declared = pm.inspect_notebook(str(ROOT / "notebooks" / "02_train_segmentation.ipynb"))
+    assert {"retrain", "shipped_models"} <= set(declared)
+    assert pipeline.notebook_parameters("02_train_segmentation", "full")["shipped_models"] == "models/full"
+    seen = {}
+    monkeypatch.setattr(pipeline, "run_notebook", lambda nb, profile, **kw: seen.update(kw))
+    monkeypatch.setenv(pipeline.TRAIN_ENV, "1")  # make repro TRAIN=1
+    assert pipeline.main(["run", "02_train_segmentation", "--quiet"]) == 0
+    assert seen["retrain"] is True
+    monkeypatch.delenv(pipeline.TRAIN_ENV)
+    seen.clear()
+    assert pipeline.main(["run", "02_train_segmentation", "--quiet"]) == 0
+    assert "retrain" not in seen
+
+
 @pytest.mark.notebooks
 @pytest.mark.slow
 def test_a_smoke_sized_confirm_run_writes_every_table(tmp_path):

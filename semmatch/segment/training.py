@@ -668,8 +668,10 @@ def _config_record(config: TrainConfig) -> dict:
     return _plain(asdict(replace(config, progress=False)))
 
 
-#: config fields that do not change the trained weights (ignored when matching checkpoints)
-_NOT_IDENTITY = ("out", "progress", "threads", "cache_dir", "device")
+#: config fields that do not change the trained weights (ignored when matching checkpoints);
+#: ``eval_seeds`` is only checked for disjointness, so a network serves any evaluation scenes
+#: (a confirmatory run's too) that its training and validation scenes leave apart
+_NOT_IDENTITY = ("out", "progress", "threads", "cache_dir", "device", "eval_seeds")
 
 
 def config_differences(stored: dict, wanted: dict) -> list[str]:
