@@ -323,13 +323,17 @@ def test_stages_depend_on_what_they_use_and_not_on_the_rest():
 
 def test_editing_viz_or_execution_settings_reruns_no_stage():
     """DVC reruns a stage when a dependency or a tracked param changes: viz.py (views shown in the
-    reports only) and jobs/scheduler (how, not what) are neither for any stage; the figure code
+    reports only), the README and snapshot writers, the confirm/ship subcommands and jobs/scheduler
+    (how, not what) are neither for any stage; the stage command's entry point is; the figure code
     is a dependency exactly of the stages that write figure files."""
     import yaml
 
+    untracked = ("semmatch/viz", "semmatch/experiments/readme.py", "semmatch/experiments/snapshot.py",
+                 "semmatch/experiments/confirm.py")
     stages = yaml.safe_load((pipeline.ROOT / "dvc.yaml").read_text())["stages"]
     for name, st in stages.items():
-        assert not [d for d in st["deps"] if d.startswith("semmatch/viz")], name
+        assert not [d for d in st["deps"] if d.startswith(untracked)], name
+        assert "semmatch/experiments/__main__.py" in st["deps"], name  # `python -m semmatch.experiments run`
         assert not [p for p in st["params"] if p.split(".")[-1] in ("jobs", "scheduler")], name
         draws = any(str(next(iter(o)) if isinstance(o, dict) else o).endswith(".png") for o in st["outs"])
         assert ("semmatch/plots/charts.py" in st["deps"]) == draws, name

@@ -3,16 +3,19 @@
 DVC reruns a stage when one of its dependencies changes, so a stage must depend on every module
 it runs and, to be useful, on no other. :func:`stage_modules` finds them statically: the
 ``import`` statements of the notebook's code cells and of the stage command's module
-(:mod:`semmatch.experiments.pipeline`), followed transitively through the package, counting
+(``python -m semmatch.experiments``: :mod:`semmatch.experiments.__main__`), followed transitively through the package, counting
 imports anywhere in a module (also those inside functions, which run only when called), the
 parent packages of every module, and the lazily exported names of a package (an ``_EXPORTS``
 table of ``name -> submodule``, as :mod:`semmatch.segment` has).
 
-Presentation-only modules are left out (``leave_out``, default :data:`DISPLAY_ONLY`): the
-interactive 3D views of :mod:`semmatch.viz` appear only in the executed report, never in a
-tracked table, figure or data file, so editing them must rerun no computing stage. The
-pipeline's generator (``scripts/dvc_stages.py``) also leaves out :mod:`semmatch.plots` for a
-stage that draws no figure file.
+Modules that no stage computes with are left out (``leave_out``, default :data:`LEAVE_OUT`),
+and imports are not followed into them: the presentation-only :data:`DISPLAY_ONLY` (the
+interactive 3D views of :mod:`semmatch.viz` appear only in the executed report; the README's
+results section and the report snapshots are written from finished tables by their own
+commands) and :data:`OTHER_COMMANDS` (the stage command's other subcommands, ``confirm`` and
+``ship``, which only register their arguments when a stage runs). Editing them reruns no
+stage. The pipeline's generator (``scripts/dvc_stages.py``) also leaves out
+:mod:`semmatch.plots` for a stage that draws no figure file.
 
 :func:`record_loaded_modules` is the runtime check: under the pipeline with
 ``SEMMATCH_RECORD_MODULES=<folder>`` set, every notebook writes the semmatch modules it
@@ -29,7 +32,8 @@ import os
 import sys
 from pathlib import Path
 
-__all__ = ["stage_modules", "record_loaded_modules", "RECORD_ENV", "DISPLAY_ONLY"]
+__all__ = ["stage_modules", "record_loaded_modules", "RECORD_ENV", "DISPLAY_ONLY", "OTHER_COMMANDS", "LEAVE_OUT",
+           "RUNNER"]
 
 #: environment variable naming the folder where notebooks record the modules they loaded
 RECORD_ENV = "SEMMATCH_RECORD_MODULES"
@@ -37,9 +41,16 @@ RECORD_ENV = "SEMMATCH_RECORD_MODULES"
 _ROOT = Path(__file__).resolve().parents[2]
 _PACKAGE = "semmatch"
 
-#: modules (with their submodules) whose output is only shown, never written to a tracked file:
-#: no stage depends on them, nor on what only they import
-DISPLAY_ONLY = ("semmatch.viz",)
+#: presentation-only modules (with their submodules): what they draw or write is only shown or
+#: read by people, never by a stage (3D views in the reports; the README's results section and
+#: the report snapshots, written from finished tables by their own commands)
+DISPLAY_ONLY = ("semmatch.viz", "semmatch.experiments.readme", "semmatch.experiments.snapshot")
+#: the stage command's other subcommands (confirmatory runs, shipping networks)
+OTHER_COMMANDS = ("semmatch.experiments.confirm",)
+#: what no stage depends on, nor on what only these import
+LEAVE_OUT = DISPLAY_ONLY + OTHER_COMMANDS
+#: the module the stage command runs (``python -m semmatch.experiments run NN_name``)
+RUNNER = "semmatch.experiments.__main__"
 
 
 def _under(name: str, packages: tuple[str, ...]) -> bool:
@@ -121,8 +132,7 @@ def _notebook_code(path: Path) -> str:
 
 
 def stage_modules(notebook: str | os.PathLike, *, root: str | os.PathLike = _ROOT,
-                  runner: str = "semmatch.experiments.pipeline",
-                  leave_out: tuple[str, ...] = DISPLAY_ONLY) -> list[str]:
+                  runner: str = RUNNER, leave_out: tuple[str, ...] = LEAVE_OUT) -> list[str]:
     """Source files of every semmatch module a pipeline stage can run.
 
     Parameters
@@ -134,8 +144,8 @@ def stage_modules(notebook: str | os.PathLike, *, root: str | os.PathLike = _ROO
     runner : str
         Module of the stage command, included with its imports.
     leave_out : tuple of str
-        Presentation-only modules (and their submodules) the stage must not depend on; imports
-        are not followed into them.
+        Modules (and their submodules) the stage must not depend on; imports are not followed
+        into them.
 
     Returns
     -------
@@ -176,7 +186,7 @@ def record_loaded_modules(notebook: str, folder: str | os.PathLike | None = None
 
     Notes
     -----
-    The modules of :data:`DISPLAY_ONLY` are not recorded: stages leave them out by design.
+    The modules of :data:`LEAVE_OUT` are not recorded: stages leave them out by design.
 
     Returns
     -------
@@ -193,7 +203,7 @@ def record_loaded_modules(notebook: str, folder: str | os.PathLike | None = None
         for m in list(sys.modules.values()):
             f = getattr(m, "__file__", None)
             name = getattr(m, "__name__", "")
-            if f and _under(name, (_PACKAGE,)) and not _under(name, DISPLAY_ONLY):
+            if f and _under(name, (_PACKAGE,)) and not _under(name, LEAVE_OUT):
                 p = Path(f).resolve()
                 files.add(p.relative_to(_ROOT).as_posix() if p.is_relative_to(_ROOT) else str(p))
         out.parent.mkdir(parents=True, exist_ok=True)
