@@ -15,7 +15,7 @@ Open3D answers every radius query from a KD-tree and expands clusters through ha
 the neighbours come from a uniform grid of cells of side ``eps`` (a neighbour lies in one of
 the 27 cells around a point's cell, found in a dense table of the occupied cells, or by binary
 search when the cloud's box holds too many cells) and clusters from a union-find over the core
-points, in a numba kernel on one thread. ``tests/test_dbscan.py`` compares both on random clouds
+points, in a numba kernel on one thread. ``tests/test_kernels.py`` compares both on random clouds
 (including points on a lattice, duplicates and every ``min_points`` from 1) and on the
 clouds of the ``dbscan`` transfer method.
 """

@@ -3,7 +3,7 @@
 One compiled pass (numba) gives every point's voxel, the voxels' centroids and, for
 ``3d-slic``, their mean colours. The arithmetic and the summation order are those of the NumPy
 formulation it replaced (float32 keys, float64 sums in point order), so the results are
-bit-identical to it (``tests/test_transfer_voxels.py`` keeps that NumPy formulation as the
+bit-identical to it (``tests/test_kernels.py`` keeps that NumPy formulation as the
 reference).
 """
 
