@@ -78,6 +78,10 @@ def _set_loaded(n: int) -> dict:
         numba = sys.modules["numba"]
         previous["numba"] = numba.get_num_threads()
         numba.set_num_threads(min(n, numba.config.NUMBA_NUM_THREADS))
+    if "cv2" in sys.modules:  # OpenCV keeps its own pool (SLIC, blurs): the variables do not reach it
+        cv2 = sys.modules["cv2"]
+        previous["cv2"] = cv2.getNumThreads()
+        cv2.setNumThreads(n)
     try:
         from threadpoolctl import threadpool_limits
     except ImportError:  # pragma: no cover  (a dependency of scikit-learn; the libraries keep their own)
@@ -90,7 +94,7 @@ def configure(kind: str = "cli", n: int | None = None) -> int:
     """Set this process's threads for ``kind`` of work.
 
     Sets the thread variables (:data:`ENV_VARS`) for libraries loaded later and for child
-    processes, and limits torch, Open3D, numba and the OpenMP / BLAS runtimes already loaded.
+    processes, and limits torch, Open3D, numba, OpenCV and the OpenMP / BLAS runtimes already loaded.
     A later call with the same number only limits the libraries loaded since (torch and the BLAS
     read the variables when they load; Open3D does not, so a Dask task calls this again).
 
@@ -144,7 +148,7 @@ def current() -> dict:
 
 @contextmanager
 def limit_threads(n: int | None = None) -> Iterator[int]:
-    """Run the block with torch, Open3D, numba and the loaded OpenMP / BLAS runtimes on ``n`` threads.
+    """Run the block with torch, Open3D, numba, OpenCV and the loaded OpenMP / BLAS runtimes on ``n`` threads.
 
     For library users: ``with limit_threads(): reconstruct(frames, labels, 0.04)`` runs the
     fusion as the ``semmatch`` verbs do. The previous limits are restored on exit.
@@ -174,3 +178,5 @@ def limit_threads(n: int | None = None) -> Iterator[int]:
             sys.modules["open3d"].utility.set_max_threads(previous["open3d"])
         if "numba" in previous:
             sys.modules["numba"].set_num_threads(previous["numba"])
+        if "cv2" in previous:
+            sys.modules["cv2"].setNumThreads(previous["cv2"])

@@ -102,3 +102,18 @@ def test_thread_rows_rerun_the_same_benchmark_options():
     assert again.thread_rows is False  # the rows themselves run without it
     seg = parser.parse_args(["bench", "segment", "--no-flip", "--model", "a.pt", "b.pt", "--threads", "2"])
     assert _argv_of(seg) == ["--model", "a.pt", "b.pt", "--no-flip"]
+
+
+def test_opencv_pool_is_limited_and_restored():
+    import cv2
+
+    from semmatch.threads import limit_threads
+
+    before = cv2.getNumThreads()
+    cv2.setNumThreads(2)
+    try:
+        with limit_threads(1):
+            assert cv2.getNumThreads() == 1
+        assert cv2.getNumThreads() == 2
+    finally:
+        cv2.setNumThreads(before)
