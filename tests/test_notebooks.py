@@ -57,14 +57,20 @@ def test_smoke_run_writes_every_table_and_figure(smoke_run):
                  "fig3_height.png", "table3_real.md", "findings_real.md", "trajectory_error.csv",
                  "fig4_qualitative.png", "routes.png", "misregistration.png", "validation_flip.csv",
                  "validation_odometry_gate.csv", "findings_height.md", "adapt_label_quality.md",
-                 "validation_adapt_recipe.md", "adapt_gap.md", "table2_adapted.md"):
+                 "validation_adapt_recipe.md", "adapt_gap.md", "table2_adapted.md",
+                 # the analysis plan's verdict tables, speed claims and the depth-noise study
+                 "verdicts_synthetic.csv", "verdicts_height.csv", "verdicts_real.csv", "claims_speed.csv",
+                 "depth_noise.csv", "depth_noise.png", "claims_depth_noise.csv"):
         assert (fig / name).is_file(), name
     # the protocol's per-scene numbers, beside every table
     for name in ("table2_per_scene.csv", "fig3_height_per_scene.csv", "table3_per_scene.csv", "support_per_scene.csv"):
         per_scene = pd.read_csv(fig / name)
         assert len(per_scene) and "scene" in per_scene.columns, name
     assert set(pd.read_csv(fig / "table2_per_scene.csv")["reference"]) == {"fusion", "mesh"}
-    assert {"claim", "verdict"} <= set(pd.read_csv(fig / "claims_synthetic.csv").columns)
+    claims = pd.read_csv(fig / "claims_synthetic.csv")
+    assert {"claim", "verdict", "reference", "p_holds", "paper_diff"} <= set(claims.columns)
+    assert set(claims["reference"]) == {"fusion", "mesh"}  # every verdict under both references
+    assert "upper" in set(pd.read_csv(fig / "table3_per_scene.csv")["method"])  # C16's rows
     t2 = pd.read_csv(fig / "table2_synthetic.csv")
     methods = pipeline.notebook_parameters("05_evaluate_synthetic", "smoke")["methods"]
     assert set(methods) <= set(t2["method"])
