@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 import torch
@@ -359,78 +361,87 @@ def test_pipeline_configs_name_seed_and_steps_per_network(tmp_path):
     assert pipeline_configs(["compact"], steps=None, **common)["compact"].steps == 100  # the smoke profile's
 
 
-def _ship_tiny(views, tmp_path):
-    """A 4-step network trained from the tiny views and shipped to tmp_path/models/x with its recipe."""
+
+@pytest.fixture(scope="module")
+def shipped_tiny(views, tmp_path_factory):
+    """A 2-step network trained from the tiny views and shipped (ship_networks) with its recipe."""
     import json
 
     from semmatch.segment.shipping import ship_networks
 
+    tmp = tmp_path_factory.mktemp("ship")
     tr, va = views
     small = (tr.subset(np.arange(8)), va.subset(np.arange(2)))
-    trained = train(_config(tmp_path, out=str(tmp_path / "trained" / "compact.pt"), steps=4, eval_every=4), views=small)
-    recipe = tmp_path / "trained" / "recipe.json"
+    trained = train(_config(tmp, out=str(tmp / "trained" / "compact.pt"), steps=2, eval_every=2), views=small)
+    recipe = tmp / "trained" / "recipe.json"
     recipe.write_text(json.dumps({"flip": {"compact": True, "other": False}}))
-    ship_networks({"compact": trained}, tmp_path / "models" / "x", recipe=recipe, code_version="abc123")
-    return small, tmp_path / "models" / "x"
+    ship_networks({"compact": trained}, tmp / "models" / "x", recipe=recipe, code_version="abc123")
+    return small, tmp / "models" / "x"
 
 
-def test_a_shipped_network_of_the_same_config_is_used_without_training(views, tmp_path, monkeypatch):
+def _copy_shipped(shipped_tiny, tmp_path):
+    import shutil
+
+    small, shipped = shipped_tiny
+    return small, Path(shutil.copytree(shipped, tmp_path / "shipped"))
+
+
+def test_a_shipped_network_of_the_same_config_is_used_without_training(shipped_tiny, tmp_path, monkeypatch):
     import json
 
     from semmatch.segment import shipping, training
     from semmatch.segment.training import views_digest
 
-    small, shipped = _ship_tiny(views, tmp_path)
+    small, shipped = _copy_shipped(shipped_tiny, tmp_path)
     manifest = json.loads((shipped / "compact.json").read_text())
     assert manifest["checkpoint_sha256"] == shipping.file_sha256(shipped / "compact.pt")
     assert manifest["training_data"]["views_sha256"] == views_digest(*small)
-    assert manifest["train_config"]["steps"] == 4 and manifest["code_version"] == "abc123"
+    assert manifest["train_config"]["steps"] == 2 and manifest["code_version"] == "abc123"
     assert manifest["trained_on"]["device"] == "cpu" and manifest["trained_on"]["cpu_count"] >= 1
-    assert manifest["train_seconds"] > 0 and manifest["validation"]["best_step"] == 4
+    assert manifest["train_seconds"] > 0 and manifest["validation"]["best_step"] == 2
     assert json.loads((shipped / "recipe.json").read_text())["flip"] == {"compact": True}  # only shipped networks
 
-    def no_training(*a, **k):
-        raise AssertionError("trained although a shipped network matches")
-
-    monkeypatch.setattr(training, "train", no_training)
+    trained = []
+    monkeypatch.setattr(training, "train", lambda config, views=None: trained.append(config) or Path(config.out))
     # other evaluation scenes (a confirmatory run's) do not change the weights: still the shipped network
-    cfg = _config(tmp_path, out=str(tmp_path / "data" / "models" / "compact.pt"), steps=4, eval_every=4,
+    cfg = _config(tmp_path, out=str(tmp_path / "data" / "models" / "compact.pt"), steps=2, eval_every=2,
                   eval_seeds=(9101,))
     ckpts, from_shipped = shipping.provide_networks({"compact": cfg}, shipped_dir=shipped, views={0: small},
                                                     log=lambda s: None)
-    assert from_shipped == ["compact"]
+    assert from_shipped == ["compact"] and not trained
     assert (tmp_path / "data" / "models" / "compact.pt").read_bytes() == (shipped / "compact.pt").read_bytes()
     load_model(ckpts["compact"])  # weights_only loading of the installed copy
     assert shipping.apply_shipped_recipe(tmp_path / "data", shipped, ["compact"]) == {"compact": True}
     assert json.loads((tmp_path / "data" / "models" / "recipe.json").read_text())["flip"] == {"compact": True}
+    # retrain (make repro TRAIN=1) trains even a network whose shipped copy matches
+    lines = []
+    _, from_shipped = shipping.provide_networks({"compact": cfg}, shipped_dir=shipped, retrain=True,
+                                                views={0: small}, log=lines.append)
+    assert from_shipped == [] and trained == [cfg] and "retraining" in lines[-1]
 
 
-def test_a_network_whose_config_differs_from_the_shipped_one_is_trained(views, tmp_path):
+def test_a_network_whose_config_differs_from_the_shipped_one_is_trained(shipped_tiny, tmp_path):
     import json
 
     from semmatch.segment import shipping
 
-    small, shipped = _ship_tiny(views, tmp_path)
-    cfg = _config(tmp_path, out=str(tmp_path / "data" / "models" / "compact.pt"), steps=5, eval_every=5)
+    small, shipped = _copy_shipped(shipped_tiny, tmp_path)
+    cfg = _config(tmp_path, out=str(tmp_path / "data" / "models" / "compact.pt"), steps=1, eval_every=1)
     path, why = shipping.shipped_checkpoint(cfg, shipped)
-    assert path is None and "steps: 4 -> 5" in why
+    assert path is None and "steps: 2 -> 1" in why
     lines = []
     ckpts, from_shipped = shipping.provide_networks({"compact": cfg}, shipped_dir=shipped, views={0: small},
                                                     log=lines.append)
-    assert from_shipped == [] and "steps: 4 -> 5" in lines[0]
-    assert load_model(ckpts["compact"]).info["train_config"]["steps"] == 5
-    # retrain (make repro TRAIN=1) trains even a network whose shipped copy matches
-    same = _config(tmp_path, out=str(tmp_path / "again" / "compact.pt"), steps=4, eval_every=4)
-    _, from_shipped = shipping.provide_networks({"compact": same}, shipped_dir=shipped, retrain=True,
-                                                views={0: small}, log=lines.append)
-    assert from_shipped == [] and "retraining" in lines[-1]
+    assert from_shipped == [] and "steps: 2 -> 1" in lines[0]
+    assert load_model(ckpts["compact"]).info["train_config"]["steps"] == 1
     # a shipped file that is not the one its manifest describes (a Git LFS pointer, a truncated copy) is refused
+    same = _config(tmp_path, out=str(tmp_path / "again" / "compact.pt"), steps=2, eval_every=2)
     (shipped / "compact.pt").write_bytes((shipped / "compact.pt").read_bytes()[:-10])
     with pytest.raises(ValueError, match="SHA-256 differs"):
         shipping.shipped_checkpoint(same, shipped)
     (shipped / "compact.json").unlink()
     with pytest.raises(ValueError, match="without its manifest"):
         shipping.shipped_checkpoint(same, shipped)
+    (shipped / "recipe.json").write_text(json.dumps({"flip": {}}))
     with pytest.raises(ValueError, match="no flip choice for compact"):
-        (shipped / "recipe.json").write_text(json.dumps({"flip": {}}))
         shipping.apply_shipped_recipe(tmp_path / "data", shipped, ["compact"])
