@@ -255,6 +255,9 @@ def add_ship_parser(sub) -> None:
     s.add_argument("--models", required=True, help="folder of the trained checkpoints (data/<profile>/models)")
     s.add_argument("--to", required=True, help="the shipped folder, e.g. models/full")
     s.add_argument("--networks", nargs="+", default=["compact", "strong"])
+    s.add_argument("--code-version", help="the commit the networks were trained with (default: git describe of "
+                                          "this checkout, right when shipping right after training)")
+    s.add_argument("--note", help="free text recorded in each manifest (e.g. how busy the machine was)")
     s.set_defaults(handler=_ship_main)
 
 
@@ -266,6 +269,6 @@ def _ship_main(args) -> int:
     if missing:
         raise FileNotFoundError(f"{src}: no checkpoint for {', '.join(missing)}")
     for p in ship_networks({n: src / f"{n}.pt" for n in args.networks}, args.to, recipe=src / "recipe.json",
-                           code_version=code_version()):
+                           code_version=args.code_version or code_version(), note=args.note):
         print(p)
     return 0

@@ -97,7 +97,8 @@ def network_manifest(checkpoint: str | os.PathLike, *, code_version: str | None 
 
 
 def ship_networks(checkpoints: Mapping[str, str | os.PathLike], dest: str | os.PathLike, *,
-                  recipe: str | os.PathLike | None = None, code_version: str | None = None) -> list[Path]:
+                  recipe: str | os.PathLike | None = None, code_version: str | None = None,
+                  note: str | None = None) -> list[Path]:
     """Copy trained checkpoints into a shipped folder with a manifest each and the flip recipe.
 
     Parameters
@@ -111,6 +112,9 @@ def ship_networks(checkpoints: Mapping[str, str | os.PathLike], dest: str | os.P
         copied (other networks' entries are dropped).
     code_version : str, optional
         Recorded in each manifest.
+    note : str, optional
+        Recorded in each manifest as ``note`` (how the training run went, e.g. how busy the
+        machine was and why its thread count was chosen).
 
     Returns
     -------
@@ -139,6 +143,8 @@ def ship_networks(checkpoints: Mapping[str, str | os.PathLike], dest: str | os.P
         with atomic_path(out) as tmp:
             shutil.copyfile(src, tmp)
         manifest["checkpoint"] = out.name
+        if note:
+            manifest["note"] = note
         atomic_write_text(dest / f"{name}.json", json.dumps(manifest, indent=2) + "\n")
         written += [out, dest / f"{name}.json"]
     if recipe is not None:
