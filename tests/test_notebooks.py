@@ -71,11 +71,16 @@ def test_smoke_run_writes_every_table_and_figure(smoke_run):
     assert {"claim", "verdict", "reference", "p_holds", "paper_diff"} <= set(claims.columns)
     assert set(claims["reference"]) == {"fusion", "mesh"}  # every verdict under both references
     assert "upper" in set(pd.read_csv(fig / "table3_per_scene.csv")["method"])  # C16's rows
+    # the smoke scene shows transfer working: the person's map supports most robot pixels, and the
+    # transfer rows are not zero
+    support = pd.read_csv(fig / "support_per_scene.csv")
+    assert support.loc[support["route"] == "own", "support"].mean() > 0.5, support
     t2 = pd.read_csv(fig / "table2_synthetic.csv")
     methods = pipeline.notebook_parameters("05_evaluate_synthetic", "smoke")["methods"]
     assert set(methods) <= set(t2["method"])
     assert {"upper", "lower"} <= set(t2["method"])
     assert t2[["jaccard", "sorensen", "color_acc", "mean_acc"]].apply(lambda c: c.between(0, 1)).all().all()
+    assert (t2.loc[t2["method"].isin(methods), "mean_acc"] > 0.3).all(), t2
     assert "paper_mean_acc" in t2.columns
 
 
