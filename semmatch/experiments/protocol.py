@@ -2,9 +2,10 @@
 
 A profile of ``params.yaml`` names its scene splits in ``common``: ``train_seeds`` (the networks
 learn from them), ``val_seeds`` (every recipe choice is made on them: checkpoint selection,
-test-time flip, odometry gate), ``eval_seeds`` (never looked at while developing; every table
-is computed on them) and ``dev_seeds`` (scenes that were looked at during development, recorded
-so that they can never become evaluation scenes). ``min_val_per_kind`` asks for validation
+test-time flip, odometry gate), ``eval_seeds`` (every table is computed on them; in the full
+profile they are the development scenes 7001-7003, looked at in earlier runs, and confirmatory
+scenes come from ``make confirm``) and ``dev_seeds`` (scenes that were looked at during an
+earlier round, recorded so that they can never become evaluation scenes). ``min_val_per_kind`` asks for validation
 scenes of every kind.
 """
 
