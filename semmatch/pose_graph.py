@@ -62,6 +62,60 @@ class CompressedDepths(Sequence):
         return sum(len(b) for b in self._png)
 
 
+def _open3d_optimise(poses: np.ndarray, edges: list) -> np.ndarray:
+    """Open3D's Levenberg-Marquardt with line process on nodes ``poses`` and ``edges``
+    ``(source, target, T_target_source, information, uncertain)``; node 0 is the reference."""
+    import open3d as o3d
+
+    reg = o3d.pipelines.registration
+    graph = reg.PoseGraph()
+    for p in poses:
+        graph.nodes.append(reg.PoseGraphNode(p))
+    for i, j, T, info, uncertain in edges:
+        graph.edges.append(reg.PoseGraphEdge(i, j, T, info, uncertain=uncertain))
+    option = reg.GlobalOptimizationOption(max_correspondence_distance=0.03, edge_prune_threshold=0.25,
+                                          preference_loop_closure=1.0, reference_node=0)
+    level = o3d.utility.get_verbosity_level()
+    o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Error)
+    try:
+        reg.global_optimization(graph, reg.GlobalOptimizationLevenbergMarquardt(),
+                                reg.GlobalOptimizationConvergenceCriteria(), option)
+    finally:
+        o3d.utility.set_verbosity_level(level)
+    out = np.stack([np.asarray(node.pose) for node in graph.nodes])
+    return poses[0] @ np.linalg.inv(out[0]) @ out  # node 0 stays where it was
+
+
+def _optimise(poses: np.ndarray, edges: list, max_nodes: int | None) -> np.ndarray:
+    """Optimise a pose graph; above ``max_nodes`` nodes in fragments, as Open3D's reconstruction system.
+
+    Open3D's optimiser solves dense normal equations (6N x 6N): +1.1 GB at 1000 nodes, growing
+    with the square of N. Above ``max_nodes`` the frames are cut into fragments of ``max_nodes``
+    consecutive frames; each fragment's own edges are optimised with its first frame fixed, then
+    one node per fragment is optimised with the edges that join fragments (each expressed as a
+    motion between the two fragments' first frames), and every frame keeps its place in its
+    fragment.
+    """
+    n = len(poses)
+    if max_nodes is None or n <= max_nodes:
+        return _open3d_optimise(poses, edges)
+    size = max(2, int(max_nodes))
+    frag = np.arange(n) // size
+    starts = np.arange(0, n, size)
+    local = poses.copy()  # optimised within fragments
+    for k, s0 in enumerate(starts):
+        idx = np.arange(s0, min(s0 + size, n))
+        inner = [(i - s0, j - s0, T, info, u) for i, j, T, info, u in edges if frag[i] == k and frag[j] == k]
+        if len(idx) > 1 and inner:
+            local[idx] = _open3d_optimise(poses[idx], inner)
+    anchors = poses[starts]
+    Q = np.linalg.inv(anchors[frag]) @ local  # each frame relative to its fragment's first frame
+    cross = [(frag[i], frag[j], Q[j] @ T @ np.linalg.inv(Q[i]), info, u) for i, j, T, info, u in edges
+             if frag[i] != frag[j]]
+    A = _open3d_optimise(anchors, cross) if len(starts) > 1 and cross else anchors
+    return A[frag] @ Q
+
+
 class _LRU:
     """The ``size`` most recently used values of ``make(key)``."""
 
@@ -108,6 +162,7 @@ def refine_pose_graph(
     depth_max: float = 5.0,
     device: str | None = None,
     cache: int = 8,
+    max_nodes: int | None = 500,
     progress: bool = False,
     name: str = "sequence",
 ) -> np.ndarray:
@@ -152,6 +207,9 @@ def refine_pose_graph(
         Open3D device of the registrations.
     cache : int
         Depth pyramids kept (least recently used dropped); the result does not depend on it.
+    max_nodes : int or None
+        Longer recordings are optimised in fragments of this many frames (Open3D's optimiser
+        needs memory growing with the square of the frames: 1.1 GB at 1000); None: never.
     progress : bool
         Show a tqdm bar.
     name : str
@@ -174,7 +232,6 @@ def refine_pose_graph(
     from .geometry import backproject
     from .progress import tqdm
 
-    reg = o3d.pipelines.registration
     poses = np.asarray(poses, dtype=np.float64)
     n = len(poses)
     if len(depths) != n or n < 2:
@@ -218,9 +275,7 @@ def refine_pose_graph(
         return T, info.cpu().numpy().astype(np.float64)
 
     with open3d_threads(1):  # repeatable sums (semmatch.rgbd_odometry)
-        graph = reg.PoseGraph()
-        for p in poses:
-            graph.nodes.append(reg.PoseGraphNode(p))
+        edges: list = []
         kept[0] = _checked(depths[0], 0)
         for i in tqdm(range(1, n), desc="pose graph", disable=not progress, leave=False):
             kept[i] = _checked(depths[i], i)
@@ -243,18 +298,10 @@ def refine_pose_graph(
                 else:
                     edge = register(i, j)
                 if edge is not None:
-                    graph.edges.append(reg.PoseGraphEdge(i, j, edge[0], edge[1], uncertain=j != i - 1))
-        option = reg.GlobalOptimizationOption(max_correspondence_distance=0.03, edge_prune_threshold=0.25,
-                                              preference_loop_closure=1.0, reference_node=0)
-        level = o3d.utility.get_verbosity_level()
-        o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Error)
-        try:
-            reg.global_optimization(graph, reg.GlobalOptimizationLevenbergMarquardt(),
-                                    reg.GlobalOptimizationConvergenceCriteria(), option)
-        finally:
-            o3d.utility.set_verbosity_level(level)
-    out = np.stack([np.asarray(node.pose) for node in graph.nodes])
-    out = poses[0] @ np.linalg.inv(out[0]) @ out  # frame 0 stays where it was
+                    edges.append((i, j, edge[0], edge[1], j != i - 1))
+        kept.clear()  # free the depth and pyramids before the optimiser allocates
+        pyramid.items.clear()
+        out = _optimise(poses, edges, max_nodes)
     if not np.isfinite(out).all():
         raise RuntimeError(f"{name}: the pose graph optimisation returned non-finite poses")
     return out
