@@ -51,7 +51,7 @@ stages = {
     params=["profile", *common("kinds", "eval_seeds", "train_seeds", "val_seeds", "dev_seeds", "min_val_per_kind", "seed"), f"profiles.{P}.simulate"],
     outs=[f"data/{P}/scenes"], figs=["frames_upper_lower.png", "routes.png"]),
  "train_segmentation": dict(
-    nb="02_train_segmentation", deps=[f"data/{P}/scenes"],
+    nb="02_train_segmentation", deps=[f"data/{P}/scenes", "models"],  # the shipped networks (every profile)
     params=["profile", *common("kinds", "train_seeds", "val_seeds", "eval_seeds", "networks", "seed"), f"profiles.{P}.train_segmentation"],
     outs=[{f"data/{P}/models": {"persist": True}}],
     figs=["training_curves.png", *tbl("segmentation_validation", "validation_flip", "validation_flip_summary")]),
