@@ -210,7 +210,7 @@ def test_reconstruct_cli(tmp_path, room_frames, capsys):
     m = read_map(tmp_path / "m.ply")
     assert m.is_mesh and {1, 2, 3} <= set(np.unique(m.labels))
     rc = main(["reconstruct", str(tmp_path / "nothing"), "--out", str(tmp_path / "x.ply")])
-    assert rc == 2 and "no such sequence folder" in capsys.readouterr().err
+    assert rc == 2 and "nothing: no such" in capsys.readouterr().err  # names the folder
 
 
 def test_bench_fusion_json_with_labelings(capsys):
