@@ -275,24 +275,29 @@ def _n_workers(client) -> int:
         return 0
 
 
-def _raise_for(fut, i: int, item: Any, where: str) -> None:
+def _raise_for(fut, i: int, item: Any, where: str) -> Any:
     """Raise for task ``i`` that did not finish: a clear :class:`ClusterError` for a task that killed
-    its workers or was cancelled, the task's own exception otherwise (a note names the item)."""
+    its workers or was cancelled, the task's own exception otherwise (a note names the item). A
+    task that finished after all (its status changed while it was looked at: recomputed after a
+    worker died) returns its result."""
     from distributed.client import FutureCancelledError
     from distributed.scheduler import KilledWorker
 
     try:
-        fut.result(timeout=5)  # the error is held by this client: no transfer
+        value = fut.result(timeout=5)  # the error is held by this client: no transfer
     except KilledWorker:
-        raise ClusterError(f"task {i} ({item!r:.100}) was running on every worker that died under it (the "
-                           f"{where} gave it up after distributed.scheduler.allowed-failures retries): out "
-                           "of memory, or a crash in native code? It runs alone with --jobs 1") from None
+        raise ClusterError(f"task {i} ({item!r:.100}) was on workers that died under it (the {where} gave it "
+                           "up after distributed.scheduler.allowed-failures retries): a task of this run kills its "
+                           "worker (out of memory, or a crash in native code), this one or one beside it on the "
+                           "same worker; run with --jobs 1 to find it") from None
     except FutureCancelledError:
         raise ClusterError(f"task {i} ({item!r:.100}) was cancelled on the {where} (the scheduler went away, "
                            "or another client cancelled it)") from None
     except Exception as e:
         e.add_note(f"(in task {i}: {item!r:.100}, on the {where})")
         raise
+    if fut.status == "finished":
+        return value
     raise ClusterError(f"task {i} ({item!r:.100}) ended as {fut.status!r} on the {where}")
 
 
@@ -317,8 +322,11 @@ def _gather(client, futures: list, items: list, *, where: str, desc: str, progre
             if ac.has_ready():
                 for fut, value in ac.next_batch(block=False):
                     i = index[fut.key]
+                    if fut.status in ("lost", "pending"):  # its worker died under it: Dask recomputes it
+                        ac.add(fut)
+                        continue
                     if fut.status != "finished":
-                        _raise_for(fut, i, items[i], where)
+                        value = _raise_for(fut, i, items[i], where)
                     results[i] = value
                     bar.update()
                 continue
