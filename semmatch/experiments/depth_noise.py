@@ -25,10 +25,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ..io import read_map, read_sequence
 from .layout import GT, Layout, model_name
-from .misregistration import _scene_dirs
-from .synthetic import MEASURE_COLUMNS, eval_grid_origin, reference_grid
+from .misregistration import _scene_dirs, clean_scene_inputs
+from .synthetic import MEASURE_COLUMNS, eval_grid_origin
 
 __all__ = ["KINECT_DEPTH_A", "KINECT_DEPTH_B", "depth_noise_study", "noise_drops"]
 
@@ -113,19 +112,10 @@ def _depth_noise_scene(data_root: str, methods: tuple[str, ...], levels: tuple[f
     from ..fusion import reconstruct_many
     from ..metrics import compare
     from ..sim.noise import NoiseConfig, noisy_depth
-    from ..transfer import load_index, transfer_sequence
+    from ..transfer import transfer_sequence
 
     layout = Layout(data_root)
-    sd = layout.scenes / "eval" / sid
-    need = [(layout.upper_map(sid, GT), "03_reconstruct_upper"), (sd / "lower" / "poses.txt", "01_simulate"),
-            (layout.lower_reference(sid), "05_evaluate_synthetic")]
-    for path, stage in need:
-        if not path.is_file():
-            raise FileNotFoundError(f"{path}: missing; run {stage} first")
-    upper = read_map(layout.upper_map(sid, GT))
-    lower = read_sequence(sd / "lower").load()
-    reference = reference_grid(layout.lower_reference(sid), o["eval_voxel_size"])
-    index = load_index(layout.upper_map(sid, GT), semantic_map=upper)
+    _, lower, reference, index = clean_scene_inputs(layout, sid, o["eval_voxel_size"])
     labelings = []  # (level, method, labels folder, coverage)
     with tempfile.TemporaryDirectory(prefix=f".depth_noise_{sid}.", dir=layout.root) as tmp:
         for level in levels:

@@ -28,7 +28,7 @@ from ..io import read_map, read_sequence
 from .layout import GT, Layout
 from .synthetic import MEASURE_COLUMNS, eval_grid_origin, reference_grid
 
-__all__ = ["misregistration_study"]
+__all__ = ["misregistration_study", "clean_scene_inputs"]
 
 
 def _perturbations(translations: Sequence[float], rotations_deg: Sequence[float]) -> list[tuple[float, float]]:
@@ -136,15 +136,30 @@ def misregistration_study(
     return pd.DataFrame([r for rows in per_scene for r in rows], columns=cols)
 
 
-def _misregistration_scene(data_root: str, methods: tuple[str, ...], cases: tuple[tuple[float, float], ...],
-                           o: dict, sid: str) -> list[dict]:
-    """The score rows of one scene (a task of :func:`misregistration_study`)."""
-    from ..fusion import reconstruct_many
-    from ..metrics import compare
-    from ..registration import rigid_perturbation
-    from ..transfer import load_index, transfer_sequence
+def clean_scene_inputs(layout: Layout, sid: str, eval_voxel_size: float):
+    """The clean synthetic inputs of the studies on one evaluation scene.
 
-    layout = Layout(data_root)
+    Parameters
+    ----------
+    layout : Layout
+    sid : str
+        Evaluation scene id.
+    eval_voxel_size : float
+        Evaluation voxel size (m) of the reference grid.
+
+    Returns
+    -------
+    tuple
+        ``(upper, lower, reference, index)``: the ground-truth upper map, the clean lower sequence
+        decoded once, the lower reference voxelised once, and the map's index (cached beside it).
+
+    Raises
+    ------
+    FileNotFoundError
+        A missing input, naming the file and the stage that writes it.
+    """
+    from ..transfer import load_index
+
     sd = layout.scenes / "eval" / sid
     need = [(layout.upper_map(sid, GT), "03_reconstruct_upper"), (sd / "lower" / "poses.txt", "01_simulate"),
             (layout.lower_reference(sid), "05_evaluate_synthetic")]
@@ -153,8 +168,21 @@ def _misregistration_scene(data_root: str, methods: tuple[str, ...], cases: tupl
             raise FileNotFoundError(f"{path}: missing; run {stage} first")
     upper = read_map(layout.upper_map(sid, GT))
     lower = read_sequence(sd / "lower").load()
-    reference = reference_grid(layout.lower_reference(sid), o["eval_voxel_size"])  # voxelised once
+    reference = reference_grid(layout.lower_reference(sid), eval_voxel_size)  # voxelised once
     index = load_index(layout.upper_map(sid, GT), semantic_map=upper)  # cached beside the map
+    return upper, lower, reference, index
+
+
+def _misregistration_scene(data_root: str, methods: tuple[str, ...], cases: tuple[tuple[float, float], ...],
+                           o: dict, sid: str) -> list[dict]:
+    """The score rows of one scene (a task of :func:`misregistration_study`)."""
+    from ..fusion import reconstruct_many
+    from ..metrics import compare
+    from ..registration import rigid_perturbation
+    from ..transfer import transfer_sequence
+
+    layout = Layout(data_root)
+    upper, lower, reference, index = clean_scene_inputs(layout, sid, o["eval_voxel_size"])
     center = upper.points.astype(np.float64).mean(axis=0)
     scene_seed = int(np.random.SeedSequence([o["seed"], zlib.crc32(sid.encode())]).generate_state(1)[0])
     labelings = []  # (translation, rotation, method, labels folder, coverage)

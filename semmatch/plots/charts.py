@@ -83,6 +83,27 @@ def plot_height_study(summary: pd.DataFrame, path: str | Path, *, metrics: Seque
     return save_figure(fig, path)
 
 
+def _require_columns(df: pd.DataFrame, need: set[str], fn: str) -> None:
+    """Refuse an empty table or one without the columns ``need`` (naming ``fn``)."""
+    if df.empty or not need <= set(df.columns):
+        raise ValueError(f"{fn} needs a non-empty table with {sorted(need)}, "
+                         f"got columns {list(df.columns)} and {len(df)} rows")
+
+
+def _method_curves(ax, df: pd.DataFrame, x: str, measure: str, *, scale: float, confidence: float,
+                   alpha: float) -> None:
+    """One line per method: the mean of ``measure`` over scenes at each ``x`` (times ``scale``),
+    with its t-interval band (the analysis plan's interval)."""
+    from ..stats import stratified_t_ci
+
+    for method, g in df.groupby("method", sort=False):
+        xs = sorted(g[x].unique())
+        stats = np.array([stratified_t_ci(g.loc[g[x] == v, measure].to_numpy(), confidence=confidence) for v in xs])
+        xv = np.asarray(xs) * scale
+        (line,) = ax.plot(xv, stats[:, 0], marker="o", label=method)
+        ax.fill_between(xv, stats[:, 1], stats[:, 2], color=line.get_color(), alpha=alpha)
+
+
 def plot_misregistration(df: pd.DataFrame, path: str | Path, *, measure: str = "mean_acc",
                          confidence: float = 0.95, seed: int = 0) -> Path:
     """Two panels: ``measure`` against translation and against rotation, one line per method.
@@ -114,24 +135,12 @@ def plot_misregistration(df: pd.DataFrame, path: str | Path, *, measure: str = "
     """
     import matplotlib.pyplot as plt
 
-    from ..stats import stratified_t_ci
-
-    need = {"method", "translation_m", "rotation_deg", measure}
-    if df.empty or not need <= set(df.columns):
-        raise ValueError(f"plot_misregistration needs a non-empty table with {sorted(need)}, "
-                         f"got columns {list(df.columns)} and {len(df)} rows")
+    _require_columns(df, {"method", "translation_m", "rotation_deg", measure}, "plot_misregistration")
     fig, axes = plt.subplots(1, 2, figsize=(10, 4), sharey=True)
     series = (("translation_m", "rotation_deg", 100.0, "translation (cm)"),
               ("rotation_deg", "translation_m", 1.0, "rotation (degrees)"))
     for ax, (x, other, scale, label) in zip(axes, series, strict=True):
-        sel = df[df[other] == 0]
-        for method, g in sel.groupby("method", sort=False):
-            xs = sorted(g[x].unique())
-            stats = np.array([stratified_t_ci(g.loc[g[x] == v, measure].to_numpy(), confidence=confidence)
-                              for v in xs])
-            xv = np.asarray(xs) * scale
-            (line,) = ax.plot(xv, stats[:, 0], marker="o", label=method)
-            ax.fill_between(xv, stats[:, 1], stats[:, 2], color=line.get_color(), alpha=0.2)
+        _method_curves(ax, df[df[other] == 0], x, measure, scale=scale, confidence=confidence, alpha=0.2)
         ax.set_xlabel(label)
         ax.grid(alpha=0.3)
     n = df["scene"].nunique() if "scene" in df.columns else 0
@@ -169,20 +178,9 @@ def plot_depth_noise(df: pd.DataFrame, path: str | Path, *, measure: str = "mean
     """
     import matplotlib.pyplot as plt
 
-    from ..stats import stratified_t_ci
-
-    need = {"method", "level", "depth_sigma_2m", measure}
-    if df.empty or not need <= set(df.columns):
-        raise ValueError(f"plot_depth_noise needs a non-empty table with {sorted(need)}, "
-                         f"got columns {list(df.columns)} and {len(df)} rows")
+    _require_columns(df, {"method", "level", "depth_sigma_2m", measure}, "plot_depth_noise")
     fig, ax = plt.subplots(figsize=(5.5, 3.8))
-    for method, g in df.groupby("method", sort=False):
-        xs = sorted(g["depth_sigma_2m"].unique())
-        stats = np.array([stratified_t_ci(g.loc[g["depth_sigma_2m"] == v, measure].to_numpy(), confidence=confidence)
-                          for v in xs])
-        xv = np.asarray(xs) * 100.0
-        (line,) = ax.plot(xv, stats[:, 0], marker="o", label=method)
-        ax.fill_between(xv, stats[:, 1], stats[:, 2], color=line.get_color(), alpha=0.15)
+    _method_curves(ax, df, "depth_sigma_2m", measure, scale=100.0, confidence=confidence, alpha=0.15)
     n = df["scene"].nunique() if "scene" in df.columns else 0
     ax.set_xlabel("depth noise: standard deviation at 2 m (cm)")
     ax.set_ylabel(f"{measure} (mean over {n} scenes, {confidence:.0%} t interval)")
