@@ -69,8 +69,9 @@ def bootstrap_ci(
     confidence: float = 0.95,
     n_resamples: int = 10000,
     seed: int = 0,
+    method: str = "percentile",
 ) -> tuple[float, float, float]:
-    """Mean of ``values`` and a percentile bootstrap confidence interval of it.
+    """Mean of ``values`` and a bootstrap confidence interval of it (percentile by default).
 
     Parameters
     ----------
@@ -82,6 +83,9 @@ def bootstrap_ci(
         Number of bootstrap resamples.
     seed : int, optional
         Seed of the resampling generator (``numpy.random.default_rng(seed)``).
+    method : {"percentile", "BCa"}, optional
+        SciPy's interval method; a BCa interval SciPy cannot form (NaN bounds, e.g. a two-valued
+        sample) falls back to the percentile one.
 
     Returns
     -------
@@ -108,12 +112,15 @@ def bootstrap_ci(
         np.mean,
         n_resamples=n_resamples,
         confidence_level=confidence,
-        method="percentile",
+        method=method,
         vectorized=True,
         axis=-1,
         rng=np.random.default_rng(seed),
     )
-    return mean, float(res.confidence_interval.low), float(res.confidence_interval.high)
+    lo, hi = float(res.confidence_interval.low), float(res.confidence_interval.high)
+    if method != "percentile" and (np.isnan(lo) or np.isnan(hi)):
+        return bootstrap_ci(x, confidence=confidence, n_resamples=n_resamples, seed=seed)
+    return mean, lo, hi
 
 
 def paired_difference_ci(
@@ -454,8 +461,9 @@ def interval(
         return stratified_t_ci(values, strata, confidence=confidence)
     if method == "t":
         return stratified_t_ci(values, None, confidence=confidence)
-    if method == "percentile":
-        return bootstrap_ci(values, confidence=confidence, n_resamples=n_resamples, seed=seed)
+    if method in ("percentile", "bca"):
+        return bootstrap_ci(values, confidence=confidence, n_resamples=n_resamples, seed=seed,
+                            method="BCa" if method == "bca" else "percentile")
     if not 0.0 < confidence < 1.0:
         raise ValueError(f"interval: confidence must be in (0, 1), got {confidence}")
     x = _as_1d(values, "interval")
@@ -467,15 +475,8 @@ def interval(
     mean = float(np.mean(x))
     if x.size == 1 or np.all(x == x[0]):
         return mean, mean, mean
-    rng = np.random.default_rng(seed)
-    alpha = 1.0 - confidence
-    if method == "stratified-percentile":
-        means = _stratified_resample_means(x, g if g is not None else np.zeros(x.size, str), n_resamples, rng)
-        lo, hi = np.quantile(means, [alpha / 2, 1 - alpha / 2])
-        return mean, float(lo), float(hi)
-    res = _st.bootstrap((x,), np.mean, n_resamples=n_resamples, confidence_level=confidence, method="BCa",
-                        vectorized=True, axis=-1, rng=rng)
-    lo, hi = float(res.confidence_interval.low), float(res.confidence_interval.high)
-    if np.isnan(lo) or np.isnan(hi):  # BCa undefined (e.g. a two-valued sample): fall back to percentile
-        return bootstrap_ci(x, confidence=confidence, n_resamples=n_resamples, seed=seed)
-    return mean, lo, hi
+    # stratified percentile bootstrap: units resampled within their stratum
+    means = _stratified_resample_means(x, g if g is not None else np.zeros(x.size, str), n_resamples,
+                                       np.random.default_rng(seed))
+    lo, hi = np.quantile(means, [(1.0 - confidence) / 2, (1.0 + confidence) / 2])
+    return mean, float(lo), float(hi)
