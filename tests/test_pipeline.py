@@ -143,6 +143,38 @@ def test_readme_results_section_is_generated_from_figures(tmp_path):
            "not resolved)." in (tmp_path / "docs" / "results.md").read_text()
 
 
+def test_readme_headline_comes_from_the_plans_confirmatory_run(tmp_path):
+    import json
+
+    from semmatch.experiments import readme
+
+    plan = {"scenes": {"confirmatory_seeds": [8001, 8002]}}
+    figs = tmp_path / "figures"
+    dev = figs / "full"
+    dev.mkdir(parents=True)
+    (dev / "table2_synthetic.md").write_text("| dev |\n|---|\n| 1 |\n")
+    assert readme.confirmatory_run(figs, plan) is None
+    record = {"name": "mine", "seeds": [8002, 8001], "kinds": ["a", "b"], "networks_from": "models/full",
+              "code_version": "abc1234", "started": "2026-11-26T15:00:00Z", "total_seconds": 600.0}
+    for name, change in (("other-seeds", {"seeds": [9001, 9002]}), ("trained", {"networks_from": "trained here"}),
+                         ("mine", {})):
+        (figs / "confirm" / name).mkdir(parents=True)
+        (figs / "confirm" / name / "confirm.json").write_text(json.dumps({**record, **change}))
+    run = readme.confirmatory_run(figs, plan)
+    assert run == figs / "confirm" / "mine"  # not a run on other seeds, not one that retrained the networks
+    (run / "table2_synthetic.md").write_text("| confirm |\n|---|\n| 2 |\n")
+    r = tmp_path / "README.md"
+    r.write_text(f"# x\n{readme.BEGIN}\nold\n{readme.END}\n")
+    assert readme.update_readme(r, dev, confirmatory_dir=run, judge=False)
+    text = r.read_text()
+    confirm_doc = (tmp_path / "docs" / "results_confirmatory.md").read_text()
+    assert "Confirmatory run `mine`: scene seeds 8002, 8001 x 2 kinds (4 scenes" in text
+    assert "](docs/results_confirmatory.md)" in text and "](docs/results.md)" in text
+    assert "| confirm |" in confirm_doc and "make confirm" in confirm_doc and "| dev |" not in confirm_doc
+    assert "| dev |" in (tmp_path / "docs" / "results.md").read_text()
+    assert not readme.update_readme(r, dev, confirmatory_dir=run, judge=False)
+
+
 def test_protocol_refuses_bad_splits_before_any_work(tmp_path):
     from semmatch.experiments.protocol import check_protocol
 

@@ -403,6 +403,8 @@ def main(argv: list[str] | None = None, extra_commands: Sequence[Callable] = ())
     sp.add_argument("name")
     rd = sub.add_parser("readme", help="write README.md's results section from figures/<profile>/")
     rd.add_argument("--profile", help="profile whose figures to show (default: params.yaml's)")
+    rd.add_argument("--confirm", metavar="NAME", help="headline from figures/confirm/NAME (default: the analysis "
+                    "plan's confirmatory run when it exists; --confirm none: the profile's figures)")
     sn = sub.add_parser("snapshot", help="small copies of the executed notebooks for git (reports/snapshot/<profile>/)")
     sn.add_argument("--profile", help="profile whose executed notebooks to copy (default: params.yaml's)")
     sn.add_argument("--max-width", type=int, default=960, help="scale figures down to this width (pixels)")
@@ -418,10 +420,18 @@ def main(argv: list[str] | None = None, extra_commands: Sequence[Callable] = ())
             set_profile(args.name)
             return 0
         if args.cmd == "readme":
-            from .readme import update_readme
+            from .readme import confirmatory_run, update_readme
 
             name = load_params(ROOT / "params.yaml", args.profile)["profile"]
-            update_readme(ROOT / "README.md", ROOT / "figures" / name)
+            if args.confirm is None:
+                confirm = confirmatory_run(ROOT / "figures")
+            elif args.confirm == "none":
+                confirm = None
+            else:
+                confirm = ROOT / "figures" / "confirm" / args.confirm
+                if not (confirm / "confirm.json").is_file():
+                    raise FileNotFoundError(f"{confirm}: no confirm.json (run make confirm SEEDS=... NAME={args.confirm})")
+            update_readme(ROOT / "README.md", ROOT / "figures" / name, confirmatory_dir=confirm)
             return 0
         if args.cmd == "snapshot":
             from .snapshot import snapshot_reports
