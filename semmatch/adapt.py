@@ -27,12 +27,18 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .io import Frame, atomic_path
 
-__all__ = ["LABEL_SOURCES", "RobotViews", "robot_training_views", "fine_tune", "adapted_name"]
+if TYPE_CHECKING:
+    from .segment.predict import Segmenter
+    from .transfer import MapIndex
+
+__all__ = ["LABEL_SOURCES", "HOME_SOURCES", "MIN_COVERAGE", "RobotViews", "label_robot_frame", "robot_training_views",
+           "home_views", "adapt_in_home", "fine_tune", "adapted_name"]
 
 #: label sources besides the transfer methods
 BASELINES = ("self-training", "ground-truth")
@@ -46,6 +52,12 @@ def _label_sources() -> tuple[str, ...]:
 
 #: every label source: the paper's transfer methods, ``fused``, self-training, ground truth
 LABEL_SOURCES: tuple[str, ...] = _label_sources()
+
+#: label sources of in-home adaptation (:func:`adapt_in_home`): labels from the person's map only
+HOME_SOURCES: tuple[str, ...] = tuple(s for s in LABEL_SOURCES if s not in BASELINES)
+
+#: smallest share of the robot's pixels with depth that the labels must cover (:func:`fine_tune`)
+MIN_COVERAGE = 0.005
 
 
 def adapted_name(network: str, source: str) -> str:
@@ -67,18 +79,83 @@ class RobotViews:
         ``{source: share of the pixels with depth that carry a label}``.
     scenes : list of str
         Scene names, in the order of ``views.scene``.
+    frames : list of int
+        The views' frame indices in their recorded sequence (:func:`home_views`); empty for
+        rendered tours.
     """
 
     views: object
     pseudo: dict[str, np.ndarray]
     coverage: dict[str, float] = field(default_factory=dict)
     scenes: list[str] = field(default_factory=list)
+    frames: list[int] = field(default_factory=list)
 
 
 def _check_sources(sources: Sequence[str]) -> None:
     bad = [s for s in sources if s not in LABEL_SOURCES]
     if bad:
         raise ValueError(f"unknown label source(s) {', '.join(bad)}; valid: {', '.join(LABEL_SOURCES)}")
+
+
+def label_robot_frame(
+    frame: Frame,
+    index: MapIndex,
+    sources: Sequence[str],
+    seg: Segmenter | None = None,
+    *,
+    min_purity: float = 0.5,
+    self_threshold: float = 0.9,
+    fused_base: str = "3d-neighborhood",
+) -> dict[str, np.ndarray]:
+    """Label one robot frame with each label source (the pseudo-labels :func:`fine_tune` learns from).
+
+    Parameters
+    ----------
+    frame : Frame
+        The robot's posed RGB-D frame (``labels``: its ground truth, needed by ``ground-truth``).
+    index : MapIndex
+        The person's semantic map, indexed (:class:`semmatch.transfer.MapIndex`).
+    sources : sequence of str
+        Label sources (:data:`LABEL_SOURCES`).
+    seg : Segmenter, optional
+        The network (its class probabilities on ``frame.rgb``); needed by ``fused`` and
+        ``self-training``.
+    min_purity : float
+        A transfer method's labels of pixels whose group vote was less pure are ignored (0).
+    self_threshold : float
+        Self-training keeps predictions at least this confident.
+    fused_base : str
+        The transfer method ``fused`` completes with the network's labels.
+
+    Returns
+    -------
+    dict
+        ``{source: uint8 (H,W)}``, 0 = ignored by the loss; a transfer method labels only
+        pixels with depth.
+    """
+    from .transfer import transfer_frame
+
+    probs = None
+    if {"fused", "self-training"} & set(sources):
+        if seg is None:
+            raise ValueError("the fused and self-training sources need the network's predictions (seg)")
+        probs = seg.predict(frame.rgb)
+    valid = frame.depth > 0
+    out = {}
+    for s in sources:
+        if s == "ground-truth":
+            if frame.labels is None:
+                raise ValueError(f"frame {frame.index}: the ground-truth source needs the frame's labels")
+            lab = frame.labels
+        elif s == "self-training":
+            lab = np.where(probs.max(axis=2) >= self_threshold, probs.argmax(axis=2), 0)
+        elif s == "fused":
+            lab = transfer_frame("fused", frame, index, probs=probs, base=fused_base).labels
+        else:
+            res = transfer_frame(s, frame, index)
+            lab = np.where(valid & (res.purity >= min_purity), res.labels, 0)
+        out[s] = np.asarray(lab).astype(np.uint8)
+    return out
 
 
 def robot_training_views(
@@ -131,7 +208,7 @@ def robot_training_views(
     from .segment.data import Views, make_scenes
     from .sim import Renderer
     from .sim.trajectory import make_trajectory
-    from .transfer import MapIndex, transfer_frame
+    from .transfer import MapIndex
 
     _check_sources(sources)
     seg = load_model(checkpoint)
@@ -158,20 +235,11 @@ def robot_training_views(
         index = MapIndex(reconstruct(up_frames, labels=probs_up, voxel_size=voxel_size))
         for i, (v, T) in enumerate(zip(lo, lo_poses)):
             frame = Frame(v.rgb, v.depth, v.labels, np.asarray(T), intr, index=i)
-            p = seg.predict(v.rgb) if {"fused", "self-training"} & set(sources) else None
+            labs = label_robot_frame(frame, index, sources, seg, min_purity=min_purity,
+                                     self_threshold=self_threshold, fused_base=fused_base)
             valid = v.depth > 0
             valid_px += int(valid.sum())
-            for s in sources:
-                if s == "ground-truth":
-                    lab = v.labels
-                elif s == "self-training":
-                    lab = np.where(p.max(axis=2) >= self_threshold, p.argmax(axis=2), 0).astype(np.uint8)
-                elif s == "fused":
-                    lab = transfer_frame("fused", frame, index, probs=p, base=fused_base).labels
-                else:
-                    res = transfer_frame(s, frame, index)
-                    lab = np.where(res.purity >= min_purity, res.labels, 0).astype(np.uint8)
-                lab = np.where(valid | (s in ("ground-truth", "self-training", "fused")), lab, 0).astype(np.uint8)
+            for s, lab in labs.items():
                 pseudo[s].append(lab)
                 labelled[s] += int(np.count_nonzero(lab[valid]))
             rgb.append(v.rgb)
@@ -182,6 +250,205 @@ def robot_training_views(
                   np.full(len(rgb), lower_height, np.float32))
     return RobotViews(views, {s: np.stack(v) for s, v in pseudo.items()},
                       {s: labelled[s] / max(valid_px, 1) for s in sources}, names)
+
+
+def home_views(
+    checkpoint: str | Path,
+    sequence: str | Path,
+    person_map: str | Path,
+    *,
+    source: str = "3d-neighborhood",
+    frames: int | None = None,
+    frame_step: int = 1,
+    min_purity: float = 0.5,
+    fused_base: str = "3d-neighborhood",
+    min_coverage: float = MIN_COVERAGE,
+    progress: bool = True,
+) -> RobotViews:
+    """Label a robot's recorded tour of a home with the person's map of that home.
+
+    The frames' labels come from :func:`label_robot_frame` (the same rules as
+    :func:`robot_training_views`); frames of another size than the network was trained at are
+    resized to it after the transfer (labels and depth nearest-neighbour).
+
+    Parameters
+    ----------
+    checkpoint : path
+        The network to adapt (its training size; its predictions for ``fused``).
+    sequence : path
+        The robot's sequence folder (:func:`semmatch.io.read_sequence`): RGB, metric depth,
+        poses in the map's frame.
+    person_map : path
+        The person's semantic map of the same home (PLY).
+    source : str
+        A transfer method or ``fused`` (:data:`HOME_SOURCES`).
+    frames : int, optional
+        Use at most this many frames (after ``frame_step``); default all.
+    frame_step : int
+        Use every ``frame_step``-th frame.
+    min_purity, fused_base
+        As :func:`label_robot_frame`.
+    min_coverage : float
+        Smallest share of the robot's pixels with depth the labels must cover.
+    progress : bool
+
+    Returns
+    -------
+    RobotViews
+        One scene: the home (its name from the sequence's ``meta.json``, else the folder's name).
+
+    Raises
+    ------
+    ValueError
+        A source outside :data:`HOME_SOURCES`; a sequence without depth; a map without labels;
+        a map and a sequence naming different scenes; labels covering less than
+        ``min_coverage`` of the robot's pixels (the map does not cover this view).
+    FileNotFoundError
+        A missing sequence or map.
+    """
+    import cv2
+
+    from .io import read_map, read_sequence
+    from .io.maps import map_scene
+    from .io.sequences import sequence_scene
+    from .progress import tqdm
+    from .segment import load_model
+    from .segment.data import Views
+    from .transfer import load_index
+
+    if source not in HOME_SOURCES:
+        raise ValueError(f"in-home adaptation takes labels from the person's map: source must be one of "
+                         f"{', '.join(HOME_SOURCES)}, got {source!r}")
+    if int(frame_step) < 1 or (frames is not None and int(frames) < 1):
+        raise ValueError(f"need frames >= 1 and frame_step >= 1, got {frames}, {frame_step}")
+    sequence, person_map = Path(sequence), Path(person_map)
+    if sequence.is_dir() and not (sequence / "depth").is_dir():
+        raise ValueError(f"{sequence}: the sequence has no depth/ folder; adapting in a home needs the robot's "
+                         "depth to place its pixels in the person's map")
+    seq = read_sequence(sequence)
+    m = read_map(person_map)
+    if not np.any(m.labels > 0):
+        raise ValueError(f"{person_map}: the map carries no labels (every vertex is void); a person's semantic map "
+                         "is needed")
+    home, map_home = sequence_scene(sequence), map_scene(person_map)
+    if home is not None and map_home is not None and home != map_home:
+        raise ValueError(f"{person_map}: the map is of scene {map_home!r} but the robot's sequence {sequence} is of "
+                         f"{home!r}: a map of another home")
+    picks = list(range(0, len(seq), int(frame_step)))[: None if frames is None else int(frames)]
+    seg = load_model(checkpoint)
+    cfg = seg.info.get("train_config") or {}
+    size = (int(cfg.get("width", seq.intrinsics.width)), int(cfg.get("height", seq.intrinsics.height)))
+    index = load_index(person_map, semantic_map=m, cache=False)
+    rgb, depth, gt, cam_z, lab = [], [], [], [], []
+    valid_px = labelled = 0
+    for i in tqdm(picks, desc=f"labelling {sequence.name}", disable=not progress):
+        frame = seq[i]
+        if frame.pose is None or not np.isfinite(frame.pose).all():
+            raise ValueError(f"{sequence}: frame {i} has no pose; the robot's frames must be posed in the map's frame")
+        valid = frame.depth > 0
+        valid_px += int(valid.sum())
+        y = label_robot_frame(frame, index, [source], seg, min_purity=min_purity, fused_base=fused_base)[source]
+        labelled += int(np.count_nonzero(y[valid]))
+        truth = frame.labels if frame.labels is not None else np.zeros(frame.depth.shape, np.uint8)
+        if (frame.rgb.shape[1], frame.rgb.shape[0]) != size:
+            near = cv2.INTER_NEAREST
+            frame_rgb = cv2.resize(np.ascontiguousarray(frame.rgb), size, interpolation=cv2.INTER_AREA)
+            d, y, truth = (cv2.resize(np.ascontiguousarray(a), size, interpolation=near)
+                           for a in (frame.depth, y, truth))
+        else:
+            frame_rgb, d = frame.rgb, frame.depth
+        rgb.append(frame_rgb)
+        depth.append(d)
+        lab.append(y)
+        gt.append(truth)
+        cam_z.append(frame.pose[2, 3])
+    if valid_px == 0:
+        raise ValueError(f"{sequence / 'depth'}: no depth in any of the {len(picks)} frames used (frame {picks[0]}: "
+                         f"{sequence / 'depth' / f'{picks[0]:06d}.png'}); adapting in a home needs the robot's depth")
+    coverage = labelled / valid_px
+    if coverage < min_coverage:
+        raise ValueError(f"{person_map}: the map's labels cover {coverage:.2%} of the robot's pixels with depth in "
+                         f"{sequence} (fewer than {min_coverage:.2%}): the map does not cover this robot's view "
+                         "(a map of another home, or in another frame?)")
+    views = Views(np.stack(rgb), np.stack(depth).astype(np.float32), np.stack(gt), np.zeros(len(rgb), np.int64),
+                  np.asarray(cam_z, np.float32))
+    return RobotViews(views, {source: np.stack(lab)}, {source: coverage}, [home or sequence.resolve().name],
+                      picks)
+
+
+def adapt_in_home(
+    checkpoint: str | Path,
+    sequence: str | Path,
+    person_map: str | Path,
+    out: str | Path,
+    *,
+    source: str = "3d-neighborhood",
+    frames: int | None = None,
+    frame_step: int = 1,
+    steps: int = 400,
+    batch_size: int = 16,
+    lr: float = 1e-3,
+    upper_share: float = 0.5,
+    seed: int = 0,
+    min_purity: float = 0.5,
+    min_coverage: float = MIN_COVERAGE,
+    cache_dir: str | Path | None = "checkpoint-if-present",
+    progress: bool = True,
+) -> Path:
+    """Adapt a network in a home: the robot's tour labelled from the person's map of it.
+
+    :func:`home_views` labels the robot's frames, :func:`fine_tune` fine-tunes on them (half of
+    each batch, by default, the network's own human-height training views).
+
+    Parameters
+    ----------
+    checkpoint : path
+        The network to adapt.
+    sequence, person_map : paths
+        The robot's tour of the home and the person's semantic map of it (:func:`home_views`).
+    out : path
+        The adapted checkpoint (never ``checkpoint`` nor an input).
+    source, frames, frame_step, min_purity, min_coverage
+        As :func:`home_views`.
+    steps, batch_size, lr, upper_share, seed
+        The recipe (:func:`fine_tune`).
+    cache_dir : path, "checkpoint", "checkpoint-if-present" or None
+        The cache of the network's human-height training views (:func:`fine_tune`); by default
+        the checkpoint's recorded folder where it exists, else the views are rendered each run.
+    progress : bool
+
+    Returns
+    -------
+    Path
+        The checkpoint; its ``adapted`` record holds, besides :func:`fine_tune`'s fields (the
+        recipe: ``steps``, ``lr``, ``batch_size``, ``upper_share``, ``seed``, ``label_source``;
+        ``label_coverage``; ``scenes``: the home), ``home`` (``sequence``, ``scene`` or None,
+        ``frames``: the frame indices used) and ``map`` (``path``, ``sha256``: the first 16 hex
+        digits).
+
+    Raises
+    ------
+    ValueError
+        ``out`` is the network or an input; the errors of :func:`home_views` and
+        :func:`fine_tune`.
+    """
+    from .io.sequences import sequence_scene
+
+    out = Path(out)
+    for flag, p in (("--model", checkpoint), ("--home", sequence), ("--map", person_map)):
+        if out.resolve() == Path(p).resolve() or Path(p).resolve() in out.resolve().parents:
+            raise ValueError(f"--out {out}: it is the input {flag} {p} (or inside it); refusing to overwrite an input")
+    robot = home_views(checkpoint, sequence, person_map, source=source, frames=frames, frame_step=frame_step,
+                       min_purity=min_purity, min_coverage=min_coverage, progress=progress)
+    extra = {
+        "mode": "home",
+        "home": {"sequence": str(sequence), "scene": sequence_scene(sequence), "frames": list(robot.frames)},
+        "map": {"path": str(person_map), "sha256": _file_digest(Path(person_map))},
+        "min_purity": float(min_purity),
+    }
+    return fine_tune(checkpoint, robot, source, out, steps=steps, batch_size=batch_size, lr=lr,
+                     upper_share=upper_share, seed=seed, min_coverage=min_coverage, extra=extra, cache_dir=cache_dir,
+                     progress=progress)
 
 
 def _file_digest(path: Path) -> str:
@@ -204,7 +471,9 @@ def fine_tune(
     upper_share: float = 0.5,
     distill: float = 0.0,
     seed: int = 0,
-    min_coverage: float = 0.005,
+    min_coverage: float = MIN_COVERAGE,
+    extra: dict | None = None,
+    cache_dir: str | Path | None = "checkpoint",
     progress: bool = True,
 ) -> Path:
     """Fine-tune a network on the robot's frames labelled by ``source``; write the checkpoint.
@@ -236,6 +505,14 @@ def fine_tune(
     min_coverage : float
         Smallest share of the robot's pixels with depth that ``source`` must label: below it the
         person's map barely overlaps the robot's view and there is nothing to learn from.
+    extra : dict, optional
+        More entries for the checkpoint's ``adapted`` record (:func:`adapt_in_home`: the home
+        and the map).
+    cache_dir : path, "checkpoint", "checkpoint-if-present" or None
+        Where the network's human-height training views are cached: the folder recorded in the
+        checkpoint (``"checkpoint"``, the default), that folder only when it exists on this
+        machine (``"checkpoint-if-present"``: a shipped network's training folder is never
+        created elsewhere), another folder, or None (rendered, not cached).
     progress : bool
 
     Returns
@@ -278,6 +555,10 @@ def fine_tune(
     known = {f for f in TrainConfig.__dataclass_fields__}
     cfg = TrainConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in rec.items() if k in known})
     cfg.progress = False
+    if cache_dir == "checkpoint-if-present":
+        cfg.cache_dir = cfg.cache_dir if cfg.cache_dir and Path(cfg.cache_dir).is_dir() else None
+    elif cache_dir != "checkpoint":
+        cfg.cache_dir = None if cache_dir is None else str(cache_dir)
     upper_views, _ = build_views(cfg)
     torch.manual_seed(seed)
     torch.use_deterministic_algorithms(True)
@@ -319,6 +600,7 @@ def fine_tune(
         "scenes": list(robot.scenes), "frames": int(len(robot.views)), "label_coverage": robot.coverage.get(source),
         "steps": int(steps), "batch_size": int(batch_size), "lr": float(lr), "upper_share": float(upper_share),
         "distill": float(distill), "seed": int(seed), "final_loss": float(np.mean(losses[-20:])), "seconds": time.perf_counter() - t0,
+        **(extra or {}),
     }
     out = Path(out)
     with atomic_path(out) as tmp:

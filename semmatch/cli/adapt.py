@@ -1,41 +1,103 @@
-"""``semmatch adapt --model NET.pt --source METHOD --out ADAPTED.pt``: fine-tune to the robot's view."""
+"""``semmatch adapt``: fine-tune a segmentation network to the robot's view.
+
+Two modes::
+
+    semmatch adapt --model NET.pt --source METHOD --seeds S [S ...] --out ADAPTED.pt   # training scenes
+    semmatch adapt --home LOWER_SEQ --map PERSON_MAP --model NET.pt --out ADAPTED.pt    # in a home
+"""
 
 from __future__ import annotations
 
 import argparse
 
+_EPILOG = """\
+modes (--home selects the second):
+  training scenes  --model --source --seeds [--kinds --frames]
+                   the person and the robot tour rendered training scenes of the network; the
+                   network's map of each is transferred into the robot's frames.
+  in a home        --home LOWER_SEQ --map PERSON_MAP --model [--source --frames --frame-step
+                   --views-cache]
+                   the robot's recorded tour LOWER_SEQ (RGB, depth, poses in the map's frame) is
+                   labelled from the person's map of the same home PERSON_MAP (default source
+                   3d-neighborhood); --frames N uses the first N frames (after --frame-step).
+                   Refused: --seeds/--kinds, a sequence without depth, a map without labels, a
+                   map naming another scene than the sequence, labels covering too little of the
+                   robot's view.
+both: --out, --steps, --batch-size, --lr, --upper-share, --seed; --out must not be an input.
+"""
+
 
 def register(sub) -> None:
     """Add ``semmatch adapt``."""
-    from semmatch.adapt import LABEL_SOURCES
-    from semmatch.cli import add_quiet
+    from semmatch.adapt import HOME_SOURCES, LABEL_SOURCES
+    from semmatch.cli import add_quiet, number
     from semmatch.io.outputs import declare_paths
 
     p = sub.add_parser(
         "adapt",
         help="fine-tune a segmentation network to the robot's viewpoint with transferred labels",
-        description="On training scenes, the person and the robot tour each room; the network builds "
-        "the person's map, its labels are transferred into the robot's frames (or another label "
-        "source) and the network is fine-tuned on them, half of each batch staying human-height views.",
+        description="Fine-tune a network on the robot's frames labelled from the person's semantic map, half of "
+        "each batch staying the network's human-height training views. Either on rendered training scenes "
+        "(--seeds) or in one home the person has mapped (--home LOWER_SEQ --map PERSON_MAP).",
+        epilog=_EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("--model", required=True, help="checkpoint of the network to adapt (.pt)")
-    p.add_argument("--source", required=True, choices=list(LABEL_SOURCES),
-                   help="labels of the robot's frames: a transfer method, fused, self-training or ground-truth")
+    p.add_argument("--source", default=None, choices=list(LABEL_SOURCES), metavar="SOURCE",
+                   help=f"labels of the robot's frames: training scenes (required): one of {', '.join(LABEL_SOURCES)}; "
+                        f"in a home: one of {', '.join(HOME_SOURCES)} (default 3d-neighborhood)")
     p.add_argument("--out", required=True, help="adapted checkpoint to write (.pt)")
-    p.add_argument("--kinds", nargs="+", default=["living_room", "bedroom", "office", "apartment"],
-                   help="scene kinds (scene i has kind i mod len(kinds))")
-    p.add_argument("--seeds", nargs="+", type=int, required=True,
-                   help="training scenes to adapt on (never the network's validation/evaluation seeds)")
-    p.add_argument("--frames", type=int, default=40, help="frames of each camera's tour (default %(default)s)")
-    p.add_argument("--steps", type=int, default=400, help="fine-tuning steps (default %(default)s)")
-    p.add_argument("--batch-size", type=int, default=16, help="default %(default)s")
-    p.add_argument("--lr", type=float, default=1e-3, help="peak learning rate (default %(default)s)")
+    home = p.add_argument_group("in a home")
+    home.add_argument("--home", default=None, metavar="LOWER_SEQ",
+                      help="the robot's sequence folder of the home (selects this mode)")
+    home.add_argument("--map", default=None, metavar="PERSON_MAP", help="the person's semantic map of the home (PLY)")
+    home.add_argument("--frame-step", type=number(int, lo=1), default=1,
+                      help="use every N-th frame of LOWER_SEQ (default %(default)s)")
+    train = p.add_argument_group("training scenes")
+    train.add_argument("--kinds", nargs="+", default=None,
+                       help="scene kinds (scene i has kind i mod len(kinds); default living_room bedroom office "
+                            "apartment)")
+    train.add_argument("--seeds", nargs="+", type=int, default=None,
+                       help="training scenes to adapt on (never the network's validation/evaluation seeds)")
+    p.add_argument("--frames", type=number(int, lo=1), default=None,
+                   help="training scenes: frames of each camera's tour (default 40); in a home: use at most N "
+                        "frames of LOWER_SEQ (default all)")
+    p.add_argument("--steps", type=number(int, lo=1), default=400, help="fine-tuning steps (default %(default)s)")
+    p.add_argument("--batch-size", type=number(int, lo=2), default=16, help="default %(default)s")
+    p.add_argument("--lr", type=number(float, lo=0.0, lo_open=True), default=1e-3,
+                   help="peak learning rate (default %(default)s)")
     p.add_argument("--upper-share", type=float, default=0.5,
                    help="share of each batch from human-height training views (default %(default)s)")
     p.add_argument("--seed", type=int, default=0, help="default %(default)s")
+    home.add_argument("--views-cache", default=None, metavar="DIR",
+                      help="cache of the network's human-height training views (rendered on the first run, "
+                           "minutes); default: the folder recorded in the checkpoint where it exists on this "
+                           "machine, else none (rendered each run)")
     add_quiet(p)
-    declare_paths(p, inputs=("model",), outputs=("out",))
+    declare_paths(p, inputs=("model", "home", "map"), outputs=("out", "views_cache"))
     p.set_defaults(func=run)
+
+
+def _check_mode(args: argparse.Namespace) -> None:
+    """Refuse arguments of one mode given in the other."""
+    if args.home is not None:
+        mixed = [f for f, v in (("--seeds", args.seeds), ("--kinds", args.kinds)) if v is not None]
+        if mixed:
+            raise ValueError(f"{' and '.join(mixed)}: training-scene options cannot be mixed with --home (in a home "
+                             "the robot's own tour is the adaptation data)")
+        if args.map is None:
+            raise ValueError("--home needs --map PERSON_MAP (the person's semantic map of that home)")
+        return
+    if args.views_cache is not None:
+        raise ValueError("--views-cache is for --home LOWER_SEQ (on training scenes the checkpoint's cache is used)")
+    if args.map is not None:
+        raise ValueError("--map is the person's map of a home: give it with --home LOWER_SEQ")
+    if args.frame_step != 1:
+        raise ValueError("--frame-step is for --home LOWER_SEQ")
+    missing = [f for f, v in (("--source", args.source), ("--seeds", args.seeds)) if v is None]
+    if missing:
+        raise ValueError(f"adapting on training scenes needs {' and '.join(missing)} (or adapt in a home with "
+                         "--home LOWER_SEQ --map PERSON_MAP)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -44,12 +106,33 @@ def run(args: argparse.Namespace) -> int:
 
     from semmatch.adapt import fine_tune, robot_training_views
 
+    _check_mode(args)
     if Path(args.out).resolve() == Path(args.model).resolve():
         raise ValueError(f"--out {args.out}: refusing to overwrite the network being adapted")
-    robot = robot_training_views(args.model, kinds=args.kinds, seeds=args.seeds, sources=[args.source],
-                                 n_frames=args.frames, seed=args.seed, progress=not args.quiet)
+    if args.home is not None:
+        return _run_home(args)
+    kinds = args.kinds or ["living_room", "bedroom", "office", "apartment"]
+    robot = robot_training_views(args.model, kinds=kinds, seeds=args.seeds, sources=[args.source],
+                                 n_frames=args.frames or 40, seed=args.seed, progress=not args.quiet)
     out = fine_tune(args.model, robot, args.source, args.out, steps=args.steps, batch_size=args.batch_size,
                     lr=args.lr, upper_share=args.upper_share, seed=args.seed, progress=not args.quiet)
     print(f"{out}: {args.model} adapted with {args.source} labels on {len(robot.views)} robot frames "
           f"({robot.coverage[args.source]:.0%} of their pixels labelled)")
+    return 0
+
+
+def _run_home(args: argparse.Namespace) -> int:
+    import torch
+
+    from semmatch.adapt import adapt_in_home
+
+    source = args.source or "3d-neighborhood"
+    out = adapt_in_home(args.model, args.home, args.map, args.out, source=source, frames=args.frames,
+                        frame_step=args.frame_step, steps=args.steps, batch_size=args.batch_size, lr=args.lr,
+                        upper_share=args.upper_share, seed=args.seed, progress=not args.quiet,
+                        cache_dir=args.views_cache or "checkpoint-if-present")
+    a = torch.load(out, map_location="cpu", weights_only=True)["adapted"]
+    print(f"{out}: {args.model} adapted in {a['scenes'][0]} with {source} labels from {args.map} on "
+          f"{a['frames']} robot frames ({a['label_coverage']:.0%} of their pixels with depth labelled), "
+          f"{a['steps']} steps in {a['seconds']:.0f} s")
     return 0

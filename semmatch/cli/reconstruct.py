@@ -217,7 +217,10 @@ def _run(args: argparse.Namespace) -> int:
         device=args.device,
     )
     m = extract(vol, "mesh", min_weight=args.min_weight)
-    write_map(args.out, m)
+    from semmatch.io.sequences import sequence_scene
+
+    scene = sequence_scene(args.seq)  # the map names the home it is of (semmatch adapt --home checks it)
+    write_map(args.out, m, scene=scene)
     if args.rgb_out:
         write_map(args.rgb_out, m, colors="rgb")
     if args.points_out:

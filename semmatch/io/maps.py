@@ -147,6 +147,38 @@ _PLY_SIZES = {"char": 1, "int8": 1, "uchar": 1, "uint8": 1, "short": 2, "int16":
 _PLY_MAX_LINE = 64 * 1024
 
 
+#: header comment naming the scene a map is of (``comment scene NAME``)
+_SCENE_COMMENT = "scene"
+
+
+def map_scene(path: PathLike) -> str | None:
+    """The scene (home) a semantic PLY map says it is of: its header comment ``scene NAME``.
+
+    Parameters
+    ----------
+    path : path
+        A PLY map (:func:`write_map` with ``scene=`` writes the comment; ``semmatch reconstruct``
+        does when its sequence names its scene).
+
+    Returns
+    -------
+    str or None
+        The scene name, or None when the header has no such comment (or is not a PLY header).
+    """
+    with open(path, "rb") as fh:
+        if fh.read(3) != b"ply":
+            return None
+        fh.seek(0)
+        for _ in range(10_000):
+            ln = fh.readline(_PLY_MAX_LINE + 1)
+            if not ln or ln.strip() == b"end_header":
+                return None
+            tok = ln.decode("ascii", errors="replace").split(None, 2)
+            if len(tok) == 3 and tok[0] == "comment" and tok[1] == _SCENE_COMMENT:
+                return tok[2].strip()
+    return None
+
+
 def check_ply_header(path: PathLike) -> None:
     """Refuse a PLY whose header claims more elements than the file can hold, before parsing it.
 
@@ -316,6 +348,7 @@ def write_map(
     colors: str = "labels",
     binary: bool = True,
     canonical: bool = False,
+    scene: str | None = None,
 ) -> Path:
     """Write a semantic map as PLY: vertex colours + ``label`` (uchar) property, atomically.
 
@@ -335,6 +368,9 @@ def write_map(
         the same content always gives the same bytes (the reconstructions of
         :mod:`semmatch.fusion` are written so). Off by default: a mesh whose triangle order means
         something (a scene's per-triangle data) keeps it.
+    scene : str, optional
+        The scene (home) the map is of, written as the header comment ``scene NAME`` and read
+        back by :func:`map_scene`; none by default.
     """
     from plyfile import PlyData, PlyElement
 
@@ -364,7 +400,12 @@ def write_map(
         f = np.empty(len(m.faces), dtype=[("vertex_indices", "i4", (3,))])
         f["vertex_indices"] = m.faces
         elements.append(PlyElement.describe(f, "face"))
-    ply = PlyData(elements, text=not binary, byte_order="<", comments=["semmatch semantic map; label = category id"])
+    comments = ["semmatch semantic map; label = category id"]
+    if scene is not None:
+        if not scene.strip() or any(c in scene for c in "\r\n"):
+            raise ValueError(f"scene must be a non-empty single line, got {scene!r}")
+        comments.append(f"{_SCENE_COMMENT} {scene.strip()}")
+    ply = PlyData(elements, text=not binary, byte_order="<", comments=comments)
     path = Path(path)
     with atomic_path(path) as tmp:
         if binary and m.is_mesh:

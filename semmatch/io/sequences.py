@@ -45,7 +45,7 @@ from .images import (
 )
 from .outputs import temp_dir
 
-__all__ = ['Frame', 'SequenceReader', 'InMemorySequence', 'SequenceWriter', 'read_intrinsics', 'write_intrinsics', 'read_tum', 'write_tum', 'read_labels_folder', 'write_labels_folder', 'frame_index', 'is_sequence', 'read_sequence', 'listed_file']
+__all__ = ['Frame', 'SequenceReader', 'InMemorySequence', 'SequenceWriter', 'read_intrinsics', 'write_intrinsics', 'read_tum', 'write_tum', 'read_labels_folder', 'write_labels_folder', 'frame_index', 'is_sequence', 'read_sequence', 'listed_file', 'sequence_scene']
 
 PathLike = str | os.PathLike
 
@@ -196,6 +196,27 @@ def is_sequence(path: PathLike) -> bool:
     """True when ``path`` holds a (complete) sequence folder."""
     p = Path(path)
     return (p / "intrinsics.json").is_file() and (p / "poses.txt").is_file()
+
+
+def sequence_scene(path: PathLike) -> str | None:
+    """The scene (home) a sequence folder says it shows: ``scene`` of its ``meta.json``.
+
+    Parameters
+    ----------
+    path : path
+        A sequence folder (``semmatch simulate`` writes ``meta.json``; a recording may have none).
+
+    Returns
+    -------
+    str or None
+        The scene name, or None without a readable ``meta.json`` naming one.
+    """
+    p = Path(path) / "meta.json"
+    try:
+        scene = json.loads(p.read_text()).get("scene")
+    except (OSError, ValueError, AttributeError):
+        return None
+    return scene if isinstance(scene, str) and scene.strip() else None
 
 
 class SequenceReader(_SequenceABC):

@@ -1,0 +1,78 @@
+"""Time ``semmatch adapt --home`` on one simulated home (issue 38 item 5: <= 3 min per home).
+
+``python scripts/bench_adapt_home.py OUT [--model models/full/compact.pt] [--frames 60] [--size 320x240]``
+
+Writes a person/robot pair of one procedural home (``semmatch simulate --pair``) and the person's map
+(``semmatch reconstruct`` of the person's tour with its labels) into OUT: the home's setup, not timed
+as adaptation. The network's human-height training views, which every fine-tuning step mixes in, are
+rendered once per machine into a views cache (``--cache-dir``, default OUT/cache; the checkpoint is
+copied into OUT with that cache recorded, so nothing is read or written where it was trained): timed
+apart as the first run's extra cost. Then :func:`semmatch.adapt.adapt_in_home` is timed: the
+per-home cost. Prints and writes OUT/bench_adapt_home.json with the load average at start and end
+(a busy machine's times are upper bounds).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import time
+from pathlib import Path
+
+
+def main() -> None:
+    import torch
+
+    from semmatch.adapt import adapt_in_home
+    from semmatch.cli import main as cli
+    from semmatch.segment.training import TrainConfig, build_views
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("out", type=Path, help="work folder (the home, the map, the checkpoints, the timings)")
+    ap.add_argument("--model", type=Path, default=Path("models/full/compact.pt"), help="network to adapt")
+    ap.add_argument("--kind", default="apartment", help="procedural home kind (default %(default)s)")
+    ap.add_argument("--seed", type=int, default=9101, help="home seed (default %(default)s)")
+    ap.add_argument("--frames", type=int, default=60, help="frames of each tour (default %(default)s)")
+    ap.add_argument("--size", default="320x240", help="image size (default %(default)s)")
+    ap.add_argument("--steps", type=int, default=400, help="fine-tuning steps (default %(default)s)")
+    ap.add_argument("--cache-dir", type=Path, default=None, help="views cache (default OUT/cache)")
+    args = ap.parse_args()
+    out = args.out
+    out.mkdir(parents=True, exist_ok=True)
+    res: dict = {"load_start": os.getloadavg(), "threads": torch.get_num_threads(), "model": str(args.model),
+                 "kind": args.kind, "seed": args.seed, "frames": args.frames, "size": args.size, "steps": args.steps}
+    t = time.perf_counter()
+    pair = out / "pair"
+    if not (pair / "lower" / "poses.txt").is_file():
+        assert cli(["simulate", "--kind", args.kind, "--seed", str(args.seed), "--pair", "--frames", str(args.frames),
+                    "--size", args.size, "--out", str(pair), "--quiet", "--overwrite"]) == 0
+    if not (out / "map.ply").is_file():
+        assert cli(["reconstruct", str(pair / "upper"), "--out", str(out / "map.ply"), "--quiet"]) == 0
+    res["setup_s"] = time.perf_counter() - t
+
+    ckpt = torch.load(args.model, map_location="cpu", weights_only=True)
+    ckpt["train_config"]["cache_dir"] = str(args.cache_dir or out / "cache")
+    model = out / "model.pt"
+    torch.save(ckpt, model)
+    known = set(TrainConfig.__dataclass_fields__)
+    cfg = TrainConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in ckpt["train_config"].items()
+                         if k in known})
+    cfg.progress = False
+    t = time.perf_counter()
+    build_views(cfg)
+    res["training_views_first_run_s"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    adapted = adapt_in_home(model, pair / "lower", out / "map.ply", out / "adapted.pt", steps=args.steps,
+                            progress=False)
+    res["adapt_in_home_s"] = time.perf_counter() - t
+    a = torch.load(adapted, map_location="cpu", weights_only=True)["adapted"]
+    res.update(fine_tune_loop_s=a["seconds"], label_coverage=a["label_coverage"], robot_frames=a["frames"],
+               load_end=os.getloadavg())
+    (out / "bench_adapt_home.json").write_text(json.dumps(res, indent=2) + "\n")
+    print(json.dumps(res, indent=2))
+
+
+if __name__ == "__main__":
+    main()
