@@ -36,9 +36,9 @@ def register(sub) -> None:
     p = sub.add_parser(
         "adapt",
         help="fine-tune a segmentation network to the robot's viewpoint with transferred labels",
-        description="Fine-tune a network on the robot's frames labelled from the person's semantic map, half of "
-        "each batch staying the network's human-height training views. Either on rendered training scenes "
-        "(--seeds) or in one home the person has mapped (--home LOWER_SEQ --map PERSON_MAP).",
+        description="Fine-tune a network on the robot's frames labelled from the person's semantic map,\n"
+        "half of each batch staying the network's human-height training views. Either on rendered\n"
+        "training scenes (--seeds) or in one home the person has mapped (--home LOWER_SEQ --map PERSON_MAP).",
         epilog=_EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
