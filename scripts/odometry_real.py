@@ -9,7 +9,7 @@ folder) from the first frame's true pose, and is scored against the recording's 
 (ATE after rigid alignment, RPE over one frame; frames without ground truth are skipped and no
 RPE pair spans a gap). Methods (``--variants``, comma-separated):
 
-- ``default``: :func:`semmatch.odometry.estimate_poses` with its defaults (hybrid residual,
+- ``default``: :func:`semmatch.poses.odometry.estimate_poses` with its defaults (hybrid residual,
   point-to-plane as fallback, pose graph);
 - ``chained``: the same without the pose graph;
 - ``ptp-misfit``: the earlier default (point-to-plane first, the point-to-plane/hybrid estimate
@@ -111,9 +111,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--quiet", action="store_true")
     args = ap.parse_args(argv)
 
-    from semmatch.odometry import ground_truth_poses
-    from semmatch.recordings import read_recording
-    from semmatch.trajectory_metrics import trajectory_errors
+    from semmatch.io.recordings import read_recording
+    from semmatch.poses.odometry import ground_truth_poses
+    from semmatch.poses.trajectory_metrics import trajectory_errors
 
     full = read_recording(args.recording)
     a, _, b = args.frames.partition(":")
@@ -144,7 +144,7 @@ def main(argv: list[str] | None = None) -> int:
         if name == "open3d":
             est = open3d_plain(seq, gt[0], depth_max=args.depth_max, prior=prior, progress=not args.quiet)
         else:
-            from semmatch.odometry import estimate_poses
+            from semmatch.poses.odometry import estimate_poses
 
             est = estimate_poses(seq, init_pose=gt[0], depth_max=args.depth_max, downsample=args.downsample,
                                  prior=prior, progress=not args.quiet, **VARIANTS[name])

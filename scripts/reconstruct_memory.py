@@ -35,7 +35,7 @@ def main(argv: list[str] | None = None) -> int:
     if timer is None:
         print("error: /usr/bin/time (GNU time) is needed for the peak memory", file=sys.stderr)
         return 2
-    from semmatch.recordings import read_recording
+    from semmatch.io.recordings import read_recording
 
     seq = read_recording(args.recording)
     h, w = seq[0].depth.shape

@@ -27,6 +27,9 @@ runs with the thread limits of :func:`semmatch.threads.configure` (``"worker"``)
 The per-frame pool inside one sequence (``transfer_sequence(..., jobs=N)``) stays a process pool
 (:mod:`semmatch.workers`): its tasks are milliseconds long and share one large map index, which a
 pool initialiser hands each worker once.
+
+:func:`default_device` names the Open3D device the GPU-capable kernels (fusion, odometry) use
+by default.
 """
 
 from __future__ import annotations
@@ -40,7 +43,8 @@ from collections.abc import Callable, Iterable
 from typing import Any
 
 __all__ = ["map_tasks", "resolve_scheduler", "check_scheduler", "SCHEDULER_ENV", "WORKER_TIMEOUT_ENV",
-           "ClusterError", "close_local_cluster", "pin_to_cpu"]
+           "ClusterError", "close_local_cluster", "pin_to_cpu",
+           "default_device"]
 
 #: environment variable naming a Dask scheduler address to run per-scene tasks on
 SCHEDULER_ENV = "SEMMATCH_SCHEDULER"
@@ -63,6 +67,13 @@ class ClusterError(ValueError):
 _LOCAL: dict = {}  # "client", "cluster", "workers", "pid" of the process's local cluster
 
 
+def default_device() -> str:
+    """``"CUDA:0"`` when Open3D was built with CUDA and a GPU is present, else ``"CPU:0"``."""
+    import open3d as o3d
+
+    return "CUDA:0" if o3d.core.cuda.is_available() else "CPU:0"
+
+
 def resolve_scheduler(scheduler: str | None = None) -> str | None:
     """The scheduler address to use: the argument, else ``SEMMATCH_SCHEDULER``, else None (local)."""
     addr = scheduler if scheduler not in (None, "") else os.environ.get(SCHEDULER_ENV) or None
@@ -75,7 +86,7 @@ def dask_setup(worker) -> None:
     Each worker is pinned to one CPU (:func:`pin_to_cpu`, by its index in the cluster), so the
     workers stop competing for the cores (stages 04, 05 and 07 ran 9-28 % faster pinned, 2026-11-25). Pinning
     is not what makes the real-like chain repeatable: the odometry, the registration and the
-    real-like scene tasks limit Open3D to one thread themselves (:mod:`semmatch.rgbd_odometry`).
+    real-like scene tasks limit Open3D to one thread themselves (:mod:`semmatch.poses.rgbd_odometry`).
     """
     from .threads import configure
     from .workers import die_with_parent

@@ -26,7 +26,6 @@ __all__ = [
     "voxel_keys",
     "pack_keys",
     "unpack_keys",
-    "cluster_dbscan",
 ]
 
 
@@ -331,25 +330,3 @@ def unpack_keys(packed: np.ndarray) -> np.ndarray:
     p = np.asarray(packed, dtype=np.int64)
     mask = (1 << 21) - 1
     return np.stack([(p >> 42) & mask, (p >> 21) & mask, p & mask], axis=1) - (1 << 20)
-
-
-def cluster_dbscan(points: np.ndarray, eps: float, min_points: int) -> np.ndarray:
-    """DBSCAN cluster id of every point (-1 = noise), the labels of Open3D ``cluster_dbscan``.
-
-    Computed by the compiled kernel of :func:`semmatch.dbscan.dbscan_labels`.
-
-    Parameters
-    ----------
-    points : float (N,3)
-    eps : float
-        Neighbourhood radius (metres).
-    min_points : int
-        Core-point threshold (1: single linkage at ``eps``).
-
-    Returns
-    -------
-    int64 (N,)
-    """
-    from .dbscan import dbscan_labels
-
-    return dbscan_labels(points, eps, min_points)

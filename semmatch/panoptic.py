@@ -39,9 +39,10 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .geometry import Intrinsics, check_pose, cluster_dbscan, pack_keys, voxel_keys
+from .geometry import Intrinsics, check_pose, pack_keys, voxel_keys
 from .io import Frame, SemanticMap, read_map
 from .labels import NAMES, NUM_CLASSES, STUFF_CLASSES, THING_CLASSES
+from .transfer.dbscan import dbscan_labels
 from .transfer.frames import check_frame
 from .transfer.index import MapIndex, prepare
 from .transfer.registry import transfer_frame
@@ -126,7 +127,7 @@ def segment_instances(
         sel = np.flatnonzero(m.labels == c)
         if len(sel) < max(int(min_vertices), 1):
             continue
-        cl = cluster_dbscan(m.points[sel], eps, min_points)
+        cl = dbscan_labels(m.points[sel], eps, min_points)
         if (cl >= 0).sum() == 0:
             continue
         sizes = np.bincount(cl[cl >= 0])
@@ -186,7 +187,7 @@ def clean_instances(
             sel = in_c[inst[in_c] == i]
             if len(sel) >= min_vertices * 50:
                 continue  # a large instance: its fragments are rare and harmless, skip the DBSCAN
-            comp = cluster_dbscan(pts[sel], eps, 1)
+            comp = dbscan_labels(pts[sel], eps, 1)
             sizes = np.bincount(comp)
             for k in np.flatnonzero(sizes < min_vertices):
                 part = sel[comp == k]
@@ -461,7 +462,7 @@ def panoptic_quality(
     voxel_size : float
         Voxel edge (metres).
     grid_origin : float or (3,), optional
-        Corner of voxel (0, 0, 0), as :func:`semmatch.metrics.voxelize`.
+        Corner of voxel (0, 0, 0), as :func:`semmatch.evaluate.metrics.voxelize`.
     iou_threshold : float
         Matching threshold (0.5: matches are unique).
 

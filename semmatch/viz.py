@@ -188,8 +188,8 @@ def error_figure(
     counts are in its title and legend."""
     import plotly.graph_objects as go
 
+    from .evaluate.metrics import voxelize
     from .geometry import unpack_keys
-    from .metrics import voxelize
 
     g = voxelize(_as_map(reference), voxel_size, grid_origin=grid_origin)
     p = voxelize(_as_map(pred), voxel_size, grid_origin=grid_origin)

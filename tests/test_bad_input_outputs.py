@@ -468,7 +468,7 @@ def _tum(root: Path) -> Path:
 
 @pytest.mark.parametrize("entry", ["../outside.png", "/etc/hostname", "rgb/../../outside.png"])
 def test_tum_list_entries_outside_the_folder_are_refused(tmp_path, entry):
-    from semmatch.recordings import read_tum_rgbd
+    from semmatch.io.recordings import read_tum_rgbd
 
     root = _tum(tmp_path / "tum")
     shutil.copy(next((root / "rgb").iterdir()), tmp_path / "outside.png")
@@ -480,7 +480,7 @@ def test_tum_list_entries_outside_the_folder_are_refused(tmp_path, entry):
 
 
 def test_a_fifo_in_a_recording_is_refused_not_waited_on(tmp_path):
-    from semmatch.recordings import read_tum_rgbd
+    from semmatch.io.recordings import read_tum_rgbd
 
     root = _tum(tmp_path / "tum")
     frame = sorted((root / "rgb").iterdir())[0]

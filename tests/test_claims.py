@@ -8,6 +8,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from semmatch.evaluate.stats import bootstrap_ci, stratified_estimate, stratified_t_ci, t_test_pvalue
 from semmatch.experiments.claims import (
     CLAIMS,
     PLAN_FILE,
@@ -21,7 +22,6 @@ from semmatch.experiments.claims import (
     summarize_over_scenes,
     verdict_table,
 )
-from semmatch.stats import bootstrap_ci, stratified_estimate, stratified_t_ci, t_test_pvalue
 
 SCENES = [f"office_70{i:02d}" for i in range(6)]
 ALL_METHODS = ["2d-slic", "3d-projected-sp", "3d-slic", "dbscan", "3d-neighborhood"]

@@ -5,10 +5,10 @@ from __future__ import annotations
 
 import pytest
 
+from semmatch.evaluate.metrics import compare
 from semmatch.fusion import reconstruct
 from semmatch.geometry import DEFAULT_INTRINSICS
 from semmatch.io import Frame
-from semmatch.metrics import compare
 from semmatch.sim import Renderer, generate_scene, make_trajectory
 
 transfer_mod = pytest.importorskip("semmatch.transfer")

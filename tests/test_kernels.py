@@ -1,8 +1,8 @@
 """The compiled kernels against the library code they replace.
 
-DBSCAN (:mod:`semmatch.dbscan`) against Open3D ``cluster_dbscan``; voxelisation
+DBSCAN (:mod:`semmatch.transfer.dbscan`) against Open3D ``cluster_dbscan``; voxelisation
 (:mod:`semmatch.transfer.voxels`) against its NumPy formulation; RANSAC planes
-(:mod:`semmatch.planes`) on planes with outliers; the map index's float32 bounds test against
+(:mod:`semmatch.transfer.planes`) on planes with outliers; the map index's float32 bounds test against
 the float64 comparison.
 """
 
@@ -11,8 +11,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from semmatch.dbscan import dbscan_labels
-from semmatch.planes import ransac_plane
+from semmatch.transfer.dbscan import dbscan_labels
+from semmatch.transfer.planes import ransac_plane
 from semmatch.transfer.voxels import voxel_downsample
 
 

@@ -1,12 +1,12 @@
-"""semmatch.metrics: the paper's voxel measures (hand-counted cases), 2D pixel measures."""
+"""semmatch.evaluate.metrics: the paper's voxel measures (hand-counted cases), 2D pixel measures."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
+from semmatch.evaluate.metrics import compare, compare_dict_loop, pixel_metrics, voxelize
 from semmatch.io import SemanticMap, write_map
-from semmatch.metrics import compare, compare_dict_loop, pixel_metrics, voxelize
 
 VS = 0.05
 
@@ -196,8 +196,8 @@ def test_evaluate_cli_table_files_and_errors(tmp_path, rng, capsys):
 def test_grid_origin_moves_both_grids():
     """A surface on a voxel boundary, reconstructed 5 mm low, splits between two voxel layers;
     half a voxel off the boundary it does not."""
+    from semmatch.evaluate.metrics import compare
     from semmatch.io import SemanticMap
-    from semmatch.metrics import compare
 
     xy = np.stack(np.meshgrid(np.arange(0, 1, 0.01), np.arange(0, 1, 0.01)), -1).reshape(-1, 2)
     floor = SemanticMap(np.c_[xy, np.zeros(len(xy))], np.full(len(xy), 2))

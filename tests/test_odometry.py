@@ -1,4 +1,4 @@
-"""semmatch.odometry: trajectory errors, RGB-D pose estimation on a rendered sequence."""
+"""semmatch.poses.odometry: trajectory errors, RGB-D pose estimation on a rendered sequence."""
 
 from __future__ import annotations
 
@@ -7,10 +7,10 @@ import pytest
 
 from semmatch.geometry import DEFAULT_INTRINSICS, look_at
 from semmatch.io import Frame
-from semmatch.odometry import estimate_poses, shrink_frame
-from semmatch.pose_graph import refine_pose_graph
+from semmatch.poses.odometry import estimate_poses, shrink_frame
+from semmatch.poses.pose_graph import refine_pose_graph
+from semmatch.poses.trajectory_metrics import align_trajectory, ate, rpe, trajectory_errors
 from semmatch.sim import Renderer, generate_scene
-from semmatch.trajectory_metrics import align_trajectory, ate, rpe, trajectory_errors
 
 
 def circle_poses(n: int = 20) -> np.ndarray:
@@ -112,7 +112,7 @@ def test_tracking_on_shrunk_frames():
 def test_pose_graph_removes_drift_from_chained_poses():
     from scipy.spatial.transform import Rotation
 
-    from semmatch.odometry import _depth_mm
+    from semmatch.poses.odometry import _depth_mm
 
     frames, gt = rendered_slide(160, 120, 10)
     intr = frames[0].intrinsics
@@ -136,7 +136,7 @@ def test_pose_graph_removes_drift_from_chained_poses():
 
 def test_real_like_chain_on_a_noisy_simulated_sequence(tmp_path, capsys):
     from semmatch.io import read_sequence
-    from semmatch.odometry import real_like_chain
+    from semmatch.poses.odometry import real_like_chain
     from semmatch.sim import NoiseConfig, make_trajectory, simulate_sequence
 
     scene = generate_scene("living_room", 0)
@@ -179,7 +179,7 @@ def test_sensor_dropouts_are_bridged_not_tracked(recwarn):
 
 
 def test_rpe_pairs_never_span_a_gap_in_the_ground_truth():
-    from semmatch.trajectory_metrics import rpe_pairs
+    from semmatch.poses.trajectory_metrics import rpe_pairs
 
     gt = circle_poses(10)
     est = gt.copy()
@@ -196,7 +196,7 @@ def test_rpe_pairs_never_span_a_gap_in_the_ground_truth():
 
 
 def test_chain_is_anchored_where_the_ground_truth_starts():
-    from semmatch.odometry import anchor_to_ground_truth
+    from semmatch.poses.odometry import anchor_to_ground_truth
 
     gt = circle_poses(8)
     S = look_at([1.0, 2.0, 0.5], [3.0, 1.0, 0.0])
@@ -213,8 +213,8 @@ def test_chain_is_anchored_where_the_ground_truth_starts():
 
 
 def test_pose_graph_memory_is_bounded_and_does_not_change_the_poses():
-    from semmatch.odometry import _depth_mm
-    from semmatch.pose_graph import CompressedDepths
+    from semmatch.poses.odometry import _depth_mm
+    from semmatch.poses.pose_graph import CompressedDepths
 
     frames, gt = rendered_slide(160, 120, 13)
     intr = frames[0].intrinsics

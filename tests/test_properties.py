@@ -13,8 +13,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from semmatch.evaluate.metrics import MEASURES, compare, compare_dict_loop
 from semmatch.io import SemanticMap
-from semmatch.metrics import MEASURES, compare, compare_dict_loop
 
 pytestmark = pytest.mark.slow
 

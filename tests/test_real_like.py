@@ -126,7 +126,7 @@ def test_estimated_poses_do_not_depend_on_the_true_first_pose(tiny_root, tmp_pat
 
 def test_registration_errors_measure_a_known_error():
     rng = np.random.default_rng(0)
-    from semmatch.registration import rigid_perturbation
+    from semmatch.poses.registration import rigid_perturbation
 
     true_l = np.stack([rigid_perturbation(1.0, 30.0, center=rng.normal(size=3), seed=i) for i in range(10)])
     Au = rigid_perturbation(2.0, 40.0, center=np.zeros(3), seed=1)

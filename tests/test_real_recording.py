@@ -18,7 +18,7 @@ pytestmark = pytest.mark.skipif(not (DATA / "frame-000000.depth.png").is_file(),
 
 
 def test_red_kitchen_reads_as_a_7scenes_recording():
-    from semmatch.recordings import SevenScenesSequence, check_depth_scale, read_recording
+    from semmatch.io.recordings import SevenScenesSequence, check_depth_scale, read_recording
 
     seq = read_recording(DATA)
     assert isinstance(seq, SevenScenesSequence) and len(seq) >= 10
@@ -30,9 +30,9 @@ def test_red_kitchen_reads_as_a_7scenes_recording():
 
 
 def test_red_kitchen_first_frames_track_within_a_centimetre():
-    from semmatch.odometry import estimate_poses
-    from semmatch.recordings import SevenScenesSequence
-    from semmatch.trajectory_metrics import trajectory_errors
+    from semmatch.io.recordings import SevenScenesSequence
+    from semmatch.poses.odometry import estimate_poses
+    from semmatch.poses.trajectory_metrics import trajectory_errors
 
     seq = SevenScenesSequence(DATA, frames=slice(0, 6))
     est = estimate_poses(seq, init_pose=seq.poses[0], downsample=2, pose_graph=False)

@@ -1,4 +1,4 @@
-"""semmatch.recordings: TUM RGB-D folders (association, ground truth, intrinsics, bad input)."""
+"""semmatch.io.recordings: TUM RGB-D folders (association, ground truth, intrinsics, bad input)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import pytest
 
 from semmatch.geometry import Intrinsics, look_at
 from semmatch.io import write_depth, write_image, write_tum
-from semmatch.recordings import TUM_INTRINSICS, associate, interpolate_poses, is_tum_rgbd, read_tum_rgbd
+from semmatch.io.recordings import TUM_INTRINSICS, associate, interpolate_poses, is_tum_rgbd, read_tum_rgbd
 
 H, W = 48, 64
 
@@ -128,7 +128,7 @@ def write_7scenes(root, n=3, *, depth_mm=2000, holes=0.0, camera=True, poses=Tru
 
 
 def test_7scenes_folder_reads_frames_camera_and_poses(tmp_path):
-    from semmatch.recordings import SevenScenesSequence, is_7scenes, read_recording
+    from semmatch.io.recordings import SevenScenesSequence, is_7scenes, read_recording
 
     write_7scenes(tmp_path / "kitchen", 4)
     assert is_7scenes(tmp_path / "kitchen") and not is_tum_rgbd(tmp_path / "kitchen")
@@ -149,7 +149,7 @@ def test_7scenes_folder_reads_frames_camera_and_poses(tmp_path):
 
 
 def test_7scenes_without_camera_file_warns_and_names_the_camera(tmp_path):
-    from semmatch.recordings import SEVEN_SCENES_INTRINSICS, read_recording
+    from semmatch.io.recordings import SEVEN_SCENES_INTRINSICS, read_recording
 
     write_7scenes(tmp_path / "k", 2, camera=False)
     with pytest.warns(UserWarning, match=r"no intrinsics.json; ASSUMING the Microsoft 7-Scenes Kinect .*fx 585"):
@@ -158,7 +158,7 @@ def test_7scenes_without_camera_file_warns_and_names_the_camera(tmp_path):
 
 
 def test_65535_depth_is_a_hole_not_a_wrong_unit(tmp_path):
-    from semmatch.recordings import read_recording
+    from semmatch.io.recordings import read_recording
 
     write_7scenes(tmp_path / "k", 2, holes=0.6)  # 60 % of the pixels are holes
     f = read_recording(tmp_path / "k")[0]
@@ -167,7 +167,7 @@ def test_65535_depth_is_a_hole_not_a_wrong_unit(tmp_path):
 
 
 def test_tum_without_intrinsics_warns_and_short_names_select_the_camera(tmp_path):
-    from semmatch.recordings import tum_camera
+    from semmatch.io.recordings import tum_camera
 
     assert tum_camera("fr1_desk") == "freiburg1" and tum_camera("rgbd_dataset_freiburg3_long_office") == "freiburg3"
     assert tum_camera("FR2-xyz") == "freiburg2" and tum_camera("frame_12") is None and tum_camera("fr12") is None
@@ -194,7 +194,7 @@ def test_millimetre_depth_read_at_tum_scale_is_refused(tmp_path):
 
 def test_plain_folder_needs_its_camera(tmp_path):
     from semmatch.io import write_intrinsics
-    from semmatch.recordings import PlainFolderSequence, read_recording
+    from semmatch.io.recordings import PlainFolderSequence, read_recording
 
     root = tmp_path / "plain"
     for i in range(3):
@@ -221,7 +221,7 @@ def test_cli_points_to_estimate_poses_and_prints_plain_warnings(tmp_path, capsys
     err = capsys.readouterr().err
     assert "semmatch reconstruct: warning: " in err and "ASSUMING the Microsoft 7-Scenes Kinect" in err
     assert "warnings.warn" not in err and "UserWarning" not in err  # no Python source lines
-    assert "has no recorded poses; pass --estimate-poses" in err and "semmatch.odometry" not in err
+    assert "has no recorded poses; pass --estimate-poses" in err and "semmatch.poses.odometry" not in err
 
 
 def test_cli_anchors_the_chain_where_the_ground_truth_starts(tmp_path, capsys):

@@ -1,4 +1,4 @@
-"""semmatch.reference: the ground-truth mesh sampled where the lower camera observed it."""
+"""semmatch.evaluate.reference: the ground-truth mesh sampled where the lower camera observed it."""
 
 from __future__ import annotations
 
@@ -7,11 +7,11 @@ import pytest
 from scenes import box
 from scipy.spatial import cKDTree
 
+from semmatch.evaluate.metrics import compare
+from semmatch.evaluate.reference import observed_reference, sample_surface, triangle_labels
 from semmatch.fusion import reconstruct
 from semmatch.geometry import DEFAULT_INTRINSICS, backproject, look_at, project
 from semmatch.io import Frame, SemanticMap, SequenceWriter, read_map, read_sequence
-from semmatch.metrics import compare
-from semmatch.reference import observed_reference, sample_surface, triangle_labels
 from semmatch.sim import Scene, render_frames
 
 INTR = DEFAULT_INTRINSICS.scaled(160, 120)

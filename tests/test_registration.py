@@ -1,4 +1,4 @@
-"""semmatch.registration: global + ICP registration of two partial maps, known perturbations."""
+"""semmatch.poses.registration: global + ICP registration of two partial maps, known perturbations."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import pytest
 
 from semmatch.geometry import DEFAULT_INTRINSICS
 from semmatch.io import Frame, SemanticMap
-from semmatch.registration import Registration, register_maps, rigid_perturbation, transform_error
+from semmatch.poses.registration import Registration, register_maps, rigid_perturbation, transform_error
 
 
 def _angle_deg(R: np.ndarray) -> float:

@@ -1,4 +1,4 @@
-"""semmatch.rgbd_odometry: Open3D's multi-scale RGB-D odometry, repeatable from run to run."""
+"""semmatch.poses.rgbd_odometry: Open3D's multi-scale RGB-D odometry, repeatable from run to run."""
 
 from __future__ import annotations
 
@@ -7,8 +7,8 @@ import pytest
 from test_odometry import rendered_slide
 
 from semmatch.io import depth_to_uint16
-from semmatch.odometry import estimate_poses
-from semmatch.rgbd_odometry import _pyrdown_depth, multi_scale_odometry, open3d_threads, rgbd_pyramid
+from semmatch.poses.odometry import estimate_poses
+from semmatch.poses.rgbd_odometry import _pyrdown_depth, multi_scale_odometry, open3d_threads, rgbd_pyramid
 
 
 @pytest.fixture(scope="module")

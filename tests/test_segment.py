@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 import torch
 
+from semmatch.experiments.layout import Layout
 from semmatch.geometry import DEFAULT_INTRINSICS
 from semmatch.io import SequenceWriter, read_label_image, read_labels_folder, read_sequence
 from semmatch.labels import NUM_CLASSES
@@ -413,6 +414,7 @@ def test_a_shipped_network_of_the_same_config_is_used_without_training(shipped_t
     load_model(ckpts["compact"])  # weights_only loading of the installed copy
     assert shipping.apply_shipped_recipe(tmp_path / "data", shipped, ["compact"]) == {"compact": True}
     assert json.loads((tmp_path / "data" / "models" / "recipe.json").read_text())["flip"] == {"compact": True}
+    assert json.loads(Layout(tmp_path / "data").recipe.read_text())["flip"] == {"compact": True}  # the layout's file
     # retrain (make repro TRAIN=1) trains even a network whose shipped copy matches
     lines = []
     _, from_shipped = shipping.provide_networks({"compact": cfg}, shipped_dir=shipped, retrain=True,

@@ -105,7 +105,7 @@ def test_detectron2_segmenter_end_to_end():
 
 
 def test_pixel_scores_agree_with_semmatch_metrics():
-    from semmatch.metrics import pixel_metrics
+    from semmatch.evaluate.metrics import pixel_metrics
     from semmatch.segment.scores import confusion, scores
 
     rng = np.random.default_rng(0)

@@ -1,4 +1,4 @@
-"""semmatch.stats: stratified t intervals and tests, Holm, and percentile bootstrap intervals."""
+"""semmatch.evaluate.stats: stratified t intervals and tests, Holm, and percentile bootstrap intervals."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy import stats as st
 
-from semmatch.stats import (
+from semmatch.evaluate.stats import (
     INTERVAL_METHODS,
     bootstrap_ci,
     holm,

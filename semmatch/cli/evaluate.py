@@ -53,10 +53,10 @@ def _load_transform(path: str) -> np.ndarray:
 
 
 def results_table(results: dict[str, dict], *, per_class: bool = False):
-    """A pandas DataFrame (one row per prediction) from :func:`semmatch.metrics.compare` results."""
+    """A pandas DataFrame (one row per prediction) from :func:`semmatch.evaluate.metrics.compare` results."""
     import pandas as pd
 
-    from semmatch.metrics import MEASURES
+    from semmatch.evaluate.metrics import MEASURES
 
     rows = []
     for name, s in results.items():
@@ -70,7 +70,7 @@ def results_table(results: dict[str, dict], *, per_class: bool = False):
 
 
 def check_scorable(gt: str, results: dict[str, dict]) -> list[str]:
-    """Why scores of :func:`semmatch.metrics.compare` would be zeros that measure nothing.
+    """Why scores of :func:`semmatch.evaluate.metrics.compare` would be zeros that measure nothing.
 
     Parameters
     ----------
@@ -91,7 +91,7 @@ def check_scorable(gt: str, results: dict[str, dict]) -> list[str]:
         The ground truth has no voxel of an evaluated class (all void, or another label table):
         no prediction can be scored against it.
     """
-    from semmatch.metrics import EVAL_CLASSES
+    from semmatch.evaluate.metrics import EVAL_CLASSES
 
     first = next(iter(results.values()), None)
     if first is not None and first["counts"]["gt"] == 0:
@@ -106,8 +106,8 @@ def run(args: argparse.Namespace) -> int:
     """Evaluate every prediction and print the table."""
     import pandas as pd
 
+    from semmatch.evaluate.metrics import compare, voxelize
     from semmatch.io import atomic_write_text
-    from semmatch.metrics import compare, voxelize
 
     T = _load_transform(args.transform) if args.transform else None
     gt = voxelize(args.gt, args.voxel_size)

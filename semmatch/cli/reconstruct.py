@@ -48,7 +48,7 @@ def register(sub) -> None:
     p.add_argument("--prior", action="store_true",
                    help="with --estimate-poses: seed the odometry with the recorded (rough) poses")
     p.add_argument("--poses-out", help="with --estimate-poses: write the estimated trajectory (TUM)")
-    from semmatch.rgbd_odometry import METHODS
+    from semmatch.poses.rgbd_odometry import METHODS
 
     p.add_argument("--residual", choices=METHODS, default="hybrid",
                    help="with --estimate-poses: residual of the frame-to-frame odometry (default hybrid; "
@@ -62,8 +62,8 @@ def register(sub) -> None:
 
 
 def open_any_sequence(path: str | Path):
-    """A sequence folder, a TUM RGB-D, 7-Scenes or plain folder (:func:`semmatch.recordings.read_recording`)."""
-    from semmatch.recordings import read_recording
+    """A sequence folder, a TUM RGB-D, 7-Scenes or plain folder (:func:`semmatch.io.recordings.read_recording`)."""
+    from semmatch.io.recordings import read_recording
 
     return read_recording(path)
 
@@ -185,8 +185,13 @@ def _run(args: argparse.Namespace) -> int:
     if args.estimate_poses:
 
         from semmatch.io import write_tum
-        from semmatch.odometry import anchor_to_ground_truth, estimate_poses, ground_truth_poses, start_pose
-        from semmatch.trajectory_metrics import rpe_pairs, trajectory_errors
+        from semmatch.poses.odometry import (
+            anchor_to_ground_truth,
+            estimate_poses,
+            ground_truth_poses,
+            start_pose,
+        )
+        from semmatch.poses.trajectory_metrics import rpe_pairs, trajectory_errors
 
         gt = ground_truth_poses(seq)  # for the start pose and the report only
         prior = seq.poses if args.prior and getattr(seq, "poses", None) is not None else None

@@ -17,9 +17,9 @@ import numpy as np
 import pandas as pd
 
 from ..adapt import RobotViews, adapted_name, fine_tune, robot_training_views
+from ..evaluate.metrics import MEASURES, compare
+from ..evaluate.stats import bootstrap_ci, paired_difference_ci, ratio_of_means_ci
 from ..io import read_sequence
-from ..metrics import MEASURES, compare
-from ..stats import bootstrap_ci, paired_difference_ci, ratio_of_means_ci
 from .layout import Layout
 from .synthetic import eval_grid_origin, reference_grid
 
@@ -368,7 +368,7 @@ def gap_table(per_scene: pd.DataFrame, network: str, *, low: float = 0.2, high: 
     unadapted at ``low``, paired over scenes) and ``change_high`` (the same at ``high``: negative
     = forgetting); ``gap_closed``: ``gain_low`` over the unadapted network's gap ``high - low``
     (mean gain over mean gap; its interval resamples the scenes with their gain and gap together,
-    :func:`semmatch.stats.ratio_of_means_ci`)."""
+    :func:`semmatch.evaluate.stats.ratio_of_means_ci`)."""
     def at(model: str, h: float) -> pd.Series:
         sel = per_scene[(per_scene["model"] == model) & np.isclose(per_scene["height"], h)]
         return sel.set_index("scene")[measure]

@@ -29,8 +29,8 @@ import numpy as np
 import pandas as pd
 import yaml
 
-from ..metrics import MEASURES
-from ..stats import holm, interval, scene_kind, stratified_estimate, t_test_pvalue
+from ..evaluate.metrics import MEASURES
+from ..evaluate.stats import holm, interval, scene_kind, stratified_estimate, t_test_pvalue
 from .paper import FIG3_MEAN_ACC, PAPER_MODEL_OF, TABLE2, TABLE3
 
 __all__ = [
@@ -150,7 +150,7 @@ class AnalysisPlan:
     sesoi : dict
         Smallest effect size of interest per measure.
     interval : str
-        Interval method (:data:`semmatch.stats.INTERVAL_METHODS`).
+        Interval method (:data:`semmatch.evaluate.stats.INTERVAL_METHODS`).
     confidence : float
         Level of the two-sided intervals.
     alpha : float
@@ -280,7 +280,7 @@ def summarize_over_scenes(
     seed : int, optional
         Seed of the bootstrap (bootstrap interval methods only).
     method : str, optional
-        Interval method (:func:`semmatch.stats.interval`); default the plan's (``t``). The
+        Interval method (:func:`semmatch.evaluate.stats.interval`); default the plan's (``t``). The
         ``stratified-*`` methods take the scene kinds from the ``scene`` column's names.
     confidence : float, optional
         Confidence level; default the plan's (0.95).

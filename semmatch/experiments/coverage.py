@@ -26,7 +26,7 @@ import numpy as np
 import pandas as pd
 from tqdm.auto import tqdm
 
-from ..stats import INTERVAL_METHODS, interval, scene_kind
+from ..evaluate.stats import INTERVAL_METHODS, interval, scene_kind
 
 __all__ = ["SCENARIOS", "development_comparisons", "coverage_study", "coverage_summary"]
 
@@ -120,7 +120,7 @@ def coverage_study(
     scenarios : sequence of str, optional
         Residual models (:data:`SCENARIOS`).
     methods : sequence of str, optional
-        Interval methods (:data:`semmatch.stats.INTERVAL_METHODS`).
+        Interval methods (:data:`semmatch.evaluate.stats.INTERVAL_METHODS`).
     reps : int, optional
         Simulated studies per comparison, scenario and size.
     n_resamples : int, optional

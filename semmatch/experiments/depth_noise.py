@@ -109,8 +109,8 @@ def depth_noise_study(
 def _depth_noise_scene(data_root: str, methods: tuple[str, ...], levels: tuple[float, ...], o: dict,
                        sid: str) -> list[dict]:
     """The score rows of one scene (a task of :func:`depth_noise_study`)."""
+    from ..evaluate.metrics import compare
     from ..fusion import reconstruct_many
-    from ..metrics import compare
     from ..sim.noise import NoiseConfig, noisy_depth
     from ..transfer import transfer_sequence
 

@@ -2,7 +2,7 @@
 
 On the clean synthetic data of the pipeline (ground-truth upper map, clean lower frames at their
 true poses) the upper map is moved by a rigid transform of known size
-(:func:`semmatch.registration.rigid_perturbation`, about the map's centroid): a series of
+(:func:`semmatch.poses.registration.rigid_perturbation`, about the map's centroid): a series of
 translations alone and a series of rotations alone, from the same seeded axis and direction.
 Every transfer method labels the lower frames from the moved map; the labelings of a scene are
 fused in one :func:`semmatch.fusion.reconstruct_many` call at the true lower poses and scored
@@ -176,9 +176,9 @@ def clean_scene_inputs(layout: Layout, sid: str, eval_voxel_size: float):
 def _misregistration_scene(data_root: str, methods: tuple[str, ...], cases: tuple[tuple[float, float], ...],
                            o: dict, sid: str) -> list[dict]:
     """The score rows of one scene (a task of :func:`misregistration_study`)."""
+    from ..evaluate.metrics import compare
     from ..fusion import reconstruct_many
-    from ..metrics import compare
-    from ..registration import rigid_perturbation
+    from ..poses.registration import rigid_perturbation
     from ..transfer import transfer_sequence
 
     layout = Layout(data_root)

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import pandas as pd
 
-from ..metrics import MEASURES
+from ..evaluate.metrics import MEASURES
 from ..transfer.registry import PAPER_FPS
 
 __all__ = ["TABLE1_FPS", "TABLE2", "TABLE3", "FIG3_MEAN_ACC", "table2_frame", "table3_frame"]

@@ -7,14 +7,14 @@ jittered recorded poses (``poses.txt``: what wheel odometry or an IMU would give
 ground truth enters the chain; it is what a real user can do:
 
 1. each recording's poses are estimated in its *own* frame (the first camera pose is the
-   identity) by RGB-D odometry (:func:`semmatch.odometry.estimate_poses`: frame-to-frame
+   identity) by RGB-D odometry (:func:`semmatch.poses.odometry.estimate_poses`: frame-to-frame
    tracking refined by a pose graph with loop closures), seeded by the frame-to-frame motions
    of its recorded poses (the prior; their absolute placement is never used) and gated by
    ``prior_tolerance`` (to be chosen on validation scenes: :func:`select_prior_tolerance`);
 2. each recording is fused in its own frame: the upper maps (labelled by ground truth and by
    each network) and the lower geometry;
 3. the lower reconstruction is registered onto the upper map from geometry alone
-   (:func:`semmatch.registration.register_maps`: FPFH + RANSAC, point-to-plane ICP), giving
+   (:func:`semmatch.poses.registration.register_maps`: FPFH + RANSAC, point-to-plane ICP), giving
    ``T_reg`` (lower frame -> upper frame);
 4. every method transfers labels from the upper map into the noisy lower frames placed at
    ``T_reg @ est_lower``; the lower labelings are fused at ``est_lower`` (the robot's own
@@ -144,7 +144,7 @@ def evaluate_real_like(
     fused_base : str or None
         Transfer method whose labels the ``fused`` rows use; None: no ``fused`` rows.
     registration_voxel, registration_seed, registration_restarts
-        ``voxel_size``, ``seed`` and ``restarts`` of :func:`semmatch.registration.register_maps`.
+        ``voxel_size``, ``seed`` and ``restarts`` of :func:`semmatch.poses.registration.register_maps`.
     jobs : int
         Scenes run as tasks of :func:`semmatch.engine.map_tasks` on ``jobs`` local worker
         processes (with one scene: its label transfer in ``jobs`` processes).
@@ -165,7 +165,7 @@ def evaluate_real_like(
         pose: its drift from the start), rpe_trans (m/frame), rpe_rot_deg (deg/frame), n_frames.
     registration : DataFrame
         One row per scene: scene; fitness, inlier_rmse (m), global_fitness, agreement,
-        restarts, seconds (:class:`semmatch.registration.Registration`); reg_trans_err_m,
+        restarts, seconds (:class:`semmatch.poses.registration.Registration`); reg_trans_err_m,
         reg_rot_err_deg, lower_in_upper_rmse_m (:func:`registration_errors` against the
         truth named in ``truth``: ``mesh``, each map fitted onto the scene's ground-truth mesh
         by :func:`world_alignment`, or ``traj``, the trajectory alignments alone, when the
@@ -212,9 +212,9 @@ def _real_like_scene(data_root: str, methods: tuple[str, ...], networks: tuple[s
                      o: dict, sid: str) -> tuple[list[dict], list[dict], dict]:
     """The real-like chain of one scene (a task of :func:`evaluate_real_like`): its score rows,
     trajectory rows and registration row. Open3D runs on one thread (its parallel sums and
-    RANSAC differ from run to run otherwise; :mod:`semmatch.rgbd_odometry`), so the task repeats
+    RANSAC differ from run to run otherwise; :mod:`semmatch.poses.rgbd_odometry`), so the task repeats
     its numbers run to run, on a pinned worker or not."""
-    from ..rgbd_odometry import open3d_threads
+    from ..poses.rgbd_odometry import open3d_threads
 
     with open3d_threads(1):
         return _real_like_scene_chain(data_root, methods, networks, sources, o, sid)
@@ -223,11 +223,11 @@ def _real_like_scene(data_root: str, methods: tuple[str, ...], networks: tuple[s
 def _real_like_scene_chain(data_root: str, methods: tuple[str, ...], networks: tuple[str, ...],
                            sources: tuple[str, ...], o: dict, sid: str) -> tuple[list[dict], list[dict], dict]:
     """:func:`_real_like_scene` under its thread limit."""
+    from ..evaluate.metrics import compare
     from ..fusion import reconstruct_many
-    from ..metrics import compare
-    from ..registration import register_maps
+    from ..poses.registration import register_maps
+    from ..poses.trajectory_metrics import trajectory_errors
     from ..segment import predict_sequence
-    from ..trajectory_metrics import trajectory_errors
     from ..transfer import prepare, transfer_sequence, write_fused_labels
 
     layout = Layout(data_root)
@@ -347,7 +347,7 @@ def score_real_like_against_mesh(
     """Score every stored real-like lower map against the ground-truth mesh where the robot looked.
 
     The reference is the scene's ground-truth mesh sampled every ``mesh_spacing`` metres and kept
-    where the robot's camera observed it (:func:`semmatch.reference.observed_reference` on the
+    where the robot's camera observed it (:func:`semmatch.evaluate.reference.observed_reference` on the
     clean ``lower`` sequence, which flies the same true poses as ``lower_noisy``; written by
     ``05_evaluate_synthetic`` as ``lower_maps/<scene>/mesh_reference.ply`` and reused when
     present). Each lower map, fused in the robot recording's own frame, is placed in the world
@@ -369,9 +369,9 @@ def score_real_like_against_mesh(
     DataFrame
         scene, model, method, reference (``mesh``) and the four measures.
     """
+    from ..evaluate.metrics import compare
+    from ..evaluate.reference import observed_reference
     from ..io import read_map, write_map
-    from ..metrics import compare
-    from ..reference import observed_reference
     from .layout import source_dir
 
     layout = Layout(data_root)

@@ -57,7 +57,7 @@ class PosedSequence(_SequenceABC):
         return self.seq.read_labels(i)
 
 
-#: the pipeline tracks on frames shrunk by this factor (:func:`semmatch.odometry.estimate_poses`;
+#: the pipeline tracks on frames shrunk by this factor (:func:`semmatch.poses.odometry.estimate_poses`;
 #: its cost and accuracy: docs/protocol.md, "Odometry")
 ODOMETRY_DOWNSAMPLE = 2
 
@@ -68,7 +68,7 @@ ODOMETRY_DOWNSAMPLE = 2
 ODOMETRY_RULE = dict(residual="point-to-plane", select="misfit")
 
 
-#: the odometry gate of :func:`semmatch.odometry.estimate_poses` (its default); set it from
+#: the odometry gate of :func:`semmatch.poses.odometry.estimate_poses` (its default); set it from
 #: validation scenes with :func:`select_prior_tolerance`
 DEFAULT_PRIOR_TOLERANCE: tuple[float, float] | None = (0.1, 10.0)
 
@@ -119,7 +119,7 @@ def estimate_or_load_poses(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Estimated poses of a noisy recording in its own frame (cached in ``out``), and its true poses.
 
-    The poses are :func:`semmatch.odometry.estimate_poses` from the identity (no known start
+    The poses are :func:`semmatch.poses.odometry.estimate_poses` from the identity (no known start
     pose) with the pose graph on, tracked on frames shrunk by :data:`ODOMETRY_DOWNSAMPLE`,
     seeded by the frame-to-frame motions of the recording's ``poses.txt`` and gated by
     ``prior_tolerance``. Name ``out`` with :func:`pose_cache_name` so that caches of other
@@ -135,7 +135,7 @@ def estimate_or_load_poses(
     seq : sequence, optional
         The frames of ``seq_dir`` when already read (e.g. an :class:`~semmatch.io.InMemorySequence`).
     prior_tolerance : (metres, degrees) or None
-        The odometry gate of :func:`~semmatch.odometry.estimate_poses`.
+        The odometry gate of :func:`~semmatch.poses.odometry.estimate_poses`.
     progress : bool
 
     Returns
@@ -148,7 +148,7 @@ def estimate_or_load_poses(
     FileNotFoundError
         ``seq_dir`` has no ``poses_gt.txt``.
     """
-    from ..odometry import estimate_poses
+    from ..poses.odometry import estimate_poses
 
     seq_dir, out = Path(seq_dir), Path(out)
     tol = check_tolerance(prior_tolerance)
@@ -184,7 +184,7 @@ def world_alignment(
     """Rigid transform taking a recording's own frame into the world (ground truth: for reporting only).
 
     The rigid alignment of the estimated trajectory onto the true one
-    (:func:`semmatch.trajectory_metrics.align_trajectory`; frames with a non-finite true pose skipped).
+    (:func:`semmatch.poses.trajectory_metrics.align_trajectory`; frames with a non-finite true pose skipped).
     With ``reconstruction`` and ``scene_mesh`` it is refined by point-to-plane ICP of the
     reconstruction's vertices onto points sampled on the ground-truth mesh (correspondences
     up to 10, 5, then 2.5 cm; about one mesh point per 4 cm^2): where the map actually lies,
@@ -208,7 +208,7 @@ def world_alignment(
     """
     import open3d as o3d
 
-    from ..trajectory_metrics import align_trajectory
+    from ..poses.trajectory_metrics import align_trajectory
 
     ok = finite_frames(est, true)
     A = align_trajectory(est[ok], true[ok])
@@ -279,13 +279,13 @@ def registration_errors(
     Returns
     -------
     dict
-        ``trans_err_m``, ``rot_err_deg`` (:func:`semmatch.registration.transform_error` of
+        ``trans_err_m``, ``rot_err_deg`` (:func:`semmatch.poses.registration.transform_error` of
         ``T_reg`` against the truth: the displacement of the lower frame's origin, the first
         lower camera, and the rotation angle), ``lower_in_upper_rmse_m`` (RMSE of the lower
         camera positions mapped into the upper frame, ``T_reg @ est_lower``, against their true
         positions there, ``inv(upper_to_world) @ true_lower``), ``true_transform`` (4, 4).
     """
-    from ..registration import transform_error
+    from ..poses.registration import transform_error
 
     truth = np.linalg.inv(upper_to_world) @ lower_to_world
     dt, dr = transform_error(T_reg, truth)
@@ -339,8 +339,8 @@ def select_prior_tolerance(
     FileNotFoundError
         A scene without a recording or its ``poses_gt.txt``.
     """
-    from ..odometry import estimate_poses
-    from ..trajectory_metrics import trajectory_errors
+    from ..poses.odometry import estimate_poses
+    from ..poses.trajectory_metrics import trajectory_errors
 
     cands = [check_tolerance(c) for c in candidates]
     if not cands:

@@ -11,8 +11,8 @@ from pathlib import Path
 
 import pandas as pd
 
+from ..evaluate.metrics import MEASURES, VoxelGrid
 from ..io import SemanticMap, read_map, read_sequence
-from ..metrics import MEASURES, VoxelGrid
 from .layout import GT, ROUTES, Layout, model_name
 
 __all__ = [
@@ -28,7 +28,7 @@ __all__ = [
     "average_over_scenes",
 ]
 
-MEASURE_COLUMNS = MEASURES  # the paper's four measures (semmatch.metrics.MEASURES)
+MEASURE_COLUMNS = MEASURES  # the paper's four measures (semmatch.evaluate.metrics.MEASURES)
 
 
 def eval_grid_origin(voxel_size: float) -> tuple[float, float, float]:
@@ -43,7 +43,7 @@ def eval_grid_origin(voxel_size: float) -> tuple[float, float, float]:
 
 
 def _scores(gt, pred, voxel_size: float) -> dict:
-    from ..metrics import compare
+    from ..evaluate.metrics import compare
 
     s = compare(gt, pred, voxel_size=voxel_size, grid_origin=eval_grid_origin(voxel_size))
     return {k: float(s[k]) for k in MEASURE_COLUMNS}
@@ -85,8 +85,8 @@ def reconstruct_upper_maps(
 def _upper_maps_scene(data_root: str, networks: tuple[str, ...], voxel_size: float, eval_voxel_size: float,
                       sid: str) -> list[dict]:
     """The upper maps of one scene and their scores (a task of :func:`reconstruct_upper_maps`)."""
+    from ..evaluate.metrics import pixel_metrics
     from ..fusion import reconstruct_many
-    from ..metrics import pixel_metrics
     from ..segment import predict_sequence
 
     layout = Layout(data_root)
@@ -221,7 +221,7 @@ def reconstruct_lower_maps(
     ``lower_maps/<scene>/<source>/<method>.ply`` and the independent references
     ``mesh_reference.ply`` / ``upper_mesh_reference.ply``: the ground-truth scene mesh sampled
     every ``mesh_spacing`` metres and kept where the lower / upper camera observed it
-    (:func:`semmatch.reference.observed_reference`), which shares no geometry with any fusion.
+    (:func:`semmatch.evaluate.reference.observed_reference`), which shares no geometry with any fusion.
     The same under ``shared_route/`` for the route ablation. Scenes are tasks of
     :func:`semmatch.engine.map_tasks` (``jobs`` local processes or the cluster at ``scheduler``).
     """
@@ -238,9 +238,9 @@ def reconstruct_lower_maps(
 def _lower_maps_scene(data_root: str, methods: tuple[str, ...], networks: tuple[str, ...], voxel_size: float,
                       fused_base: str, mesh_spacing: float, sid: str) -> None:
     """The lower maps and references of one scene (a task of :func:`reconstruct_lower_maps`)."""
+    from ..evaluate.reference import observed_reference
     from ..fusion import reconstruct_many
     from ..io import write_map
-    from ..reference import observed_reference
 
     layout = Layout(data_root)
     sd = layout.scenes / "eval" / sid
@@ -272,7 +272,7 @@ def evaluate_synthetic(
     """Table 2, per scene: every lower map against both references, plus the upper rows.
 
     Each reference is voxelised once per scene and compared with every map as a
-    :class:`~semmatch.metrics.VoxelGrid` (the same numbers as voxelising it per comparison).
+    :class:`~semmatch.evaluate.metrics.VoxelGrid` (the same numbers as voxelising it per comparison).
     Scenes are tasks of :func:`semmatch.engine.map_tasks` (``jobs`` local processes or the
     cluster at ``scheduler``); the rows come back in scene order.
 
@@ -316,7 +316,7 @@ def evaluate_synthetic(
 def reference_grid(ref: SemanticMap | str | Path, voxel_size: float) -> VoxelGrid:
     """A reference map voxelised once on the evaluation grid (:func:`eval_grid_origin`).
 
-    Pass the result to :func:`semmatch.metrics.compare` as ``gt_map`` for every map scored
+    Pass the result to :func:`semmatch.evaluate.metrics.compare` as ``gt_map`` for every map scored
     against that reference: the numbers equal voxelising it per comparison.
 
     Parameters
@@ -330,7 +330,7 @@ def reference_grid(ref: SemanticMap | str | Path, voxel_size: float) -> VoxelGri
     -------
     VoxelGrid
     """
-    from ..metrics import voxelize
+    from ..evaluate.metrics import voxelize
 
     return voxelize(ref, voxel_size, grid_origin=eval_grid_origin(voxel_size))
 

@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pandas as pd
 
+from ..evaluate.metrics import MEASURES
 from ..io import atomic_write_text
-from ..metrics import MEASURES
 from .paper import PAPER_MODEL_OF, TABLE1_FPS, table2_frame, table3_frame
 
 __all__ = [

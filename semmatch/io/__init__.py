@@ -2,8 +2,8 @@
 
 Submodules, by what they handle: :mod:`~semmatch.io.files` (atomic writes, output folders that
 never replace what semmatch did not write), :mod:`~semmatch.io.images` (RGB, depth and palette
-label PNGs), :mod:`~semmatch.io.sequences` (intrinsics, TUM poses, frames, sequence readers and
-the writer, label folders), :mod:`~semmatch.io.maps` (semantic maps as PLY),
+label PNGs, the depth-unit check), :mod:`~semmatch.io.sequences` (intrinsics, TUM poses,
+frames, sequence readers and the writer, label folders), :mod:`~semmatch.io.maps` (semantic maps as PLY),
 :mod:`~semmatch.io.outputs` (the output policy of every command). Every public name
 is importable from ``semmatch.io`` itself.
 
@@ -23,6 +23,8 @@ from .files import (
     write_json,
 )
 from .images import (
+    DEPTH_UNIT_RANGE,
+    check_depth_units,
     depth_to_uint16,
     read_depth,
     read_image,
@@ -74,6 +76,8 @@ __all__ = [
     "read_depth",
     "write_depth",
     "depth_to_uint16",
+    "check_depth_units",
+    "DEPTH_UNIT_RANGE",
     "read_labels_folder",
     "write_labels_folder",
     "OUTPUT_MARKER",

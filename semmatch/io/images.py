@@ -11,7 +11,7 @@ import numpy as np
 from .files import atomic_path
 
 __all__ = ['read_image', 'read_rgb', 'write_image', 'read_label_image', 'write_label_image', 'read_depth', 'write_depth',
-           'depth_to_uint16']
+           'depth_to_uint16', 'check_depth_units', 'DEPTH_UNIT_RANGE']
 
 PathLike = str | os.PathLike
 
@@ -146,6 +146,45 @@ def depth_to_uint16(depth: np.ndarray, depth_scale: float = 1000.0) -> np.ndarra
     """
     d = np.where(np.isfinite(depth) & (depth > 0), depth, 0.0) * depth_scale
     return np.clip(np.rint(d), 0, 65535).astype(np.uint16)
+
+
+#: median depths outside this range (metres) mean the depth unit is wrong
+DEPTH_UNIT_RANGE = (0.05, 20.0)
+
+
+def check_depth_units(depth: np.ndarray, *, where: str = "depth") -> float:
+    """Check that a depth image is in metres; return its median valid depth.
+
+    Parameters
+    ----------
+    depth : ndarray (H, W)
+        Depth in metres, 0 or non-finite = no measurement.
+    where : str
+        What the image is (file, frame), for the message.
+
+    Returns
+    -------
+    float
+        The median valid depth (NaN when the image has no valid pixel).
+
+    Raises
+    ------
+    ValueError
+        When the median valid depth lies outside 0.05 .. 20 m: the depth was most likely saved
+        in another unit (millimetres read as metres, or a wrong ``depth_scale``).
+    """
+    d = np.asarray(depth)[::4, ::4]
+    d = d[np.isfinite(d) & (d > 0)]
+    if d.size == 0:
+        return float("nan")
+    med = float(np.median(d))
+    lo, hi = DEPTH_UNIT_RANGE
+    if not lo <= med <= hi:
+        raise ValueError(
+            f"{where}: median depth is {med:.4g} m, outside {lo}..{hi} m; the depth is most likely "
+            "in the wrong unit (check depth_scale: 1000 for millimetre PNGs, 5000 for TUM)"
+        )
+    return med
 
 
 def write_depth(path: PathLike, depth: np.ndarray, depth_scale: float = 1000.0) -> None:

@@ -94,7 +94,7 @@ def _method_curves(ax, df: pd.DataFrame, x: str, measure: str, *, scale: float, 
                    alpha: float) -> None:
     """One line per method: the mean of ``measure`` over scenes at each ``x`` (times ``scale``),
     with its t-interval band (the analysis plan's interval)."""
-    from ..stats import stratified_t_ci
+    from ..evaluate.stats import stratified_t_ci
 
     for method, g in df.groupby("method", sort=False):
         xs = sorted(g[x].unique())
@@ -109,7 +109,7 @@ def plot_misregistration(df: pd.DataFrame, path: str | Path, *, measure: str = "
     """Two panels: ``measure`` against translation and against rotation, one line per method.
 
     Each point is the mean over scenes with a ``confidence`` t-interval band over scenes (the
-    analysis plan's interval, :func:`semmatch.stats.stratified_t_ci`); the unperturbed case
+    analysis plan's interval, :func:`semmatch.evaluate.stats.stratified_t_ci`); the unperturbed case
     starts both series.
 
     Parameters

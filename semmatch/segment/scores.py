@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..evaluate.metrics import class_iou
 from ..labels import EVAL_CLASSES, NUM_CLASSES, VOID
-from ..metrics import class_iou
 
 __all__ = ["confusion", "scores"]
 
@@ -19,7 +19,7 @@ __all__ = ["confusion", "scores"]
 def confusion(gt: np.ndarray, pred: np.ndarray, num_classes: int = NUM_CLASSES) -> np.ndarray:
     """Confusion matrix ``M[g, p]`` (int64, rows = ground truth) of label images.
 
-    A thin alias of :func:`semmatch.metrics.pixel_confusion` (one image pair or ``(N,H,W)``
+    A thin alias of :func:`semmatch.evaluate.metrics.pixel_confusion` (one image pair or ``(N,H,W)``
     stacks).
 
     Raises
@@ -27,7 +27,7 @@ def confusion(gt: np.ndarray, pred: np.ndarray, num_classes: int = NUM_CLASSES) 
     ValueError
         If the shapes differ or a label lies outside ``0..num_classes-1``.
     """
-    from ..metrics import pixel_confusion
+    from ..evaluate.metrics import pixel_confusion
 
     return pixel_confusion(np.asarray(gt), np.asarray(pred), n_classes=num_classes)
 
@@ -46,7 +46,7 @@ def scores(conf: np.ndarray, classes: tuple[int, ...] = EVAL_CLASSES) -> dict:
     -------
     dict
         ``miou`` (mean IoU over the classes present in the ground truth or the prediction,
-        as :func:`semmatch.metrics.pixel_metrics`; ground-truth void is not scored), ``pixel_acc``
+        as :func:`semmatch.evaluate.metrics.pixel_metrics`; ground-truth void is not scored), ``pixel_acc``
         (fraction of ground-truth evaluation pixels labelled correctly), ``jaccard``
         (|C| / |G u P|), ``sorensen`` (2|C| / (|G| + |P|)), ``color_acc`` (|C| / |G n P|),
         ``mean_acc`` (mean of the last three, as the paper's Mean Acc.) and ``per_class_iou``

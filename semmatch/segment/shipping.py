@@ -282,8 +282,6 @@ def apply_shipped_recipe(data_root: str | os.PathLike, shipped_dir: str | os.Pat
     FileNotFoundError, ValueError
         No ``recipe.json`` in the shipped folder, or no choice in it for one of the networks.
     """
-    from ..experiments.layout import Layout
-
     src = Path(shipped_dir) / "recipe.json"
     if not src.is_file():
         raise FileNotFoundError(f"{src}: shipped networks without their recipe.json (flip choice)")
@@ -291,7 +289,9 @@ def apply_shipped_recipe(data_root: str | os.PathLike, shipped_dir: str | os.Pat
     missing = [n for n in networks if n not in shipped]
     if missing:
         raise ValueError(f"{src}: no flip choice for {', '.join(missing)}")
-    recipe = Layout(data_root).recipe
+    # the data layout's recipe file (semmatch.experiments.layout.Layout.recipe; the segmentation
+    # code does not import the pipeline's layout, which imports it)
+    recipe = Path(data_root) / "models" / "recipe.json"
     known = json.loads(recipe.read_text()) if recipe.is_file() else {}
     choice = {n: bool(shipped[n]) for n in networks}
     flips = {**known.get("flip", {}), **choice}

@@ -16,9 +16,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from ..evaluate.metrics import MEASURES
 from ..geometry import DEFAULT_INTRINSICS, Intrinsics
 from ..io import read_sequence
-from ..metrics import MEASURES
 from ..progress import tqdm
 from .scores import confusion, scores
 

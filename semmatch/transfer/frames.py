@@ -104,7 +104,7 @@ def check_frame(frame: Frame, *, need_rgb: bool = True) -> FrameData:
     ValueError
         Missing pose, pose with NaN or a non-rotation block, image sizes that do not match the
         intrinsics, RGB that is not ``uint8 (H,W,3)``, depth whose median is not plausible in
-        metres (:func:`semmatch.fusion.check_depth_units`).
+        metres (:func:`semmatch.io.check_depth_units`).
     TypeError
         ``frame`` is not a Frame-like object.
     """
@@ -127,7 +127,7 @@ def check_frame(frame: Frame, *, need_rgb: bool = True) -> FrameData:
     if not np.issubdtype(depth.dtype, np.floating):
         raise ValueError(f"{name}: depth must be float metres, got {depth.dtype}")
     depth = depth.astype(np.float32, copy=False)
-    from ..fusion import check_depth_units
+    from ..io import check_depth_units
 
     check_depth_units(depth, where=name)  # millimetres read as metres would silently find no support
     valid = depth > 0  # NaN compares False

@@ -19,10 +19,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..geometry import cluster_dbscan, pixel_rays
-from ..planes import ransac_plane
+from ..geometry import pixel_rays
+from .dbscan import dbscan_labels
 from .frames import FrameData
 from .index import MapIndex
+from .planes import ransac_plane
 from .superpixels import skimage_slic, superpixels
 from .voting import paint, vote
 from .voxels import voxel_downsample
@@ -254,7 +255,7 @@ def _peel_planes(
 ):
     """RANSAC planes, each cut to its largest DBSCAN cluster (Alg. 3 step 4).
 
-    The plane comes from :func:`semmatch.planes.ransac_plane` (Open3D ``segment_plane``'s
+    The plane comes from :func:`semmatch.transfer.planes.ransac_plane` (Open3D ``segment_plane``'s
     algorithm, seeded by ``rng``) on at most ``sample`` random points of the remaining cloud;
     its inliers are then taken from the whole remaining cloud.
 
@@ -277,7 +278,7 @@ def _peel_planes(
         inliers = np.flatnonzero(dist <= distance)
         if len(inliers) < int(min_points):
             break
-        lab = cluster_dbscan(rest[inliers], eps, min_points)
+        lab = dbscan_labels(rest[inliers], eps, min_points)
         if (lab >= 0).sum() == 0:
             break  # too much noise: stop peeling (as the authors' code)
         best = np.bincount(lab[lab >= 0]).argmax()
@@ -318,7 +319,7 @@ def dbscan(
         eps=eps, min_points=min_points, sample=int(ransac_sample), rng=np.random.default_rng(seed),
     )
     if len(remaining):
-        lab = cluster_dbscan(cen[remaining], eps, min_points)
+        lab = dbscan_labels(cen[remaining], eps, min_points)
         cluster[remaining] = np.where(lab >= 0, lab + k, -1)
     n = int(cluster.max()) + 1
     winner, purity = vote(cluster, index.lookup(cen, exact=exact), n)

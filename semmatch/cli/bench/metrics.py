@@ -17,7 +17,7 @@ def register(sub) -> None:
         help="seconds to compare two semantic maps of N vertices (vectorised vs dict loop)",
         description="Sample two semantic point maps of N vertices on the surfaces of a procedural "
         "scene (the prediction with 1 cm noise and 10%% wrong labels), then time "
-        "semmatch.metrics.compare and the plain per-voxel dictionary evaluator on them.",
+        "semmatch.evaluate.metrics.compare and the plain per-voxel dictionary evaluator on them.",
     )
     p.add_argument("--vertices", type=int, default=500_000, help="vertices per map (default 500000)")
     p.add_argument("--voxel-size", type=float, default=0.05, help="voxel edge, metres (default 0.05)")
@@ -59,7 +59,7 @@ def surface_maps(n: int, *, scene_kind: str = "apartment", seed: int = 0):
 def run(args: argparse.Namespace) -> int:
     """Time both evaluators and print a table or JSON."""
     from semmatch.cli.bench import emit
-    from semmatch.metrics import MEASURES, compare, compare_dict_loop
+    from semmatch.evaluate.metrics import MEASURES, compare, compare_dict_loop
 
     if args.vertices < 1 or args.repeat < 1:
         raise ValueError("--vertices and --repeat must be >= 1")

@@ -1,0 +1,255 @@
+"""The package's layout and import graph: few loose top-level modules, no import circles between
+its parts, and old import paths kept only as deprecation shims that nothing of ours uses.
+
+The graph is read statically (``ast``) from every module of ``semmatch``, counting imports
+anywhere in a module (also those inside functions, which run only when called), but not those
+for type annotations only (``if TYPE_CHECKING:``), which never run. A *unit* is a
+top-level part: a subpackage (``semmatch.transfer``) or a loose module (``semmatch.geometry``).
+A *shim* is a module kept at an old path for one release: its body is a docstring and the call
+``_moved_module(__name__, "<new path>")`` (:func:`semmatch._moved_module`), nothing else.
+"""
+
+from __future__ import annotations
+
+import ast
+import json
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGE = ROOT / "semmatch"
+#: at most this many loose modules directly under semmatch/ (shims, __init__ and __main__ aside)
+MAX_LOOSE = 10
+#: import circles between modules inside one unit that predate the layout check (issue 39, item
+#: 6): each is an import made inside a function; this set may only shrink
+KNOWN_MODULE_CIRCLES = {
+    frozenset({"semmatch.sim.raster", "semmatch.sim.render"}),
+    frozenset({"semmatch.segment.shipping", "semmatch.segment.training"}),
+    frozenset({"semmatch.experiments.claims", "semmatch.experiments.tables"}),
+    frozenset({"semmatch.experiments.pipeline", "semmatch.experiments.snapshot"}),
+}
+
+
+def _modules() -> dict[str, tuple[Path, bool]]:
+    """Module name -> (source file, is a package) for every module of semmatch."""
+    out = {}
+    for f in sorted(PACKAGE.rglob("*.py")):
+        parts = list(f.relative_to(ROOT).with_suffix("").parts)
+        is_pkg = parts[-1] == "__init__"
+        out[".".join(parts[:-1] if is_pkg else parts)] = (f, is_pkg)
+    return out
+
+
+MODULES = _modules()
+
+
+def shim_target(path: Path) -> str | None:
+    """The new module path a shim aliases, or None when ``path`` is not a shim."""
+    body = ast.parse(path.read_text()).body
+    if body and isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant):
+        body = body[1:]  # the docstring
+    if (len(body) == 2 and isinstance(body[0], ast.ImportFrom) and body[0].module == "semmatch"
+            and [a.name for a in body[0].names] == ["_moved_module"]
+            and isinstance(body[1], ast.Expr) and isinstance(call := body[1].value, ast.Call)
+            and isinstance(call.func, ast.Name) and call.func.id == "_moved_module" and len(call.args) == 2
+            and isinstance(call.args[0], ast.Name) and call.args[0].id == "__name__"
+            and isinstance(call.args[1], ast.Constant) and isinstance(call.args[1].value, str)):
+        return call.args[1].value
+    return None
+
+
+SHIMS = {m: t for m, (f, _) in MODULES.items() if (t := shim_target(f)) is not None}
+
+
+def _resolve(name: str) -> str | None:
+    """The semmatch module ``name`` is, or is inside of (``semmatch.io.read_map`` -> ``semmatch.io``)."""
+    while name and name not in MODULES:
+        name = name.rpartition(".")[0]
+    return name or None
+
+
+def _runtime_nodes(tree: ast.AST):
+    """The nodes of ``tree`` outside ``if TYPE_CHECKING:`` blocks (imports for annotations only,
+    which never run)."""
+    todo = [tree]
+    while todo:
+        node = todo.pop()
+        yield node
+        for child in ast.iter_child_nodes(node):
+            if not (isinstance(child, ast.If) and isinstance(child.test, ast.Name) and child.test.id == "TYPE_CHECKING"):
+                todo.append(child)
+
+
+def _imports(tree: ast.AST, package: str) -> set[str]:
+    """The semmatch modules an AST imports (``from m import x``: ``m.x`` when ``x`` is a module)."""
+    out = set()
+    for node in _runtime_nodes(tree):
+        if isinstance(node, ast.Import):
+            names = [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                parts = package.split(".")
+                base = parts[: len(parts) - node.level + 1]
+                mod = ".".join(base + ([node.module] if node.module else []))
+            else:
+                mod = node.module or ""
+            names = [f"{mod}.{a.name}" if f"{mod}.{a.name}" in MODULES else mod for a in node.names]
+        else:
+            continue
+        out |= {r for n in names if n.startswith("semmatch") and (r := _resolve(n))}
+    return out
+
+
+def _graph() -> dict[str, set[str]]:
+    """Module -> the modules it imports, without the imports of a module's own parent packages
+    (Python runs those first anyway)."""
+    g = {}
+    for m, (f, is_pkg) in MODULES.items():
+        package = m if is_pkg else m.rpartition(".")[0]
+        deps = _imports(ast.parse(f.read_text(), filename=str(f)), package)
+        g[m] = {d for d in deps if d != m and not m.startswith(d + ".")}
+    return g
+
+
+def _circles(graph: dict[str, set[str]]) -> list[frozenset[str]]:
+    """The strongly connected components of more than one node (Tarjan, iterative)."""
+    index, low, stack, on, out = {}, {}, [], set(), []
+    for start in graph:
+        if start in index:
+            continue
+        work = [(start, iter(sorted(graph[start])))]
+        index[start] = low[start] = len(index)
+        stack.append(start)
+        on.add(start)
+        while work:
+            v, it = work[-1]
+            for w in it:
+                if w not in graph:
+                    continue
+                if w not in index:
+                    index[w] = low[w] = len(index)
+                    stack.append(w)
+                    on.add(w)
+                    work.append((w, iter(sorted(graph[w]))))
+                    break
+                if w in on:
+                    low[v] = min(low[v], index[w])
+            else:
+                work.pop()
+                if work:
+                    low[work[-1][0]] = min(low[work[-1][0]], low[v])
+                if low[v] == index[v]:
+                    comp = set()
+                    while True:
+                        w = stack.pop()
+                        on.discard(w)
+                        comp.add(w)
+                        if w == v:
+                            break
+                    if len(comp) > 1:
+                        out.append(frozenset(comp))
+    return out
+
+
+def _unit(module: str) -> str:
+    return ".".join(module.split(".")[:2])
+
+
+def test_shims_alias_existing_modules_and_nothing_else():
+    assert SHIMS, "no deprecation shim found: the old import paths must stay one release"
+    for old, new in SHIMS.items():
+        assert new in MODULES and new not in SHIMS, f"{old} aliases {new}, which is not a module of ours"
+        assert new.rpartition(".")[2] == old.rpartition(".")[2], f"{old} -> {new}: a move keeps the name"
+
+
+def test_at_most_ten_loose_top_level_modules():
+    loose = sorted(m for m, (_, is_pkg) in MODULES.items()
+                   if m.count(".") == 1 and not is_pkg and m not in SHIMS and m != "semmatch.__main__")
+    assert len(loose) <= MAX_LOOSE, f"{len(loose)} loose top-level modules (at most {MAX_LOOSE}): {loose}"
+
+
+def test_no_circles_between_the_packages_parts():
+    """No unit imports from a unit that imports it (no back arrows), also inside functions."""
+    g = _graph()
+    units: dict[str, set[str]] = {}
+    for m, deps in g.items():
+        if m == "semmatch":
+            continue
+        units.setdefault(_unit(m), set()).update(_unit(d) for d in deps if _unit(d) not in (_unit(m), "semmatch"))
+    circles = _circles(units)
+    assert not circles, f"import circles between parts of semmatch: {circles}"
+
+
+def test_no_new_circles_between_modules():
+    circles = set(_circles(_graph()))
+    assert circles <= KNOWN_MODULE_CIRCLES, f"new import circles between modules: {circles - KNOWN_MODULE_CIRCLES}"
+
+
+def test_the_circle_finder_finds_circles():
+    assert _circles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [frozenset("abc")]
+    assert _circles({"a": {"b"}, "b": set()}) == []
+
+
+def _code_files():
+    """(name, source) of every Python source of ours: package, tests, scripts, notebook cells."""
+    this = Path(__file__).resolve()
+    for folder in ("semmatch", "tests", "scripts"):
+        for f in sorted((ROOT / folder).rglob("*.py")):
+            if f.resolve() != this and f.relative_to(ROOT).with_suffix("").as_posix().replace("/", ".") not in SHIMS:
+                yield f.relative_to(ROOT).as_posix(), f.read_text()
+    for f in sorted((ROOT / "notebooks").glob("*.ipynb")):
+        cells = json.loads(f.read_text())["cells"]
+        yield f.relative_to(ROOT).as_posix(), "\n".join(
+            "".join(c["source"]) if isinstance(c["source"], list) else c["source"] for c in cells)
+
+
+def test_nothing_of_ours_uses_an_old_import_path():
+    """Package, tests, scripts and notebooks name the new paths only (imports, patch targets,
+    docstrings); the old ones are for users' code, for one release."""
+    old = re.compile(r"\b(" + "|".join(re.escape(s) for s in sorted(SHIMS)) + r")\b(?!\.py)")
+    found = [f"{name}: {m.group(1)}" for name, text in _code_files() for m in old.finditer(text)]
+    assert not found, "old import paths in use:\n" + "\n".join(found)
+
+
+def _run(code: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600, cwd=ROOT)
+
+
+@pytest.mark.slow
+def test_every_module_imports_without_a_shim():
+    """Importing every module of semmatch (not a shim) loads no shim: a DeprecationWarning from
+    one is an error here."""
+    names = sorted(m for m in MODULES if m not in SHIMS and not m.endswith("__main__"))
+    code = (
+        "import importlib, warnings\n"
+        "warnings.filterwarnings('error', r'semmatch\\.\\S+ has moved to', DeprecationWarning)\n"
+        f"for name in {names!r}:\n"
+        "    try:\n"
+        "        importlib.import_module(name)\n"
+        "    except ModuleNotFoundError as e:\n"
+        "        if (e.name or 'semmatch').startswith('semmatch'):\n"
+        "            raise\n"  # an optional third-party package (habitat_sim, detectron2) is fine
+    )
+    run = _run(code)
+    assert run.returncode == 0, run.stderr[-3000:]
+
+
+def test_old_import_paths_warn_and_give_the_new_module():
+    code = (
+        "import importlib, sys, warnings\n"
+        "import semmatch\n"
+        f"for old, new in {sorted(SHIMS.items())!r}:\n"
+        "    with warnings.catch_warnings(record=True) as w:\n"
+        "        warnings.simplefilter('always')\n"
+        "        mod = importlib.import_module(old)\n"
+        "    assert mod is sys.modules[new] is sys.modules[old], old\n"
+        "    msgs = [str(x.message) for x in w if issubclass(x.category, DeprecationWarning)]\n"
+        "    assert any(m.startswith(f'{old} has moved to {new}') for m in msgs), (old, msgs)\n"
+        "    assert all(x.filename != semmatch.__file__ for x in w), old\n"  # the importer's line, not ours
+    )
+    run = _run(code)
+    assert run.returncode == 0, run.stderr[-3000:]
