@@ -3,16 +3,12 @@ upper map) matches the lower-view map fused from ground-truth labels (paper Tabl
 
 from __future__ import annotations
 
-import pytest
-
 from semmatch.evaluate.metrics import compare
 from semmatch.fusion import reconstruct
 from semmatch.geometry import DEFAULT_INTRINSICS
 from semmatch.io import Frame
 from semmatch.sim import Renderer, generate_scene, make_trajectory
-
-transfer_mod = pytest.importorskip("semmatch.transfer")
-MapIndex = pytest.importorskip("semmatch.transfer.index").MapIndex
+from semmatch.transfer import MapIndex, transfer
 
 
 def _frames(renderer, scene, height, n, kind):
@@ -33,7 +29,7 @@ def test_lower_map_from_3d_neighborhood_labels_reaches_paper_accuracy():
     upper = reconstruct(upper_frames, voxel_size=0.04)  # ground-truth labels of the upper view
     lower_gt = reconstruct(lower_frames, voxel_size=0.04)
     index = MapIndex(upper)
-    labels = [transfer_mod.transfer("3d-neighborhood", f, index) for f in lower_frames]
+    labels = [transfer("3d-neighborhood", f, index) for f in lower_frames]
     lower = reconstruct(lower_frames, labels=labels, voxel_size=0.04)
     s = compare(lower_gt, lower)
     assert s["mean_acc"] >= 0.95, s

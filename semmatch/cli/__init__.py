@@ -88,13 +88,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="verb", metavar="VERB")
     sub.required = True
     for verb in VERBS:
-        try:
-            mod = importlib.import_module(f"semmatch.cli.{verb}")
-        except ModuleNotFoundError as e:
-            if e.name == f"semmatch.cli.{verb}":
-                continue  # verb not built yet
-            raise
-        mod.register(sub)
+        importlib.import_module(f"semmatch.cli.{verb}").register(sub)
     return parser
 
 

@@ -25,9 +25,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from ..evaluate.metrics import MEASURES
 from .layout import GT, Layout, model_name
 from .misregistration import _scene_dirs, clean_scene_inputs
-from .synthetic import MEASURE_COLUMNS, eval_grid_origin
+from .synthetic import eval_grid_origin
 
 __all__ = ["KINECT_DEPTH_A", "KINECT_DEPTH_B", "depth_noise_study", "noise_drops"]
 
@@ -102,7 +103,7 @@ def depth_noise_study(
                    dict(depth_a=float(depth_a), depth_b=float(depth_b), voxel_size=voxel_size,
                         eval_voxel_size=eval_voxel_size, seed=int(seed)))
     per_scene = map_tasks(task, sids, jobs=jobs, scheduler=scheduler, desc="depth-noise scenes", progress=progress)
-    cols = ["scene", "method", "level", "depth_sigma_2m", *MEASURE_COLUMNS, "coverage"]
+    cols = ["scene", "method", "level", "depth_sigma_2m", *MEASURES, "coverage"]
     return pd.DataFrame([r for rows in per_scene for r in rows], columns=cols)
 
 
@@ -135,7 +136,7 @@ def _depth_noise_scene(data_root: str, methods: tuple[str, ...], levels: tuple[f
         s = compare(reference, pred, voxel_size=o["eval_voxel_size"], grid_origin=eval_grid_origin(o["eval_voxel_size"]))
         rows.append(dict(scene=sid, method=method, level=level,
                          depth_sigma_2m=level * (o["depth_a"] + 4.0 * o["depth_b"]),
-                         **{k: float(s[k]) for k in MEASURE_COLUMNS}, coverage=float(cov)))
+                         **{k: float(s[k]) for k in MEASURES}, coverage=float(cov)))
     return rows
 
 
@@ -161,7 +162,7 @@ def noise_drops(study: pd.DataFrame, *, model: str = model_name(GT)) -> pd.DataF
     lo, hi = study["level"].min(), study["level"].max()
     if lo == hi:
         raise ValueError(f"noise_drops: one noise level only ({lo:g}); a drop needs two")
-    measures = [m for m in MEASURE_COLUMNS if m in study.columns]
+    measures = [m for m in MEASURES if m in study.columns]
     a = study[study["level"] == lo].set_index(["scene", "method"])[measures]
     b = study[study["level"] == hi].set_index(["scene", "method"])[measures]
     out = (a - b).reset_index()

@@ -24,9 +24,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from ..evaluate.metrics import MEASURES
 from ..io import read_map, read_sequence
 from .layout import GT, Layout
-from .synthetic import MEASURE_COLUMNS, eval_grid_origin, reference_grid
+from .synthetic import eval_grid_origin, reference_grid
 
 __all__ = ["misregistration_study", "clean_scene_inputs"]
 
@@ -132,7 +133,7 @@ def misregistration_study(
     task = partial(_misregistration_scene, str(layout.root.resolve()), tuple(methods), tuple(cases),
                    dict(voxel_size=voxel_size, eval_voxel_size=eval_voxel_size, seed=int(seed), frame_jobs=frame_jobs))
     per_scene = map_tasks(task, sids, jobs=jobs, scheduler=scheduler, desc="misregistration scenes", progress=progress)
-    cols = ["scene", "method", "translation_m", "rotation_deg", *MEASURE_COLUMNS, "coverage"]
+    cols = ["scene", "method", "translation_m", "rotation_deg", *MEASURES, "coverage"]
     return pd.DataFrame([r for rows in per_scene for r in rows], columns=cols)
 
 
@@ -201,5 +202,5 @@ def _misregistration_scene(data_root: str, methods: tuple[str, ...], cases: tupl
         s = compare(reference, pred, voxel_size=o["eval_voxel_size"],
                     grid_origin=eval_grid_origin(o["eval_voxel_size"]))
         rows.append(dict(scene=sid, method=method, translation_m=t, rotation_deg=r,
-                         **{k: float(s[k]) for k in MEASURE_COLUMNS}, coverage=float(cov)))
+                         **{k: float(s[k]) for k in MEASURES}, coverage=float(cov)))
     return rows

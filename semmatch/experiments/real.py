@@ -38,6 +38,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from ..evaluate.metrics import MEASURES
 from ..io import (
     read_map,
     read_sequence,
@@ -54,7 +55,7 @@ from .real_poses import (
     registration_errors,
     world_alignment,
 )
-from .synthetic import MEASURE_COLUMNS, eval_grid_origin, reference_grid
+from .synthetic import eval_grid_origin, reference_grid
 
 __all__ = ["real_like_lower_map", "evaluate_real_like", "score_real_like_against_mesh"]
 
@@ -324,7 +325,7 @@ def _real_like_scene_chain(data_root: str, methods: tuple[str, ...], networks: t
     for (source, method, _), pred in zip(lower, maps, strict=True):
         s = compare(reference_voxels, pred, voxel_size=eval_voxel_size, grid_origin=eval_grid_origin(eval_voxel_size))
         rows.append(dict(scene=sid, model=model_name(source), method=method,
-                         **{k: float(s[k]) for k in MEASURE_COLUMNS}))
+                         **{k: float(s[k]) for k in MEASURES}))
     # `upper` rows (claim C16): each network's upper map against the upper reference, in the
     # person's own frame (the human perspective of the real-like chain)
     upper_voxels = reference_grid(upper_reference, eval_voxel_size)
@@ -332,7 +333,7 @@ def _real_like_scene_chain(data_root: str, methods: tuple[str, ...], networks: t
         if source != GT:
             s = compare(upper_voxels, upper_map, voxel_size=eval_voxel_size, grid_origin=eval_grid_origin(eval_voxel_size))
             rows.append(dict(scene=sid, model=model_name(source), method="upper",
-                             **{k: float(s[k]) for k in MEASURE_COLUMNS}))
+                             **{k: float(s[k]) for k in MEASURES}))
     return rows, traj_rows, reg_row
 
 
@@ -395,5 +396,5 @@ def score_real_like_against_mesh(
             pred = read_map(real_like_lower_map(data_root, sid, source_dir(r.model), r.method))
             s = compare(ref, pred, eval_voxel_size, transform=to_world[sid], grid_origin=eval_grid_origin(eval_voxel_size))
             rows.append(dict(scene=sid, model=r.model, method=r.method, reference="mesh",
-                             **{k: float(s[k]) for k in MEASURE_COLUMNS}))
+                             **{k: float(s[k]) for k in MEASURES}))
     return pd.DataFrame(rows)

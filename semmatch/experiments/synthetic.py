@@ -16,7 +16,6 @@ from ..io import SemanticMap, read_map, read_sequence
 from .layout import GT, ROUTES, Layout, model_name
 
 __all__ = [
-    "MEASURE_COLUMNS",
     "eval_grid_origin",
     "reconstruct_upper_maps",
     "transfer_lower_labels",
@@ -27,8 +26,6 @@ __all__ = [
     "main_rows",
     "average_over_scenes",
 ]
-
-MEASURE_COLUMNS = MEASURES  # the paper's four measures (semmatch.evaluate.metrics.MEASURES)
 
 
 def eval_grid_origin(voxel_size: float) -> tuple[float, float, float]:
@@ -46,7 +43,7 @@ def _scores(gt, pred, voxel_size: float) -> dict:
     from ..evaluate.metrics import compare
 
     s = compare(gt, pred, voxel_size=voxel_size, grid_origin=eval_grid_origin(voxel_size))
-    return {k: float(s[k]) for k in MEASURE_COLUMNS}
+    return {k: float(s[k]) for k in MEASURES}
 
 
 def reconstruct_upper_maps(
@@ -371,7 +368,7 @@ def main_rows(per_scene: pd.DataFrame, *, reference: str = "fusion", route: str 
 
 def average_over_scenes(df: pd.DataFrame) -> pd.DataFrame:
     """Mean of the measures over scenes per (model, method), in the paper's row order."""
-    cols = [c for c in MEASURE_COLUMNS if c in df.columns]
+    cols = [c for c in MEASURES if c in df.columns]
     out = df.groupby(["model", "method"], sort=False)[cols].mean().reset_index()
     out.insert(2, "scenes", df.groupby(["model", "method"], sort=False).size().values)
     return out
