@@ -438,7 +438,7 @@ def main(argv: list[str] | None = None, extra_commands: Sequence[Callable] = ())
 
             name = load_params(ROOT / "params.yaml", args.profile)["profile"]
             for p in snapshot_reports(ROOT / "reports" / name, ROOT / "reports" / "snapshot" / name, profile=name,
-                                      max_width=args.max_width):
+                                      max_width=args.max_width, root=ROOT):
                 print(f"{p.relative_to(ROOT)}: {p.stat().st_size / 1024:.0f} KB")
             return 0
         kw = dict(params_file=args.params, reports_dir=args.reports_dir, data_root=args.data_root,

@@ -104,7 +104,7 @@ def snapshot_notebook(src: str | os.PathLike, dst: str | os.PathLike, *, max_wid
 
 
 def snapshot_reports(src_dir: str | os.PathLike, dst_dir: str | os.PathLike, *, profile: str,
-                     max_width: int = 960, quality: int = 80) -> list[Path]:
+                     max_width: int = 960, quality: int = 80, root: str | os.PathLike | None = None) -> list[Path]:
     """Snapshot every executed notebook of ``src_dir`` into ``dst_dir``.
 
     Parameters
@@ -117,6 +117,8 @@ def snapshot_reports(src_dir: str | os.PathLike, dst_dir: str | os.PathLike, *, 
         The profile they were executed with (stored in each snapshot's metadata).
     max_width, quality : int
         See :func:`snapshot_notebook`.
+    root : path, optional
+        The repository whose commit the snapshots record (default: the one ``src_dir`` is in).
 
     Returns
     -------
@@ -128,13 +130,11 @@ def snapshot_reports(src_dir: str | os.PathLike, dst_dir: str | os.PathLike, *, 
     FileNotFoundError
         If ``src_dir`` holds no executed notebook.
     """
-    from .pipeline import ROOT
-
     src = sorted(Path(src_dir).glob("[0-9][0-9]_*.ipynb"))
     if not src:
         raise FileNotFoundError(f"{src_dir}: no executed notebooks (NN_*.ipynb); run the pipeline first")
     try:
-        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True,
+        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=root or src_dir, capture_output=True,
                                 text=True, timeout=10).stdout.strip()
     except (OSError, subprocess.SubprocessError):
         commit = ""

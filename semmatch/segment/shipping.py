@@ -256,7 +256,10 @@ def provide_networks(configs: Mapping, *, shipped_dir: str | os.PathLike | None,
     for net, cfg in configs.items():
         src, why = (None, "retraining (TRAIN=1)") if retrain else shipped_checkpoint(cfg, shipped_dir)
         t0 = time.perf_counter()
-        checkpoints[net] = train_or_load(cfg, retrain=retrain, views=lambda cfg=cfg: views_of(cfg), shipped=src)
+        if src is not None:  # copied to cfg.out (unless that already holds the same bytes) instead of training
+            checkpoints[net] = install_checkpoint(src, cfg.out)
+        else:
+            checkpoints[net] = train_or_load(cfg, retrain=retrain, views=lambda cfg=cfg: views_of(cfg))
         if src is not None:
             shipped.append(net)
             log(f"{net}: shipped network {src}")

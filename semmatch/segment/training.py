@@ -701,22 +701,19 @@ def config_record(config: TrainConfig) -> dict:
 
 
 def train_or_load(config: TrainConfig, *, retrain: bool = False,
-                  views: tuple[D.Views, D.Views] | Callable[[], tuple[D.Views, D.Views]] | None = None,
-                  shipped: str | os.PathLike | None = None) -> Path:
-    """Return a checkpoint trained with ``config``: the shipped one, the one at ``config.out``, or train.
+                  views: tuple[D.Views, D.Views] | Callable[[], tuple[D.Views, D.Views]] | None = None) -> Path:
+    """Return a checkpoint trained with ``config``: the one at ``config.out``, or train.
+
+    A shipped network is installed by :func:`semmatch.segment.shipping.provide_networks` instead.
 
     Parameters
     ----------
     config : TrainConfig
     retrain : bool
-        Train even when a matching checkpoint exists (``shipped`` is then ignored).
+        Train even when a matching checkpoint exists.
     views : (Views, Views) or callable returning them, optional
         Passed to :func:`train`; a callable is called only when training (the views are then
         rendered only when needed).
-    shipped : path, optional
-        A shipped checkpoint of the same configuration
-        (:func:`semmatch.segment.shipping.shipped_checkpoint` finds and checks it): copied to
-        ``config.out`` (unless that already holds the same bytes) instead of training.
 
     Returns
     -------
@@ -726,10 +723,6 @@ def train_or_load(config: TrainConfig, *, retrain: bool = False,
     out = Path(config.out)
     if retrain:
         return train(config, views=views() if callable(views) else views)
-    if shipped is not None:
-        from .shipping import install_checkpoint
-
-        return install_checkpoint(shipped, out)
     if out.is_file():
         try:
             stored = load_model(out).info.get("train_config")

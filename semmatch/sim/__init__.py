@@ -12,8 +12,8 @@
 from .noise import NoiseConfig
 from .plyscene import scene_from_ply
 from .procedural import SCENE_KINDS, box_room, generate_scene
-from .raster import RasterRenderer, gl_available, make_renderer
-from .render import Renderer, RenderResult, render_frames
+from .raster import RasterRenderer, gl_available, make_renderer, render_frames
+from .render import Renderer, RenderResult
 from .scene import Scene
 from .sequence import (
     DEFAULT_SWEEP,

@@ -20,7 +20,8 @@ Pixel ``(u, v)`` samples the camera ray through ``((u - cx) / fx, (v - cy) / fy,
 nothing of the scene is clipped.
 
 Use :func:`make_renderer` to pick the backend: ``"auto"`` rasterises when an OpenGL context can
-be made and falls back to ray casting with one warning otherwise.
+be made and falls back to ray casting with one warning otherwise; :func:`render_frames` renders
+posed frames with the backend it picks.
 """
 
 from __future__ import annotations
@@ -35,7 +36,7 @@ from .materials import _TEX
 from .render import Renderer, RenderResult
 from .scene import Scene
 
-__all__ = ["RasterRenderer", "make_renderer", "gl_available", "BACKENDS"]
+__all__ = ["RasterRenderer", "make_renderer", "render_frames", "gl_available", "BACKENDS"]
 
 #: renderer backends: rasterise (OpenGL), ray cast (Open3D), or rasterise when possible
 BACKENDS = ("auto", "raster", "raycast")
@@ -347,3 +348,31 @@ def make_renderer(scene: Scene, intrinsics: Intrinsics = DEFAULT_INTRINSICS, *, 
                               stacklevel=2)
             return Renderer(scene, intrinsics, **kwargs)
     return RasterRenderer(scene, intrinsics, **kwargs)
+
+
+def render_frames(scene: Scene, poses: np.ndarray, intrinsics: Intrinsics = DEFAULT_INTRINSICS, *,
+                  backend: str = "raycast") -> list:
+    """Posed frames (RGB, depth, ground-truth labels) of ``scene`` seen from ``poses``.
+
+    Parameters
+    ----------
+    scene : Scene
+    poses : ndarray (N, 4, 4)
+        ``T_world_camera``.
+    intrinsics : Intrinsics
+    backend : {"raycast", "raster", "auto"}
+        See :func:`make_renderer`.
+
+    Returns
+    -------
+    list of semmatch.io.Frame
+        With ``index`` 0..N-1 and the true poses.
+    """
+    from ..io import Frame
+
+    r = make_renderer(scene, intrinsics, backend=backend)
+    out = []
+    for i, T in enumerate(np.asarray(poses)):
+        res = r.render(T)
+        out.append(Frame(res.rgb, res.depth, res.labels, np.asarray(T), intrinsics, index=i))
+    return out

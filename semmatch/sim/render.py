@@ -16,7 +16,7 @@ from ..geometry import DEFAULT_INTRINSICS, Intrinsics, check_pose, pixel_rays
 from .materials import texture_factor
 from .scene import Scene
 
-__all__ = ["Renderer", "RenderResult", "render_frames"]
+__all__ = ["Renderer", "RenderResult"]
 
 
 @dataclass
@@ -297,32 +297,3 @@ class Renderer:
         col = self._albedo_ext[prim] * shade[:, None]  # albedo x 4095, 0 for misses
         np.minimum(col, 4095.0, out=col)
         return self._lut[col.astype(np.int16)]
-
-
-def render_frames(scene: Scene, poses: np.ndarray, intrinsics: Intrinsics = DEFAULT_INTRINSICS, *,
-                  backend: str = "raycast") -> list:
-    """Posed frames (RGB, depth, ground-truth labels) of ``scene`` seen from ``poses``.
-
-    Parameters
-    ----------
-    scene : Scene
-    poses : ndarray (N, 4, 4)
-        ``T_world_camera``.
-    intrinsics : Intrinsics
-    backend : {"raycast", "raster", "auto"}
-        See :func:`semmatch.sim.raster.make_renderer`.
-
-    Returns
-    -------
-    list of semmatch.io.Frame
-        With ``index`` 0..N-1 and the true poses.
-    """
-    from ..io import Frame
-    from .raster import make_renderer
-
-    r = make_renderer(scene, intrinsics, backend=backend)
-    out = []
-    for i, T in enumerate(np.asarray(poses)):
-        res = r.render(T)
-        out.append(Frame(res.rgb, res.depth, res.labels, np.asarray(T), intrinsics, index=i))
-    return out
