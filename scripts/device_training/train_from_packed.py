@@ -51,7 +51,7 @@ def main(budget: float) -> None:
         t = time.time()
         T.train(cfg, views=views)
         spent[arch] = time.time() - t
-        ck = torch.load(out / f"{arch}_s{seed}.pt", weights_only=False)
+        ck = torch.load(out / f"{arch}_s{seed}.pt", weights_only=True)
         print(arch, seed, f"{spent[arch]:.0f} s", "best", ck["metrics"]["step"], round(ck["metrics"]["miou"], 4),
               [(h["step"], round(h["val_miou"], 4)) for h in ck["history"]], flush=True)
     print("total", f"{time.time() - t0:.0f} s")

@@ -168,15 +168,16 @@ def _confirm_sentence(run: dict) -> str:
             f"{float(run.get('total_seconds', 0)) / 60:.1f} min.")
 
 
-def confirmatory_run(figures_root: str | Path, plan: dict | None = None) -> Path | None:
+def confirmatory_run(figures_root: str | Path, plan=None) -> Path | None:
     """The analysis plan's confirmatory run under ``<figures_root>/confirm/``, if it has been made.
 
     Parameters
     ----------
     figures_root : path
         The repository's ``figures/`` folder.
-    plan : dict, optional
-        The analysis plan (default :func:`semmatch.experiments.claims.load_analysis_plan`).
+    plan : AnalysisPlan or dict, optional
+        The analysis plan (default :func:`semmatch.experiments.claims.load_analysis_plan`; a dict
+        is its YAML form).
 
     Returns
     -------
@@ -188,7 +189,8 @@ def confirmatory_run(figures_root: str | Path, plan: dict | None = None) -> Path
         from .claims import load_analysis_plan
 
         plan = load_analysis_plan()
-    wanted = sorted(int(s) for s in plan["scenes"]["confirmatory_seeds"])
+    raw = plan if isinstance(plan, dict) else plan.raw
+    wanted = sorted(int(s) for s in raw["scenes"]["confirmatory_seeds"])
     for rec in sorted(Path(figures_root, "confirm").glob("*/confirm.json")):
         run = _confirm_record(rec.parent)
         if sorted(int(s) for s in run.get("seeds", [])) == wanted and run.get("networks_from") != "trained here":
