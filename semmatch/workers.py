@@ -79,5 +79,33 @@ def process_pool(
     import multiprocessing as mp
 
     ctx = mp.get_context("spawn") if spawn else None
-    return ProcessPoolExecutor(max_workers=int(jobs), mp_context=ctx, initializer=_start,
-                               initargs=(os.getpid(), initializer, tuple(initargs)))
+    forks = not spawn and mp.get_start_method(allow_none=False) == "fork"
+    return _Pool(max_workers=int(jobs), mp_context=ctx, initializer=_start,
+                 initargs=(os.getpid(), initializer, tuple(initargs)), quiet_opencv=forks)
+
+
+class _Pool(ProcessPoolExecutor):
+    """A pool that, when its workers are forked, stops OpenCV's thread pool in this process first.
+
+    A forked worker inherits OpenCV's pool without its threads, and the worker's own thread limit
+    (``cv2.setNumThreads``) then waits forever for them to stop (seen: a ``transfer_sequence`` with
+    ``jobs=2`` after one with ``jobs=1`` in the same process hung). So OpenCV runs on one thread in
+    this process while the pool lives, and gets its previous setting back at shutdown.
+    """
+
+    def __init__(self, *args, quiet_opencv: bool = False, **kwargs) -> None:
+        self._opencv_threads: int | None = None
+        if quiet_opencv and "cv2" in sys.modules:
+            cv2 = sys.modules["cv2"]
+            self._opencv_threads = cv2.getNumThreads()
+            if self._opencv_threads != 1:
+                cv2.setNumThreads(1)
+        super().__init__(*args, **kwargs)
+
+    def shutdown(self, wait: bool = True, *, cancel_futures: bool = False) -> None:
+        try:
+            super().shutdown(wait=wait, cancel_futures=cancel_futures)
+        finally:
+            previous, self._opencv_threads = self._opencv_threads, None
+            if previous is not None and previous != 1 and "cv2" in sys.modules:
+                sys.modules["cv2"].setNumThreads(previous)

@@ -82,3 +82,35 @@ def test_pool_workers_run_on_one_thread(monkeypatch):
     monkeypatch.setenv(THREADS_ENV, "2")
     with process_pool(1, spawn=True) as pool:
         assert list(pool.map(_omp_threads, range(1))) == ["2"]
+
+
+_OPENCV_THEN_FORK = """
+import cv2
+import numpy as np
+from semmatch.workers import process_pool
+
+def work(x):
+    return float(cv2.GaussianBlur(np.full((64, 64), x, np.float32), (5, 5), 1).mean())
+
+if __name__ == "__main__":
+    cv2.setNumThreads(2)
+    img = np.random.default_rng(0).random((1500, 1500)).astype(np.float32)
+    for _ in range(3):
+        cv2.GaussianBlur(img, (31, 31), 5)  # OpenCV's thread pool now runs in this process
+    with process_pool(2) as pool:
+        print(list(pool.map(work, [1.0, 2.0])), flush=True)
+    print(cv2.getNumThreads())
+"""
+
+
+def test_a_forked_pool_after_opencv_threads_does_not_hang(tmp_path):
+    """Forked workers used to hang in ``cv2.setNumThreads`` on the OpenCV pool they inherited
+    (a ``transfer_sequence(jobs=2)`` after one with ``jobs=1`` in the same process)."""
+    script = tmp_path / "child.py"
+    script.write_text(_OPENCV_THEN_FORK)
+    try:
+        out = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=120)
+    except subprocess.TimeoutExpired:
+        pytest.fail("the forked pool hung after OpenCV had run its thread pool in the parent")
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.split() == ["[1.0,", "2.0]", "2"]  # the parent's OpenCV setting is back after the pool
