@@ -349,6 +349,37 @@ def test_transfer_sequence_jobs(seq_and_map, gt_map):
     assert not list(root.glob(".lab*"))  # no temporary folders left
 
 
+def test_transfer_sequence_streams_labels_to_disk(seq_and_map, gt_map, tmp_path, monkeypatch):
+    """Each frame's labels go to disk as soon as they are made, not held until the end; a pool
+    forked after a streamed run in the same process still works."""
+    from semmatch.io import sequences
+    from semmatch.transfer import sequence as tseq
+
+    made, at_write = [], []
+    real_one, real_write = tseq._transfer_one, sequences.write_label_image
+
+    def one(*a):
+        made.append(a[-1])
+        return real_one(*a)
+
+    def write(path, lab):
+        at_write.append(len(made))
+        return real_write(path, lab)
+
+    monkeypatch.setattr(tseq, "_transfer_one", one)
+    monkeypatch.setattr(sequences, "write_label_image", write)
+    idx = MapIndex(gt_map, **FAST)
+    res = transfer_sequence("3d-projected-sp", seq_and_map / "lower", idx, tmp_path / "lab", progress=False)
+    assert res["frames"] == len(made) == len(at_write) == 3
+    assert at_write[0] < 3  # the first image went to disk before the last frame was transferred
+    monkeypatch.undo()
+    two = transfer_sequence("3d-projected-sp", seq_and_map / "lower", idx, tmp_path / "lab2", jobs=2, progress=False)
+    assert two["frames"] == 3
+    for i in range(3):
+        assert (read_label_image(tmp_path / "lab" / f"{i:06d}.png")
+                == read_label_image(tmp_path / "lab2" / f"{i:06d}.png")).all()
+
+
 def test_transfer_sequence_other_poses(seq_and_map, gt_map):
     # poses= replaces the folder's poses, in this process and in workers alike
     root = seq_and_map

@@ -104,8 +104,9 @@ def transfer_sequence(
     semantic_map : SemanticMap or MapIndex
         The upper map (indexed once here) or a prebuilt index.
     out_dir : path
-        Labels folder ``000000.png ...``; written to a temporary folder and renamed when
-        complete (:func:`semmatch.io.write_labels_folder`), so an interrupted run leaves no
+        Labels folder ``000000.png ...``; each frame's labels are written as soon as they are
+        made (memory does not grow with the sequence) into a temporary folder that is renamed
+        when complete (:func:`semmatch.io.write_labels_folder`), so an interrupted run leaves no
         partial folder.
     jobs : int
         Worker processes (for a sequence folder, :class:`~semmatch.io.SequenceReader` or
@@ -159,31 +160,40 @@ def transfer_sequence(
         if poses.shape != (n, 4, 4):
             raise ValueError(f"{seq_path or 'sequence'}: poses must have shape ({n}, 4, 4), got {poses.shape}")
     index = prepare(semantic_map, max_distance=max_distance)
-    labels: list = [None] * n
     cov = np.zeros(n)
     secs = np.zeros(n)
     dropouts = np.zeros(n, dtype=bool)
     bar = tqdm(total=n, desc=f"transfer {method}", disable=not progress, unit="frame")
-    if int(jobs) > 1 and source is not None:
-        with process_pool(int(jobs), initializer=_init_worker, initargs=(index, source, method, params, poses)) as ex:
-            results = ex.map(_run_one, range(n), chunksize=max(1, n // (4 * int(jobs))))
-            done = 0  # results come in frame order: the first missing one names where a dead worker stopped
-            try:
-                for i, lab, c, s, d in results:
-                    labels[i], cov[i], secs[i], dropouts[i] = lab, c, s, d
-                    done = i + 1
-                    bar.update()
-            except BrokenProcessPool:
-                raise BrokenProcessPool(f"{seq_path or 'sequence'}: frame {done} of {n} ({method}) and those after it "
-                                        "were not transferred") from None
-    else:
-        for i in range(n):
-            _, labels[i], cov[i], secs[i], dropouts[i] = _transfer_one(frames, poses, index, method, params, i)
-            bar.update()
-    bar.close()
-    if dropouts.all():
-        raise ValueError(f"{seq_path or 'sequence'}: none of its {n} frame(s) has usable depth (all empty)")
-    out = write_labels_folder(out_dir, labels, overwrite=overwrite, inputs=inputs)
+
+    def streamed(results):
+        """Each frame's labels as they come, their statistics kept: the writer saves each image
+        at once, so memory does not grow with the sequence; nothing is swapped in if this raises."""
+        done = 0  # results come in frame order: the first missing one names where a dead worker stopped
+        try:
+            for i, lab, c, s, d in results:
+                cov[i], secs[i], dropouts[i] = c, s, d
+                done = i + 1
+                bar.update()
+                yield lab
+        except BrokenProcessPool:
+            raise BrokenProcessPool(f"{seq_path or 'sequence'}: frame {done} of {n} ({method}) and those after it "
+                                    "were not transferred") from None
+        if dropouts.all():
+            raise ValueError(f"{seq_path or 'sequence'}: none of its {n} frame(s) has usable depth (all empty)")
+
+    write = dict(overwrite=overwrite, inputs=inputs)
+    try:
+        if int(jobs) > 1 and source is not None:
+            with process_pool(int(jobs), initializer=_init_worker,
+                              initargs=(index, source, method, params, poses)) as ex:
+                # map() forks every worker now, before the label writer starts its threads
+                results = ex.map(_run_one, range(n), chunksize=max(1, n // (4 * int(jobs))))
+                out = write_labels_folder(out_dir, streamed(results), **write)
+        else:
+            results = (_transfer_one(frames, poses, index, method, params, i) for i in range(n))
+            out = write_labels_folder(out_dir, streamed(results), **write)
+    finally:
+        bar.close()
     if dropouts.any():
         first = np.flatnonzero(dropouts)[:5].tolist()
         warnings.warn(f"{seq_path or 'sequence'}: {int(dropouts.sum())} of {n} frame(s) had (almost) no valid depth "
