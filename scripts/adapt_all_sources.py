@@ -26,7 +26,7 @@ from pathlib import Path
 def main() -> None:
     import pandas as pd
 
-    from semmatch.adapt import LABEL_SOURCES, adapted_name
+    from semmatch.adapt import LABEL_SOURCES, AdaptRecipe, adapted_name
     from semmatch.experiments.adapt import (
         adapt_networks,
         adapted_height_study,
@@ -53,8 +53,7 @@ def main() -> None:
         raise FileNotFoundError(f"{recipe_csv}: run stage 09 (dvc repro -s adapt_robot_view) first")
     chosen = pd.read_csv(recipe_csv)
     chosen = chosen[chosen["chosen"].astype(bool)].iloc[0]
-    recipe = dict(steps=int(chosen["steps"]), batch_size=int(chosen["batch_size"]), lr=float(chosen["lr"]),
-                  upper_share=float(chosen["upper_share"]), distill=float(chosen["distill"]))
+    recipe = AdaptRecipe.from_mapping(chosen, seed=p["seed"])
     print("recipe (stage 09's):", recipe, flush=True)
 
     t0 = time.time()
@@ -66,8 +65,7 @@ def main() -> None:
     stage = {s: root / "adapted" / f"{adapted_name(network, s)}.pt" for s in LABEL_SOURCES}
     reuse = {s: path for s, path in stage.items() if path.is_file()}
     t0 = time.time()
-    checkpoints = adapt_networks(root, network, robot, LABEL_SOURCES, seed=p["seed"], reuse=reuse, out_dir=out,
-                                 **recipe)
+    checkpoints = adapt_networks(root, network, robot, LABEL_SOURCES, recipe, reuse=reuse, out_dir=out)
     print(f"fine-tunings ({len(LABEL_SOURCES) - len(reuse)} new, {len(reuse)} reused): {time.time() - t0:.0f} s",
           flush=True)
 

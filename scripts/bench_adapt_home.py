@@ -24,7 +24,7 @@ from pathlib import Path
 def main() -> None:
     import torch
 
-    from semmatch.adapt import adapt_in_home
+    from semmatch.adapt import AdaptRecipe, adapt_in_home
     from semmatch.cli import main as cli
     from semmatch.segment.training import TrainConfig, build_views
 
@@ -35,7 +35,7 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=9101, help="home seed (default %(default)s)")
     ap.add_argument("--frames", type=int, default=60, help="frames of each tour (default %(default)s)")
     ap.add_argument("--size", default="320x240", help="image size (default %(default)s)")
-    ap.add_argument("--steps", type=int, default=400, help="fine-tuning steps (default %(default)s)")
+    ap.add_argument("--steps", type=int, default=AdaptRecipe.steps, help="fine-tuning steps (default %(default)s)")
     ap.add_argument("--cache-dir", type=Path, default=None, help="views cache (default OUT/cache)")
     args = ap.parse_args()
     out = args.out

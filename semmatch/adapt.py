@@ -24,10 +24,10 @@ from __future__ import annotations
 import copy
 import hashlib
 import time
-from collections.abc import Sequence
-from dataclasses import dataclass, field
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -37,8 +37,8 @@ if TYPE_CHECKING:
     from .segment.predict import Segmenter
     from .transfer import MapIndex
 
-__all__ = ["LABEL_SOURCES", "HOME_SOURCES", "MIN_COVERAGE", "RobotViews", "label_robot_frame", "robot_training_views",
-           "home_views", "adapt_in_home", "fine_tune", "adapted_name"]
+__all__ = ["LABEL_SOURCES", "HOME_SOURCES", "MIN_COVERAGE", "AdaptRecipe", "RobotViews", "label_robot_frame",
+           "robot_training_views", "home_views", "adapt_in_home", "fine_tune", "adapted_name"]
 
 #: label sources besides the transfer methods
 BASELINES = ("self-training", "ground-truth")
@@ -58,6 +58,96 @@ HOME_SOURCES: tuple[str, ...] = tuple(s for s in LABEL_SOURCES if s not in BASEL
 
 #: smallest share of the robot's pixels with depth that the labels must cover (:func:`fine_tune`)
 MIN_COVERAGE = 0.005
+
+
+@dataclass(frozen=True)
+class AdaptRecipe:
+    """The fine-tuning recipe of :func:`fine_tune`: the one place its defaults live.
+
+    Every function that fine-tunes (:func:`fine_tune`, :func:`adapt_in_home`,
+    :func:`semmatch.experiments.adapt.adapt_networks`, ``semmatch adapt``) takes its recipe from
+    here; a profile of params.yaml sets its own (``adapt_robot_view``: ``steps``, ``batch_size``;
+    the learning rate, ``upper_share`` and ``distill`` are chosen on validation scenes) and
+    :meth:`from_mapping` reads it. Values are stored as ``int`` / ``float``.
+
+    Attributes
+    ----------
+    steps : int
+        Optimisation steps (AdamW, one-cycle schedule peaking at ``lr``).
+    batch_size : int
+        Images per step (at least 2).
+    lr : float
+        Peak learning rate.
+    upper_share : float
+        Share of each batch from the network's own human-height training views, in [0, 1).
+    distill : float
+        Weight of the distillation term (0: none; > 0 needs human-height views in the batch).
+    seed : int
+        Seed of the batch draws, the augmentation and the weights' updates.
+
+    Raises
+    ------
+    ValueError
+        ``steps`` < 1, ``batch_size`` < 2, ``upper_share`` outside [0, 1), ``distill`` < 0, or
+        ``distill`` > 0 without a human-height view in the batch.
+    """
+
+    steps: int = 400
+    batch_size: int = 16
+    lr: float = 1e-3
+    upper_share: float = 0.5
+    distill: float = 0.0
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        for f in fields(self):  # 400 or 400.0 or "400" from a table: the field's type
+            object.__setattr__(self, f.name, type(f.default)(getattr(self, f.name)))
+        steps, batch_size, upper_share, distill = self.steps, self.batch_size, self.upper_share, self.distill
+        if steps < 1 or batch_size < 2 or not 0.0 <= upper_share < 1.0:
+            raise ValueError(f"need steps >= 1, batch_size >= 2 and 0 <= upper_share < 1, got {steps}, {batch_size}, "
+                             f"{upper_share}")
+        if not distill >= 0 or (distill > 0 and int(round(batch_size * upper_share)) == 0):
+            raise ValueError(f"distill must be >= 0 and needs human-height views in the batch (upper_share > 0), "
+                             f"got distill={distill}, upper_share={upper_share}")
+
+    @classmethod
+    def names(cls) -> tuple[str, ...]:
+        """The recipe's field names, in order."""
+        return tuple(f.name for f in fields(cls))
+
+    @classmethod
+    def from_mapping(cls, values: Mapping[str, Any], **changes: Any) -> AdaptRecipe:
+        """The recipe whose fields are found in ``values``, the defaults elsewhere.
+
+        Parameters
+        ----------
+        values : mapping
+            A params.yaml section or a notebook's parameters
+            (:func:`semmatch.experiments.pipeline.notebook_parameters`), a row of a recipe table;
+            keys that are not fields of the recipe are ignored.
+        **changes
+            Fields set over ``values``.
+
+        Returns
+        -------
+        AdaptRecipe
+        """
+        return cls(**{k: values[k] for k in cls.names() if k in values}, **changes)
+
+    @classmethod
+    def of(cls, recipe: AdaptRecipe | None = None, **changes: Any) -> AdaptRecipe:
+        """``recipe`` (default: the default recipe) with ``changes`` to its fields.
+
+        Raises
+        ------
+        TypeError
+            A change that is not a field of the recipe.
+        """
+        return replace(recipe if recipe is not None else cls(), **changes)
+
+    def as_dict(self) -> dict[str, int | float]:
+        """The fields as a dict, in order (the checkpoint's ``adapted`` record holds them)."""
+        return {k: getattr(self, k) for k in self.names()}
 
 
 def adapted_name(network: str, source: str) -> str:
@@ -381,19 +471,16 @@ def adapt_in_home(
     sequence: str | Path,
     person_map: str | Path,
     out: str | Path,
+    recipe: AdaptRecipe | None = None,
     *,
     source: str = "3d-neighborhood",
     frames: int | None = None,
     frame_step: int = 1,
-    steps: int = 400,
-    batch_size: int = 16,
-    lr: float = 1e-3,
-    upper_share: float = 0.5,
-    seed: int = 0,
     min_purity: float = 0.5,
     min_coverage: float = MIN_COVERAGE,
     cache_dir: str | Path | None = "checkpoint-if-present",
     progress: bool = True,
+    **changes: Any,
 ) -> Path:
     """Adapt a network in a home: the robot's tour labelled from the person's map of it.
 
@@ -408,14 +495,16 @@ def adapt_in_home(
         The robot's tour of the home and the person's semantic map of it (:func:`home_views`).
     out : path
         The adapted checkpoint (never ``checkpoint`` nor an input).
+    recipe : AdaptRecipe, optional
+        The fine-tuning recipe (default :class:`AdaptRecipe`'s).
     source, frames, frame_step, min_purity, min_coverage
         As :func:`home_views`.
-    steps, batch_size, lr, upper_share, seed
-        The recipe (:func:`fine_tune`).
     cache_dir : path, "checkpoint", "checkpoint-if-present" or None
         The cache of the network's human-height training views (:func:`fine_tune`); by default
         the checkpoint's recorded folder where it exists, else the views are rendered each run.
     progress : bool
+    **changes
+        Fields of the recipe set over ``recipe`` (``steps=800``).
 
     Returns
     -------
@@ -431,9 +520,12 @@ def adapt_in_home(
     ValueError
         ``out`` is the network or an input; the errors of :func:`home_views` and
         :func:`fine_tune`.
+    TypeError
+        A change that is not a field of the recipe.
     """
     from .io.sequences import sequence_scene
 
+    recipe = AdaptRecipe.of(recipe, **changes)
     out = Path(out)
     for flag, p in (("--model", checkpoint), ("--home", sequence), ("--map", person_map)):
         if out.resolve() == Path(p).resolve() or Path(p).resolve() in out.resolve().parents:
@@ -446,9 +538,8 @@ def adapt_in_home(
         "map": {"path": str(person_map), "sha256": _file_digest(Path(person_map))},
         "min_purity": float(min_purity),
     }
-    return fine_tune(checkpoint, robot, source, out, steps=steps, batch_size=batch_size, lr=lr,
-                     upper_share=upper_share, seed=seed, min_coverage=min_coverage, extra=extra, cache_dir=cache_dir,
-                     progress=progress)
+    return fine_tune(checkpoint, robot, source, out, recipe, min_coverage=min_coverage, extra=extra,
+                     cache_dir=cache_dir, progress=progress)
 
 
 def _file_digest(path: Path) -> str:
@@ -464,24 +555,20 @@ def fine_tune(
     robot: RobotViews,
     source: str,
     out: str | Path,
+    recipe: AdaptRecipe | None = None,
     *,
-    steps: int = 500,
-    batch_size: int = 16,
-    lr: float = 1e-3,
-    upper_share: float = 0.5,
-    distill: float = 0.0,
-    seed: int = 0,
     min_coverage: float = MIN_COVERAGE,
     extra: dict | None = None,
     cache_dir: str | Path | None = "checkpoint",
     progress: bool = True,
+    **changes: Any,
 ) -> Path:
     """Fine-tune a network on the robot's frames labelled by ``source``; write the checkpoint.
 
-    Each step takes ``round(batch_size * upper_share)`` of the network's own human-height
-    training views (ground truth) and the rest from the robot's frames (``source`` labels, 0
-    ignored), with the network's training augmentation and class weights; AdamW with a one-cycle
-    schedule peaking at ``lr``. With ``distill`` > 0 the loss also has ``distill`` times the
+    The recipe (:class:`AdaptRecipe`): each step takes ``round(batch_size * upper_share)`` of the
+    network's own human-height training views (ground truth) and the rest from the robot's frames
+    (``source`` labels, 0 ignored), with the network's training augmentation and class weights;
+    AdamW with a one-cycle schedule peaking at ``lr``. With ``distill`` > 0 the loss also has ``distill`` times the
     per-pixel KL divergence from the unadapted network's class distribution to the adapted one's
     on the human-height part of each batch (distillation, a guard against forgetting the human
     view besides the mix itself). The final weights are kept (no selection on any scene).
@@ -497,11 +584,10 @@ def fine_tune(
         Label source (:data:`LABEL_SOURCES`).
     out : path
         Where the adapted checkpoint goes (written to a temporary file, then renamed).
-    steps, batch_size, lr, upper_share, seed
-        The schedule (AdamW, one-cycle peaking at ``lr``) and the share of each batch from the
-        network's human-height training views.
-    distill : float
-        Weight of the distillation term (0: none; needs ``upper_share`` > 0).
+    recipe : AdaptRecipe, optional
+        The schedule (AdamW, one-cycle peaking at ``lr``), the share of each batch from the
+        network's human-height training views and the distillation weight (default
+        :class:`AdaptRecipe`'s).
     min_coverage : float
         Smallest share of the robot's pixels with depth that ``source`` must label: below it the
         person's map barely overlaps the robot's view and there is nothing to learn from.
@@ -514,6 +600,8 @@ def fine_tune(
         machine (``"checkpoint-if-present"``: a shipped network's training folder is never
         created elsewhere), another folder, or None (rendered, not cached).
     progress : bool
+    **changes
+        Fields of the recipe set over ``recipe`` (``steps=2, batch_size=4``).
 
     Returns
     -------
@@ -527,6 +615,8 @@ def fine_tune(
     ValueError
         Unknown source (or one ``robot`` was not prepared with), bad schedule, labels covering
         less than ``min_coverage`` of the robot's pixels, a checkpoint of another category table.
+    TypeError
+        A change that is not a field of the recipe.
     """
     import torch
 
@@ -537,12 +627,8 @@ def fine_tune(
     _check_sources([source])
     if source not in robot.pseudo:
         raise ValueError(f"the robot views carry no {source!r} labels (prepared: {', '.join(robot.pseudo)})")
-    if int(steps) < 1 or int(batch_size) < 2 or not 0.0 <= upper_share < 1.0:
-        raise ValueError(f"need steps >= 1, batch_size >= 2 and 0 <= upper_share < 1, got {steps}, {batch_size}, "
-                         f"{upper_share}")
-    if not distill >= 0 or (distill > 0 and int(round(batch_size * upper_share)) == 0):
-        raise ValueError(f"distill must be >= 0 and needs human-height views in the batch (upper_share > 0), "
-                         f"got distill={distill}, upper_share={upper_share}")
+    recipe = AdaptRecipe.of(recipe, **changes)
+    steps, batch_size, lr, upper_share, distill, seed = (getattr(recipe, k) for k in AdaptRecipe.names())
     coverage = robot.coverage.get(source)
     if coverage is not None and coverage < min_coverage:
         raise ValueError(f"{source}: its labels cover {coverage:.2%} of the robot's pixels with depth (fewer than "
@@ -567,8 +653,8 @@ def fine_tune(
     w_t = torch.tensor(info["class_weights"], dtype=torch.float32)
     rng = np.random.default_rng(seed)
     n_up = int(round(batch_size * upper_share))
-    n_lo = int(batch_size) - n_up
-    aux = _distillation(copy.deepcopy(net), n_up, float(distill)) if distill > 0 else None
+    n_lo = batch_size - n_up
+    aux = _distillation(copy.deepcopy(net), n_up, distill) if distill > 0 else None
     lab_lo = robot.pseudo[source]
     usable = np.flatnonzero((lab_lo > 0).reshape(len(lab_lo), -1).any(axis=1))
     if len(usable) == 0:
@@ -578,7 +664,7 @@ def fine_tune(
     t0 = time.perf_counter()
     losses = []
     net.train()
-    for _ in tqdm(range(int(steps)), desc=f"adapt {source}", disable=not progress):
+    for _ in tqdm(range(steps), desc=f"adapt {source}", disable=not progress):
         xs, ys = [], []
         if n_up:
             i = np.sort(rng.choice(len(upper_views), n_up, replace=len(upper_views) < n_up))
@@ -598,8 +684,7 @@ def fine_tune(
     ckpt["adapted"] = {
         "from": str(checkpoint), "from_sha256": _file_digest(checkpoint), "label_source": source,
         "scenes": list(robot.scenes), "frames": int(len(robot.views)), "label_coverage": robot.coverage.get(source),
-        "steps": int(steps), "batch_size": int(batch_size), "lr": float(lr), "upper_share": float(upper_share),
-        "distill": float(distill), "seed": int(seed), "final_loss": float(np.mean(losses[-20:])), "seconds": time.perf_counter() - t0,
+        **recipe.as_dict(), "final_loss": float(np.mean(losses[-20:])), "seconds": time.perf_counter() - t0,
         **(extra or {}),
     }
     out = Path(out)

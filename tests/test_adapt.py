@@ -271,3 +271,34 @@ def test_robot_map_comparison_pairs_scenes_and_judges_the_interval():
         robot_map_comparison(pd.DataFrame(rows), "other")
     with pytest.raises(ValueError, match="no net rows of dbscan"):
         robot_map_comparison(pd.DataFrame(rows), "net", against=("dbscan",))
+
+
+def test_adapt_recipe_is_the_one_source_of_the_fine_tuning_defaults():
+    import inspect
+
+    from semmatch.adapt import AdaptRecipe, adapt_in_home
+    from semmatch.cli import build_parser
+    from semmatch.experiments.adapt import adapt_networks
+    from semmatch.experiments.pipeline import notebook_parameters
+
+    r = AdaptRecipe()
+    assert r.as_dict() == {"steps": 400, "batch_size": 16, "lr": 1e-3, "upper_share": 0.5, "distill": 0.0, "seed": 0}
+    for f in (fine_tune, adapt_in_home, adapt_networks):  # no recipe defaults of their own
+        assert not set(inspect.signature(f).parameters) & set(AdaptRecipe.names()), f.__name__
+    args = build_parser().parse_args(["adapt", "--model", "m.pt", "--out", "o.pt"])
+    assert {k: getattr(args, k) for k in AdaptRecipe.names() if k != "distill"} == {
+        k: v for k, v in r.as_dict().items() if k != "distill"}
+    # params.yaml fills it: the profile's steps and batch size, its seed; the rest the defaults
+    p = notebook_parameters("09_adapt_robot_view", "full")
+    assert AdaptRecipe.from_mapping(p) == AdaptRecipe(steps=1600, batch_size=16, seed=p["seed"])
+    assert AdaptRecipe.from_mapping({"steps": "3", "lr": 1, "network": "compact"}, seed=2) == AdaptRecipe(
+        steps=3, lr=1.0, seed=2)
+    assert AdaptRecipe.of(r, steps=2).steps == 2 and AdaptRecipe.of(None) == r
+    assert type(AdaptRecipe(lr=1).lr) is float and type(AdaptRecipe(steps=np.int64(5)).steps) is int
+    with pytest.raises(TypeError, match="momentum"):
+        AdaptRecipe.of(r, momentum=0.9)
+    for bad in ({"steps": 0}, {"batch_size": 1}, {"upper_share": 1.0}):
+        with pytest.raises(ValueError, match="need steps >= 1"):
+            AdaptRecipe(**bad)
+    with pytest.raises(ValueError, match="distill"):
+        AdaptRecipe(upper_share=0.0, distill=1.0)

@@ -29,7 +29,7 @@ both: --out, --steps, --batch-size, --lr, --upper-share, --seed; --out must not 
 
 def register(sub) -> None:
     """Add ``semmatch adapt``."""
-    from semmatch.adapt import HOME_SOURCES, LABEL_SOURCES
+    from semmatch.adapt import HOME_SOURCES, LABEL_SOURCES, AdaptRecipe
     from semmatch.cli import add_quiet, number
     from semmatch.io.outputs import declare_paths
 
@@ -62,13 +62,14 @@ def register(sub) -> None:
     p.add_argument("--frames", type=number(int, lo=1), default=None,
                    help="training scenes: frames of each camera's tour (default 40); in a home: use at most N "
                         "frames of LOWER_SEQ (default all)")
-    p.add_argument("--steps", type=number(int, lo=1), default=400, help="fine-tuning steps (default %(default)s)")
-    p.add_argument("--batch-size", type=number(int, lo=2), default=16, help="default %(default)s")
-    p.add_argument("--lr", type=number(float, lo=0.0, lo_open=True), default=1e-3,
+    p.add_argument("--steps", type=number(int, lo=1), default=AdaptRecipe.steps,
+                   help="fine-tuning steps (default %(default)s)")
+    p.add_argument("--batch-size", type=number(int, lo=2), default=AdaptRecipe.batch_size, help="default %(default)s")
+    p.add_argument("--lr", type=number(float, lo=0.0, lo_open=True), default=AdaptRecipe.lr,
                    help="peak learning rate (default %(default)s)")
-    p.add_argument("--upper-share", type=float, default=0.5,
+    p.add_argument("--upper-share", type=float, default=AdaptRecipe.upper_share,
                    help="share of each batch from human-height training views (default %(default)s)")
-    p.add_argument("--seed", type=int, default=0, help="default %(default)s")
+    p.add_argument("--seed", type=int, default=AdaptRecipe.seed, help="default %(default)s")
     home.add_argument("--views-cache", default=None, metavar="DIR",
                       help="cache of the network's human-height training views (rendered on the first run, "
                            "minutes); default: the folder recorded in the checkpoint where it exists on this "

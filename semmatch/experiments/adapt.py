@@ -12,11 +12,12 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
 
-from ..adapt import RobotViews, adapted_name, fine_tune, robot_training_views
+from ..adapt import AdaptRecipe, RobotViews, adapted_name, fine_tune, robot_training_views
 from ..evaluate.metrics import MEASURES, compare
 from ..evaluate.stats import bootstrap_ci, paired_difference_ci, ratio_of_means_ci
 from ..io import read_sequence
@@ -74,16 +75,12 @@ def adapt_networks(
     network: str,
     robot: RobotViews,
     sources: Sequence[str],
+    recipe: AdaptRecipe | None = None,
     *,
-    steps: int = 400,
-    batch_size: int = 16,
-    lr: float = 1e-3,
-    upper_share: float = 0.5,
-    distill: float = 0.0,
-    seed: int = 0,
     reuse: dict[str, Path] | None = None,
     out_dir: str | Path | None = None,
     progress: bool = True,
+    **changes: Any,
 ) -> dict[str, Path]:
     """Fine-tune ``network`` once per label source on the robot's frames (:func:`robot_views`).
 
@@ -91,14 +88,16 @@ def adapt_networks(
     ----------
     data_root, network, robot, sources
         The pipeline's data root, the network to adapt, :func:`robot_views` and the label sources.
-    steps, batch_size, lr, upper_share, distill, seed
-        The recipe (:func:`semmatch.adapt.fine_tune`).
+    recipe : AdaptRecipe, optional
+        The fine-tuning recipe (default :class:`semmatch.adapt.AdaptRecipe`'s).
     reuse : dict, optional
         ``{source: checkpoint}`` already fine-tuned with this very recipe from the same network
         (e.g. :func:`chosen_recipe_checkpoint`): copied instead of trained again.
     out_dir : path, optional
         Where the checkpoints go (default: ``data/<profile>/adapted/``, the stage's output).
     progress : bool
+    **changes
+        Fields of the recipe set over ``recipe`` (``lr=4e-3``).
 
     Returns
     -------
@@ -110,10 +109,11 @@ def adapt_networks(
     ValueError
         A checkpoint in ``reuse`` was adapted from another network, with another label source or
         with another recipe.
+    TypeError
+        A change that is not a field of the recipe.
     """
     layout = Layout(data_root)
-    recipe = dict(steps=int(steps), batch_size=int(batch_size), lr=float(lr), upper_share=float(upper_share),
-                  distill=float(distill), seed=int(seed))
+    recipe = AdaptRecipe.of(recipe, **changes)
     out = {}
     for s in sources:
         name = adapted_name(network, s)
@@ -121,11 +121,11 @@ def adapt_networks(
         if reuse and s in reuse:
             out[name] = _reuse_checkpoint(Path(reuse[s]), target, layout.model(network), s, recipe, robot)
             continue
-        out[name] = fine_tune(layout.model(network), robot, s, target, progress=progress, **recipe)
+        out[name] = fine_tune(layout.model(network), robot, s, target, recipe, progress=progress)
     return out
 
 
-def _reuse_checkpoint(path: Path, target: Path, source_net: Path, source: str, recipe: dict,
+def _reuse_checkpoint(path: Path, target: Path, source_net: Path, source: str, recipe: AdaptRecipe,
                       robot: RobotViews) -> Path:
     """Copy an adapted checkpoint to ``target`` after checking that its provenance is the request's."""
     import shutil
@@ -136,7 +136,7 @@ def _reuse_checkpoint(path: Path, target: Path, source_net: Path, source: str, r
 
     ckpt = read_checkpoint(path)  # weights only: a checkpoint found in the data folder is data, never code
     got = (ckpt.get("adapted") if isinstance(ckpt, dict) else None) or {}
-    want = {**recipe, "label_source": source, "from_sha256": _file_digest(Path(source_net)),
+    want = {**recipe.as_dict(), "label_source": source, "from_sha256": _file_digest(Path(source_net)),
             "scenes": list(robot.scenes), "frames": int(len(robot.views))}
     diff = {k: (got.get(k), v) for k, v in want.items() if got.get(k) != v}
     if diff:
@@ -170,11 +170,12 @@ def recipe_candidates(grid: dict) -> list[dict]:
     Raises
     ------
     ValueError
-        An empty grid, a key :func:`semmatch.adapt.fine_tune` does not take, or an empty list.
+        An empty grid, a key that is not a field of :class:`semmatch.adapt.AdaptRecipe` (the seed
+        aside), or an empty list.
     """
     import itertools
 
-    known = ("lr", "upper_share", "steps", "batch_size", "distill")
+    known = tuple(k for k in AdaptRecipe.names() if k != "seed")  # the seed is the run's, never chosen
     if not grid:
         raise ValueError("the adaptation recipe grid is empty")
     bad = [k for k in grid if k not in known]
@@ -221,12 +222,13 @@ def choose_adaptation_recipe(
     robot : RobotViews
         :func:`robot_views` (must carry ``source``).
     candidates : sequence of dict
-        Keyword sets of :func:`semmatch.adapt.fine_tune` (``lr``, ``upper_share``, ``steps``,
-        ``batch_size``), e.g. :func:`recipe_candidates`.
+        Fields of :class:`semmatch.adapt.AdaptRecipe` (``lr``, ``upper_share``, ``steps``,
+        ``batch_size``, ``distill``), e.g. :func:`recipe_candidates`.
     source : str
         The label source the recipe is chosen with (one recipe for every source).
     defaults : dict, optional
-        Keywords every candidate starts from (the profile's ``steps``, ``batch_size`` ...).
+        Fields every candidate starts from (the profile's ``steps``, ``batch_size`` ...); the
+        rest are :class:`semmatch.adapt.AdaptRecipe`'s defaults.
     max_forgetting : float
         Largest acceptable mean mIoU loss at ``high``.
     low, high : float
