@@ -509,6 +509,28 @@ def test_layout_scene_dir_by_index(tmp_path):
         layout.scene_dir(2)
 
 
+def _scene_rows(root: str, tag: str, sid: str) -> list[dict]:
+    return [{"root": root, "tag": tag, "scene": sid, "k": k} for k in range(2)]
+
+
+def test_layout_map_scenes_runs_one_task_per_scene_in_order(tmp_path):
+    from semmatch.experiments.layout import Layout
+
+    for split, sid in (("eval", "office_7002"), ("eval", "bedroom_7001"), ("val", "office_501")):
+        (tmp_path / "scenes" / split / sid).mkdir(parents=True)
+        (tmp_path / "scenes" / split / sid / "scene.ply").write_text("ply")
+    layout = Layout(tmp_path)
+    rows = layout.map_scenes(_scene_rows, "t", progress=False)
+    root = str(tmp_path.resolve())
+    assert rows == [{"root": root, "tag": "t", "scene": sid, "k": k} for sid in ("bedroom_7001", "office_7002")
+                    for k in range(2)]
+    per_scene = layout.map_scenes(_scene_rows, "t", split="val", flatten=False, progress=False)
+    assert per_scene == [_scene_rows(root, "t", "office_501")]
+    # scene ids or folders, in the order given
+    chosen = layout.map_scenes(_scene_rows, "u", scenes=[layout.scene_dir(1), "bedroom_7001"], progress=False)
+    assert [r["scene"] for r in chosen] == ["office_7002"] * 2 + ["bedroom_7001"] * 2
+
+
 def test_root_is_found_from_the_working_directory_not_the_package(tmp_path, monkeypatch):
     """A checkout is found by walking up to params.yaml (Jupyter starts in notebooks/), or named
     by SEMMATCH_ROOT; the package's own location does not decide (a shared or non-editable install)."""

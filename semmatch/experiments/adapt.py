@@ -423,16 +423,9 @@ def adapted_lower_maps(data_root: str | Path, networks: dict[str, object], *, vo
     DataFrame
         ``scene``, ``model``, ``method`` (``lower``) and the paper's measures.
     """
-    from functools import partial
-
-    from ..engine import map_tasks
-
-    layout = Layout(data_root)
-    scenes = [sd.name for sd in layout.scene_dirs("eval")]
-    task = partial(_adapted_lower_scene, str(layout.root.resolve()), networks, float(voxel_size),
-                   float(eval_voxel_size))
-    per_scene = map_tasks(task, scenes, jobs=jobs, scheduler=scheduler, desc="adapted lower maps", progress=progress)
-    return pd.DataFrame([row for rows in per_scene for row in rows])
+    rows = Layout(data_root).map_scenes(_adapted_lower_scene, networks, float(voxel_size), float(eval_voxel_size),
+                                        jobs=jobs, scheduler=scheduler, desc="adapted lower maps", progress=progress)
+    return pd.DataFrame(rows)
 
 
 def _adapted_lower_scene(data_root: str, networks: dict[str, object], voxel_size: float, eval_voxel_size: float,

@@ -90,21 +90,17 @@ def depth_noise_study(
     FileNotFoundError
         A missing input (naming the file and the stage that writes it).
     """
-    from functools import partial
-
-    from ..engine import map_tasks
-
     lv = [float(v) for v in levels]
     if not lv or any(not np.isfinite(v) or v < 0 for v in lv):
         raise ValueError(f"levels must be finite numbers >= 0 (at least one), got {list(levels)}")
     layout = Layout(data_root)
-    sids = [sd.name for sd in _scene_dirs(layout, scenes)]
-    task = partial(_depth_noise_scene, str(layout.root.resolve()), tuple(methods), tuple(dict.fromkeys(lv)),
-                   dict(depth_a=float(depth_a), depth_b=float(depth_b), voxel_size=voxel_size,
-                        eval_voxel_size=eval_voxel_size, seed=int(seed)))
-    per_scene = map_tasks(task, sids, jobs=jobs, scheduler=scheduler, desc="depth-noise scenes", progress=progress)
+    rows = layout.map_scenes(_depth_noise_scene, tuple(methods), tuple(dict.fromkeys(lv)),
+                             dict(depth_a=float(depth_a), depth_b=float(depth_b), voxel_size=voxel_size,
+                                  eval_voxel_size=eval_voxel_size, seed=int(seed)),
+                             scenes=_scene_dirs(layout, scenes), jobs=jobs, scheduler=scheduler,
+                             desc="depth-noise scenes", progress=progress)
     cols = ["scene", "method", "level", "depth_sigma_2m", *MEASURES, "coverage"]
-    return pd.DataFrame([r for rows in per_scene for r in rows], columns=cols)
+    return pd.DataFrame(rows, columns=cols)
 
 
 def _depth_noise_scene(data_root: str, methods: tuple[str, ...], levels: tuple[float, ...], o: dict,

@@ -22,8 +22,10 @@ protocol) or ``shared`` (``lower_shared/``, the person's route replayed: the abl
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 __all__ = ["Layout", "GT", "ROUTES", "source_dir", "model_name"]
 
@@ -82,6 +84,62 @@ class Layout:
         if not 0 <= index < len(scenes):
             raise ValueError(f"scene index {index} out of range: {len(scenes)} {split} scenes")
         return scenes[index]
+
+    def map_scenes(
+        self,
+        task: Callable[..., Any],
+        *args: Any,
+        scenes: Iterable[str | Path] | None = None,
+        split: str = "eval",
+        flatten: bool = True,
+        jobs: int | None = 1,
+        scheduler: str | None = None,
+        desc: str = "scenes",
+        progress: bool = True,
+    ) -> list:
+        """Run ``task(root, *args, scene_id)`` once per scene, as engine tasks: the per-scene fan-out.
+
+        ``root`` is this layout's root, resolved, as text (a task may run in another process or
+        on another machine, where it makes its own :class:`Layout`). The scenes run as tasks of
+        :func:`semmatch.engine.map_tasks` (``jobs`` local worker processes, or the cluster at
+        ``scheduler``); the results come back in the scenes' order.
+
+        Parameters
+        ----------
+        task : callable
+            A module-level function (it is pickled to the workers), called as
+            ``task(root, *args, scene_id)``.
+        *args
+            The task's arguments between the root and the scene id (picklable).
+        scenes : iterable of str or path, optional
+            Scene ids or scene folders (their names are the ids); default every scene of
+            ``split`` (:meth:`scene_dirs`).
+        split : str
+            The scenes' split when ``scenes`` is not given.
+        flatten : bool
+            Each task returns a list of rows: return one list of every scene's rows, in order
+            (False: each task's result as it is, one per scene).
+        jobs, scheduler, desc, progress
+            As :func:`semmatch.engine.map_tasks`.
+
+        Returns
+        -------
+        list
+            The rows of every scene (``flatten``), else one result per scene.
+
+        Raises
+        ------
+        FileNotFoundError
+            ``scenes`` not given and the split has no scenes folder.
+        """
+        from functools import partial
+
+        from ..engine import map_tasks
+
+        ids = [Path(s).name for s in (self.scene_dirs(split) if scenes is None else scenes)]
+        per_scene = map_tasks(partial(task, str(self.root.resolve()), *args), ids, jobs=jobs, scheduler=scheduler,
+                              desc=desc, progress=progress)
+        return [row for rows in per_scene for row in rows] if flatten else per_scene
 
     def model(self, network: str) -> Path:
         return self.root / "models" / f"{network}.pt"

@@ -121,20 +121,20 @@ def misregistration_study(
     ValueError
         Negative or non-finite perturbation sizes.
     """
-    from functools import partial
-
-    from ..engine import map_tasks, resolve_scheduler
+    from ..engine import resolve_scheduler
 
     layout = Layout(data_root)
     cases = _perturbations(translations, rotations_deg)
     sids = [sd.name for sd in _scene_dirs(layout, scenes)]
     frame_jobs = int(jobs) if resolve_scheduler(scheduler) is None and len(sids) == 1 else 1
     # scenes are engine tasks (jobs local processes or a scheduler); one scene: its frames in jobs processes
-    task = partial(_misregistration_scene, str(layout.root.resolve()), tuple(methods), tuple(cases),
-                   dict(voxel_size=voxel_size, eval_voxel_size=eval_voxel_size, seed=int(seed), frame_jobs=frame_jobs))
-    per_scene = map_tasks(task, sids, jobs=jobs, scheduler=scheduler, desc="misregistration scenes", progress=progress)
+    rows = layout.map_scenes(_misregistration_scene, tuple(methods), tuple(cases),
+                             dict(voxel_size=voxel_size, eval_voxel_size=eval_voxel_size, seed=int(seed),
+                                  frame_jobs=frame_jobs),
+                             scenes=sids, jobs=jobs, scheduler=scheduler, desc="misregistration scenes",
+                             progress=progress)
     cols = ["scene", "method", "translation_m", "rotation_deg", *MEASURES, "coverage"]
-    return pd.DataFrame([r for rows in per_scene for r in rows], columns=cols)
+    return pd.DataFrame(rows, columns=cols)
 
 
 def clean_scene_inputs(layout: Layout, sid: str, eval_voxel_size: float):

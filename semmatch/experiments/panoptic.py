@@ -84,10 +84,6 @@ def choose_clustering(
     scores : DataFrame
         ``scene``, ``eps``, ``pq_things``, ``sq_things``, ``rq_things``.
     """
-    from functools import partial
-
-    from ..engine import map_tasks
-
     layout = Layout(data_root)
     val = layout.scene_dirs("val")
     if scenes is not None:
@@ -95,10 +91,9 @@ def choose_clustering(
         kinds = sorted({sd.name.rsplit("_", 1)[0] for sd in val})
         val = [sd for k in kinds for sd in val if sd.name.rsplit("_", 1)[0] == k][:: max(1, len(val) // scenes)][:scenes]
     # one engine task per validation scene (jobs local processes or the cluster at scheduler)
-    task = partial(_clustering_scene, tuple(float(e) for e in eps_grid), float(voxel_size), float(eval_voxel_size),
-                   int(frame_step), int(min_vertices))
-    rows = [r for part in map_tasks(task, [str(sd.resolve()) for sd in val], jobs=jobs, scheduler=scheduler,
-                                    desc="clustering (validation)", progress=progress) for r in part]
+    rows = layout.map_scenes(_clustering_scene, tuple(float(e) for e in eps_grid), float(voxel_size),
+                             float(eval_voxel_size), int(frame_step), int(min_vertices), scenes=val, jobs=jobs,
+                             scheduler=scheduler, desc="clustering (validation)", progress=progress)
     scores = pd.DataFrame(rows)
     if scores.empty:
         raise ValueError(f"{layout.scenes / 'val'}: no validation scene to choose the clustering radius on")
@@ -106,12 +101,12 @@ def choose_clustering(
     return float(mean.idxmax()), scores
 
 
-def _clustering_scene(eps_grid: tuple[float, ...], voxel_size: float, eval_voxel_size: float, frame_step: int,
-                      min_vertices: int, scene_dir: str) -> list[dict]:
+def _clustering_scene(data_root: str, eps_grid: tuple[float, ...], voxel_size: float, eval_voxel_size: float,
+                      frame_step: int, min_vertices: int, sid: str) -> list[dict]:
     """PQ of every clustering radius on one validation scene (a task of :func:`choose_clustering`)."""
     from ..fusion import reconstruct
 
-    sd = Path(scene_dir)
+    sd = Layout(data_root).scenes / "val" / sid
     origin = eval_grid_origin(eval_voxel_size)
     seq = read_sequence(sd / "upper")
     frames = [seq[i] for i in range(0, len(seq), int(frame_step))]
@@ -221,17 +216,10 @@ def panoptic_study(
         ``scene``, ``source``, ``method`` and :data:`PANOPTIC_MEASURES`, plus the per-class PQ of
         the thing classes as ``pq_<class>`` (NaN where the class is absent from both maps).
     """
-    from functools import partial
-
-    from ..engine import map_tasks
-
-    layout = Layout(data_root)
-    scenes = [sd.name for sd in layout.scene_dirs("eval")]
     kw = dict(eps=eps, min_vertices=min_vertices, frame_step=frame_step, tolerance=tolerance,
               eval_voxel_size=eval_voxel_size, link_radius=link_radius)
-    per_scene = map_tasks(partial(_panoptic_task, str(Path(data_root).resolve()), methods, networks, kw), scenes, jobs=jobs,
-                          scheduler=scheduler, desc="panoptic", progress=progress)
-    rows: list[dict] = [row for rows in per_scene for row in rows]
+    rows = Layout(data_root).map_scenes(_panoptic_task, methods, networks, kw, jobs=jobs, scheduler=scheduler,
+                                        desc="panoptic", progress=progress)
     return pd.DataFrame(rows)
 
 

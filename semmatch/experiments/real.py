@@ -191,18 +191,17 @@ def evaluate_real_like(
     sources = ([GT] if include_ground_truth else []) + list(networks)
     if not sources:
         raise ValueError("nothing to evaluate: no networks and include_ground_truth=False")
-    from functools import partial
-
-    from ..engine import map_tasks, resolve_scheduler
+    from ..engine import resolve_scheduler
 
     scenes = [sd.name for sd in layout.scene_dirs("eval")]
-    task = partial(_real_like_scene, str(Path(data_root).resolve()), tuple(methods), tuple(networks), tuple(sources),
-                   dict(voxel_size=voxel_size, eval_voxel_size=eval_voxel_size, tol=tol, fused_base=fused_base,
-                        registration_voxel=registration_voxel, registration_seed=registration_seed,
-                        registration_restarts=registration_restarts,
-                        frame_jobs=int(jobs) if resolve_scheduler(scheduler) is None and len(scenes) == 1 else 1))
+    o = dict(voxel_size=voxel_size, eval_voxel_size=eval_voxel_size, tol=tol, fused_base=fused_base,
+             registration_voxel=registration_voxel, registration_seed=registration_seed,
+             registration_restarts=registration_restarts,
+             frame_jobs=int(jobs) if resolve_scheduler(scheduler) is None and len(scenes) == 1 else 1)
     # scenes are engine tasks (jobs local processes or a scheduler); one scene: its frames in jobs processes
-    per_scene = map_tasks(task, scenes, jobs=jobs, scheduler=scheduler, desc="real-like scenes", progress=progress)
+    per_scene = layout.map_scenes(_real_like_scene, tuple(methods), tuple(networks), tuple(sources), o, scenes=scenes,
+                                  flatten=False, jobs=jobs, scheduler=scheduler, desc="real-like scenes",
+                                  progress=progress)
     rows = [r for scene_rows, _, _ in per_scene for r in scene_rows]
     traj_rows = [r for _, scene_traj, _ in per_scene for r in scene_traj]
     reg_rows = [reg for _, _, reg in per_scene]

@@ -69,14 +69,9 @@ def reconstruct_upper_maps(
         One row per (scene, network): the network's upper map scored against the ground-truth
         upper map (the paper's "Upper" rows), plus the 2D pixel accuracy / mIoU on the frames.
     """
-    from functools import partial
-
-    from ..engine import map_tasks
-
-    scenes = [sd.name for sd in Layout(data_root).scene_dirs("eval")]
-    task = partial(_upper_maps_scene, str(Path(data_root).resolve()), tuple(networks), float(voxel_size), float(eval_voxel_size))
-    rows = map_tasks(task, scenes, jobs=jobs, scheduler=scheduler, desc="upper maps", progress=progress)
-    return pd.DataFrame([row for scene_rows in rows for row in scene_rows])
+    rows = Layout(data_root).map_scenes(_upper_maps_scene, tuple(networks), float(voxel_size), float(eval_voxel_size),
+                                        jobs=jobs, scheduler=scheduler, desc="upper maps", progress=progress)
+    return pd.DataFrame(rows)
 
 
 def _upper_maps_scene(data_root: str, networks: tuple[str, ...], voxel_size: float, eval_voxel_size: float,
@@ -145,17 +140,12 @@ def transfer_lower_labels(
         for the ground-truth map and ``fused_base``: the share of the robot's view the person's
         map supports), fps.
     """
-    from functools import partial
-
-    from ..engine import map_tasks
-
     if fused_base not in methods:
         raise ValueError(f"fused_base {fused_base!r} is not among the methods {list(methods)}")
-    scenes = [sd.name for sd in Layout(data_root).scene_dirs("eval")]
     # scenes are engine tasks; with one local job the frames of a scene are not split either
-    task = partial(_transfer_scene, str(Path(data_root).resolve()), tuple(methods), tuple(networks), fused_base)
-    rows = map_tasks(task, scenes, jobs=jobs, scheduler=scheduler, desc="transfer (scenes)", progress=progress)
-    return pd.DataFrame([row for scene_rows in rows for row in scene_rows])
+    rows = Layout(data_root).map_scenes(_transfer_scene, tuple(methods), tuple(networks), fused_base, jobs=jobs,
+                                        scheduler=scheduler, desc="transfer (scenes)", progress=progress)
+    return pd.DataFrame(rows)
 
 
 def _transfer_scene(data_root: str, methods: tuple[str, ...], networks: tuple[str, ...], fused_base: str,
@@ -222,14 +212,9 @@ def reconstruct_lower_maps(
     The same under ``shared_route/`` for the route ablation. Scenes are tasks of
     :func:`semmatch.engine.map_tasks` (``jobs`` local processes or the cluster at ``scheduler``).
     """
-    from functools import partial
-
-    from ..engine import map_tasks
-
-    scenes = [sd.name for sd in Layout(data_root).scene_dirs("eval")]
-    task = partial(_lower_maps_scene, str(Path(data_root).resolve()), tuple(methods), tuple(networks), float(voxel_size),
-                   fused_base, float(mesh_spacing))
-    map_tasks(task, scenes, jobs=jobs, scheduler=scheduler, desc="lower maps", progress=progress)
+    Layout(data_root).map_scenes(_lower_maps_scene, tuple(methods), tuple(networks), float(voxel_size), fused_base,
+                                 float(mesh_spacing), flatten=False, jobs=jobs, scheduler=scheduler,
+                                 desc="lower maps", progress=progress)
 
 
 def _lower_maps_scene(data_root: str, methods: tuple[str, ...], networks: tuple[str, ...], voxel_size: float,
@@ -298,16 +283,10 @@ def evaluate_synthetic(
         ``fused``, ``upper`` = the network's upper map scored against the upper references),
         the four measures.
     """
-    from functools import partial
-
-    from ..engine import map_tasks
-
-    layout = Layout(data_root)
-    scenes = [sd.name for sd in layout.scene_dirs("eval")]
-    task = partial(_evaluate_scene, str(layout.root.resolve()), tuple(methods), tuple(networks),
-                   float(eval_voxel_size), fused_base)
-    per_scene = map_tasks(task, scenes, jobs=jobs, scheduler=scheduler, desc="Table 2 scenes", progress=progress)
-    return pd.DataFrame([row for rows in per_scene for row in rows])
+    rows = Layout(data_root).map_scenes(_evaluate_scene, tuple(methods), tuple(networks), float(eval_voxel_size),
+                                        fused_base, jobs=jobs, scheduler=scheduler, desc="Table 2 scenes",
+                                        progress=progress)
+    return pd.DataFrame(rows)
 
 
 def reference_grid(ref: SemanticMap | str | Path, voxel_size: float) -> VoxelGrid:
