@@ -32,7 +32,9 @@ def main() -> None:
     ap.add_argument("out", type=Path, help="work folder (the home, the map, the checkpoints, the timings)")
     ap.add_argument("--model", type=Path, default=Path("models/full/compact.pt"), help="network to adapt")
     ap.add_argument("--kind", default="apartment", help="procedural home kind (default %(default)s)")
-    ap.add_argument("--seed", type=int, default=9101, help="home seed (default %(default)s)")
+    ap.add_argument("--seed", type=int, default=1,
+                    help="home seed (default %(default)s: a training scene, so that no seed a reader may pass to "
+                    "make confirm is generated here; the timing does not depend on it)")
     ap.add_argument("--frames", type=int, default=60, help="frames of each tour (default %(default)s)")
     ap.add_argument("--size", default="320x240", help="image size (default %(default)s)")
     ap.add_argument("--steps", type=int, default=AdaptRecipe.steps, help="fine-tuning steps (default %(default)s)")
