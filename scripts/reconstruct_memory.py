@@ -42,7 +42,7 @@ def main(argv: list[str] | None = None) -> int:
     tmp = Path(tempfile.mkdtemp(prefix="semmatch-mem-")) if args.out is None else Path(args.out)
     tmp.mkdir(parents=True, exist_ok=True)
     cmd = [timer, "-v", sys.executable, "-m", "semmatch", "reconstruct", str(args.recording), "--estimate-poses",
-           "--out", str(tmp / "map.ply"), "--quiet", *args.extra]
+           "--out", str(tmp / "map.ply"), "--quiet", "--json", *args.extra]
     t0 = time.perf_counter()
     proc = subprocess.run(cmd, capture_output=True, text=True)
     wall = time.perf_counter() - t0

@@ -229,7 +229,8 @@ CASES = [
     # simulate
     ("simulate-huge-image", argv_of("simulate", "--out", "{w}/s", "--size", "100000x100000", "--frames", "1"),
      r"(out of memory|too large|pixels)"),
-    ("simulate-bad-size", argv_of("simulate", "--out", "{w}/s", "--size", "axb"), r"--size must look like 640x480"),
+    ("simulate-bad-size", argv_of("simulate", "--out", "{w}/s", "--image-size", "axb"),
+     r"--image-size: must look like WxH, e\.g\. 640x480"),
     ("simulate-zero-frames", argv_of("simulate", "--out", "{w}/s", "--frames", "0"), r"n_frames must be >= 1"),
     ("simulate-unknown-kind", argv_of("simulate", "--out", "{w}/s", "--kind", "castle"), r"unknown scene kind 'castle'"),
     ("simulate-above-ceiling", argv_of("simulate", "--out", "{w}/s", "--height", "10", "--frames", "2", "--size", "40x30"),

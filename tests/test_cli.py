@@ -57,12 +57,12 @@ def test_simulate_camera_step(tmp_path, capsys):
     from semmatch.cli import main
     from semmatch.io import read_sequence
 
-    assert main(["simulate", "--kind", "office", "--seed", "2", "--pair", "--frames", "6", "--camera-step", "0.4",
-                 "--size", "32x24", "--out", str(tmp_path / "pair"), "--quiet"]) == 0
+    assert main(["simulate", "--scene-kind", "office", "--seed", "2", "--pair", "--frames", "6", "--camera-step",
+                 "0.4", "--image-size", "32x24", "--out", str(tmp_path / "pair"), "--quiet"]) == 0
     for name in ("upper", "lower"):
         xy = np.stack([f.pose[:2, 3] for f in read_sequence(tmp_path / "pair" / name)])
         steps = np.linalg.norm(np.diff(xy, axis=0), axis=1)
         assert steps.max() <= 0.4 + 1e-6 and steps.max() > 0.15  # longer than the default step allows
-    assert main(["simulate", "--kind", "office", "--camera-step", "0", "--frames", "3",
+    assert main(["simulate", "--scene-kind", "office", "--camera-step", "0", "--frames", "3",
                  "--out", str(tmp_path / "x"), "--quiet"]) == 2
     assert "--camera-step" in capsys.readouterr().err

@@ -205,7 +205,7 @@ def test_reconstruct_cli(tmp_path, room_frames, capsys):
         for f in room_frames[:6]:
             w.add(f.rgb, f.depth, f.pose, labels=f.labels)
     rc = main(["reconstruct", str(seq_dir), "--out", str(tmp_path / "m.ply"), "--rgb-out",
-               str(tmp_path / "rgb.ply"), "--voxel-size", "0.05", "--quiet"])
+               str(tmp_path / "rgb.ply"), "--voxel-size", "0.05", "--quiet", "--json"])
     assert rc == 0 and '"vertices"' in capsys.readouterr().out
     m = read_map(tmp_path / "m.ply")
     assert m.is_mesh and {1, 2, 3} <= set(np.unique(m.labels))

@@ -158,7 +158,7 @@ def test_real_like_chain_on_a_noisy_simulated_sequence(tmp_path, capsys):
     from semmatch.cli import main
 
     rc = main(["reconstruct", str(tmp_path / "lower"), "--out", str(tmp_path / "m.ply"), "--estimate-poses",
-               "--prior", "--quiet", "--poses-out", str(tmp_path / "est.txt")])
+               "--prior", "--quiet", "--poses-out", str(tmp_path / "est.txt"), "--json"])
     assert rc == 0
     info = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert info["ate_rmse"] < 0.05 and info["n_frames"] == 10 and (tmp_path / "est.txt").is_file()

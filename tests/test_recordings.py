@@ -233,7 +233,7 @@ def test_cli_anchors_the_chain_where_the_ground_truth_starts(tmp_path, capsys):
     for i in (0, 1):  # the motion capture starts at frame 2
         (tmp_path / "k" / f"frame-{i:06d}.pose.txt").unlink()
     assert main(["reconstruct", str(tmp_path / "k"), "--estimate-poses", "--out", str(tmp_path / "m.ply"),
-                 "--voxel-size", "0.1", "--quiet"]) == 0
+                 "--voxel-size", "0.1", "--quiet", "--json"]) == 0
     out, err = capsys.readouterr()
     assert "warning: " in err and "the ground truth starts at frame 2, not 0" in err
     info = json.loads(out.strip().splitlines()[-1])

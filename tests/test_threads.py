@@ -94,10 +94,13 @@ def test_thread_rows_rerun_the_same_benchmark_options():
     from semmatch.cli.bench import _argv_of
 
     parser = build_parser()
-    argv = ["bench", "fusion", "--frames", "7", "--probabilities", "--voxel-size", "0.05", "--thread-rows"]
+    argv = ["bench", "fusion", "--frames", "7", "--probabilities", "--voxel-size", "0.05", "--width", "320",
+            "--scene-kind", "office", "--thread-rows"]
     args = parser.parse_args(argv)
     again = parser.parse_args(["bench", "fusion", *_argv_of(args)])
-    for key in ("frames", "probabilities", "voxel_size", "width", "scene"):
+    words = _argv_of(args)  # old spellings given back canonically
+    assert words[words.index("--image-size") + 1] == "320x480" and "--width" not in words
+    for key in ("frames", "probabilities", "voxel_size", "image_size", "scene_kind"):
         assert getattr(again, key) == getattr(args, key)
     assert again.thread_rows is False  # the rows themselves run without it
     seg = parser.parse_args(["bench", "segment", "--no-flip", "--model", "a.pt", "b.pt", "--threads", "2"])

@@ -2,8 +2,10 @@
 
 Each verb lives in its own module of this package and exposes ``register(subparsers)``,
 which adds its sub-parser and sets ``func`` (called with the parsed namespace, returning an
-exit code). ``semmatch bench <what>`` benchmarks are registered the same way by modules
-under :mod:`semmatch.cli.bench`.
+exit code). The arguments verbs share, and the grammar they follow (``--image-size WxH``,
+``--camera-height``, ``--scene-kind``, ``--json``, ``--quiet``, old spellings as hidden aliases,
+British spellings accepted), live in :mod:`semmatch.cli.common`. ``semmatch bench <what>``
+benchmarks are registered the same way by modules under :mod:`semmatch.cli.bench`.
 """
 
 from __future__ import annotations
@@ -12,73 +14,27 @@ import argparse
 import importlib
 import sys
 
+from semmatch.cli.common import (
+    LONG_VERBS,
+    Parser,
+    accept_british_spellings,
+    add_quiet,
+    add_sequence,
+    emit,
+    number,
+    sequence_arg,
+)
+
+__all__ = ["VERBS", "LONG_VERBS", "build_parser", "main", "add_quiet", "add_sequence", "sequence_arg", "number",
+           "emit"]
+
 #: verb modules, in the order ``semmatch --help`` lists them
 VERBS = ("simulate", "train", "adapt", "predict", "reconstruct", "transfer", "evaluate", "panoptic", "show", "bench")
 
 
-def add_quiet(parser: argparse.ArgumentParser, what: str = "the progress bars") -> None:
-    """The one progress flag of every verb: ``--quiet`` (``--no-progress`` is kept as an alias)."""
-    parser.add_argument("--quiet", action="store_true", help=f"hide {what}")
-    parser.add_argument("--no-progress", dest="quiet", action="store_true", help=argparse.SUPPRESS)
-
-
-def add_sequence(parser: argparse.ArgumentParser, help: str) -> None:
-    """The sequence as the first positional argument, as every verb takes it (``--sequence SEQ``
-    is kept as an alias); read it with :func:`sequence_arg`."""
-    parser.add_argument("sequence", nargs="?", metavar="SEQ", help=help)
-    parser.add_argument("--sequence", dest="sequence_flag", metavar="SEQ", help=argparse.SUPPRESS)
-
-
-def sequence_arg(args: argparse.Namespace) -> str:
-    """The sequence given positionally or with ``--sequence`` (a clear error when neither or both)."""
-    pos, flag = getattr(args, "sequence", None), getattr(args, "sequence_flag", None)
-    if pos and flag and pos != flag:
-        raise ValueError(f"two sequences given ({pos} and --sequence {flag}); give SEQ once")
-    if not (pos or flag):
-        verb = " ".join(v for v in (getattr(args, "verb", None), getattr(args, "action", None)) if v)
-        raise ValueError(f"the sequence folder SEQ is required (semmatch {verb} SEQ ...)")
-    return pos or flag
-
-
-def number(kind: type = float, *, lo: float | None = None, hi: float | None = None, lo_open: bool = False):
-    """An argparse ``type`` that parses a ``kind`` (int or float) and refuses it outside its range.
-
-    Parameters
-    ----------
-    kind : type
-        ``int`` or ``float``; NaN and infinities are refused.
-    lo, hi : float, optional
-        Inclusive bounds (``lo`` exclusive with ``lo_open``).
-
-    Returns
-    -------
-    callable
-        For ``add_argument(type=...)``: argparse turns its ``ArgumentTypeError`` into a usage
-        error (exit 2) that names the flag.
-    """
-    import math
-
-    def parse(text: str):
-        try:
-            v = kind(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected {'an integer' if kind is int else 'a number'}, "
-                                             f"got {text!r}") from None
-        if not math.isfinite(v):
-            raise argparse.ArgumentTypeError(f"must be finite, got {text!r}")
-        if lo is not None and (v <= lo if lo_open else v < lo):
-            raise argparse.ArgumentTypeError(f"must be {'>' if lo_open else '>='} {lo:g}, got {text}")
-        if hi is not None and v > hi:
-            raise argparse.ArgumentTypeError(f"must be <= {hi:g}, got {text}")
-        return v
-
-    parse.__name__ = kind.__name__  # argparse names the type in its messages
-    return parse
-
-
 def build_parser() -> argparse.ArgumentParser:
     """The full ``semmatch`` argument parser."""
-    parser = argparse.ArgumentParser(
+    parser = Parser(
         prog="semmatch",
         description="3D semantic label transfer across human and robot viewpoints.",
     )
@@ -89,6 +45,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub.required = True
     for verb in VERBS:
         importlib.import_module(f"semmatch.cli.{verb}").register(sub)
+    accept_british_spellings(parser)
     return parser
 
 

@@ -12,7 +12,7 @@ import argparse
 
 _EPILOG = """\
 modes (--home selects the second):
-  training scenes  --model --source --seeds [--kinds --frames]
+  training scenes  --model --source --seeds [--scene-kinds --frames]
                    the person and the robot tour rendered training scenes of the network; the
                    network's map of each is transferred into the robot's frames.
   in a home        --home LOWER_SEQ --map PERSON_MAP --model [--source --frames --frame-step
@@ -20,7 +20,7 @@ modes (--home selects the second):
                    the robot's recorded tour LOWER_SEQ (RGB, depth, poses in the map's frame) is
                    labelled from the person's map of the same home PERSON_MAP (default source
                    3d-neighborhood); --frames N uses the first N frames (after --frame-step).
-                   Refused: --seeds/--kinds, a sequence without depth, a map without labels, a
+                   Refused: --seeds/--scene-kinds, a sequence without depth, a map without labels, a
                    map naming another scene than the sequence, labels covering too little of the
                    robot's view.
 both: --out, --steps, --batch-size, --lr, --upper-share, --seed; --out must not be an input.
@@ -30,7 +30,7 @@ both: --out, --steps, --batch-size, --lr, --upper-share, --seed; --out must not 
 def register(sub) -> None:
     """Add ``semmatch adapt``."""
     from semmatch.adapt import HOME_SOURCES, LABEL_SOURCES, AdaptRecipe
-    from semmatch.cli import add_quiet, number
+    from semmatch.cli.common import RawDescriptionHelpFormatter, add_output_flags, add_scene_kinds, number
     from semmatch.io.outputs import declare_paths
 
     p = sub.add_parser(
@@ -40,7 +40,7 @@ def register(sub) -> None:
         "half of each batch staying the network's human-height training views. Either on rendered\n"
         "training scenes (--seeds) or in one home the person has mapped (--home LOWER_SEQ --map PERSON_MAP).",
         epilog=_EPILOG,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
+        formatter_class=RawDescriptionHelpFormatter,
     )
     p.add_argument("--model", required=True, help="checkpoint of the network to adapt (.pt)")
     p.add_argument("--source", default=None, choices=list(LABEL_SOURCES), metavar="SOURCE",
@@ -54,14 +54,14 @@ def register(sub) -> None:
     home.add_argument("--frame-step", type=number(int, lo=1), default=1,
                       help="use every N-th frame of LOWER_SEQ (default %(default)s)")
     train = p.add_argument_group("training scenes")
-    train.add_argument("--kinds", nargs="+", default=None,
-                       help="scene kinds (scene i has kind i mod len(kinds); default living_room bedroom office "
-                            "apartment)")
+    add_scene_kinds(train, default=None, nargs="+",
+                    help="scene kinds (scene i has kind i mod len(kinds); default living_room bedroom office "
+                         "apartment)")
     train.add_argument("--seeds", nargs="+", type=int, default=None,
                        help="training scenes to adapt on (never the network's validation/evaluation seeds)")
     p.add_argument("--frames", type=number(int, lo=1), default=None,
-                   help="training scenes: frames of each camera's tour (default 40); in a home: use at most N "
-                        "frames of LOWER_SEQ (default all)")
+                   help="training scenes: frames of each camera's tour (40 when not given); in a home: use at most N "
+                        "frames of LOWER_SEQ (all when not given)")
     p.add_argument("--steps", type=number(int, lo=1), default=AdaptRecipe.steps,
                    help="fine-tuning steps (default %(default)s)")
     p.add_argument("--batch-size", type=number(int, lo=2), default=AdaptRecipe.batch_size, help="default %(default)s")
@@ -74,7 +74,7 @@ def register(sub) -> None:
                       help="cache of the network's human-height training views (rendered on the first run, "
                            "minutes); default: the folder recorded in the checkpoint where it exists on this "
                            "machine, else none (rendered each run)")
-    add_quiet(p)
+    add_output_flags(p, json_what="the adapted checkpoint and its data", quiet="the progress bars")
     declare_paths(p, inputs=("model", "home", "map"), outputs=("out", "views_cache"))
     p.set_defaults(func=run)
 
@@ -82,7 +82,7 @@ def register(sub) -> None:
 def _check_mode(args: argparse.Namespace) -> None:
     """Refuse arguments of one mode given in the other."""
     if args.home is not None:
-        mixed = [f for f, v in (("--seeds", args.seeds), ("--kinds", args.kinds)) if v is not None]
+        mixed = [f for f, v in (("--seeds", args.seeds), ("--scene-kinds", args.scene_kinds)) if v is not None]
         if mixed:
             raise ValueError(f"{' and '.join(mixed)}: training-scene options cannot be mixed with --home (in a home "
                              "the robot's own tour is the adaptation data)")
@@ -106,26 +106,29 @@ def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from semmatch.adapt import fine_tune, robot_training_views
+    from semmatch.cli.common import emit
 
     _check_mode(args)
     if Path(args.out).resolve() == Path(args.model).resolve():
         raise ValueError(f"--out {args.out}: refusing to overwrite the network being adapted")
     if args.home is not None:
         return _run_home(args)
-    kinds = args.kinds or ["living_room", "bedroom", "office", "apartment"]
+    kinds = args.scene_kinds or ["living_room", "bedroom", "office", "apartment"]
     robot = robot_training_views(args.model, kinds=kinds, seeds=args.seeds, sources=[args.source],
                                  n_frames=args.frames or 40, seed=args.seed, progress=not args.quiet)
     out = fine_tune(args.model, robot, args.source, args.out, steps=args.steps, batch_size=args.batch_size,
                     lr=args.lr, upper_share=args.upper_share, seed=args.seed, progress=not args.quiet)
-    print(f"{out}: {args.model} adapted with {args.source} labels on {len(robot.views)} robot frames "
-          f"({robot.coverage[args.source]:.0%} of their pixels labelled)")
-    return 0
+    result = {"out": str(out), "model": str(args.model), "source": args.source, "frames": len(robot.views),
+              "label_coverage": robot.coverage[args.source]}
+    return emit(result, args.json, f"{out}: {args.model} adapted with {args.source} labels on {len(robot.views)} "
+                f"robot frames ({robot.coverage[args.source]:.0%} of their pixels labelled)")
 
 
 def _run_home(args: argparse.Namespace) -> int:
     import torch
 
     from semmatch.adapt import adapt_in_home
+    from semmatch.cli.common import emit
 
     source = args.source or "3d-neighborhood"
     out = adapt_in_home(args.model, args.home, args.map, args.out, source=source, frames=args.frames,
@@ -133,7 +136,9 @@ def _run_home(args: argparse.Namespace) -> int:
                         upper_share=args.upper_share, seed=args.seed, progress=not args.quiet,
                         cache_dir=args.views_cache or "checkpoint-if-present")
     a = torch.load(out, map_location="cpu", weights_only=True)["adapted"]
-    print(f"{out}: {args.model} adapted in {a['scenes'][0]} with {source} labels from {args.map} on "
-          f"{a['frames']} robot frames ({a['label_coverage']:.0%} of their pixels with depth labelled), "
-          f"{a['steps']} steps in {a['seconds']:.0f} s")
-    return 0
+    result = {"out": str(out), "model": str(args.model), "source": source, "map": str(args.map),
+              "home": a["scenes"][0], "frames": a["frames"], "label_coverage": a["label_coverage"],
+              "steps": a["steps"], "seconds": a["seconds"]}
+    return emit(result, args.json, f"{out}: {args.model} adapted in {a['scenes'][0]} with {source} labels from "
+                f"{args.map} on {a['frames']} robot frames ({a['label_coverage']:.0%} of their pixels with depth "
+                f"labelled), {a['steps']} steps in {a['seconds']:.0f} s")

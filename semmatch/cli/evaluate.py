@@ -11,6 +11,7 @@ import numpy as np
 
 def register(sub) -> None:
     """Add ``semmatch evaluate``."""
+    from semmatch.cli.common import add_output_flags
     from semmatch.io.outputs import declare_paths
 
     p = sub.add_parser(
@@ -36,6 +37,7 @@ def register(sub) -> None:
     p.add_argument("--strict", action="store_true",
                    help="exit with an error (2) when a prediction shares no evaluated voxel with the ground "
                         "truth (default: a warning; its scores are 0 by construction, not by measurement)")
+    add_output_flags(p, json_what="the table (prediction -> measure -> value)")
     declare_paths(p, inputs=("gt", "pred", "transform"), outputs=("csv", "markdown", "figure"))
     p.set_defaults(func=run)
 
@@ -104,8 +106,7 @@ def check_scorable(gt: str, results: dict[str, dict]) -> list[str]:
 
 def run(args: argparse.Namespace) -> int:
     """Evaluate every prediction and print the table."""
-    import pandas as pd
-
+    from semmatch.cli.common import emit_table
     from semmatch.evaluate.metrics import compare, voxelize
     from semmatch.io import atomic_write_text
 
@@ -125,8 +126,7 @@ def run(args: argparse.Namespace) -> int:
     if len(set(names)) == len(names):
         results = dict(zip(names, results.values()))
     df = results_table(results, per_class=args.per_class)
-    with pd.option_context("display.width", 200, "display.max_columns", 50):
-        print(df.to_string(float_format=lambda v: f"{v:.4f}"))
+    emit_table(df, args.json)
     if args.csv:
         atomic_write_text(args.csv, df.to_csv(float_format="%.6f"))
     if args.markdown:

@@ -2,9 +2,9 @@
 
 * ``segment MAP.ply --out OUT.ply``: give a semantic map an instance layer by clustering each
   thing class in 3D;
-* ``reference --sequence SEQ --out OUT.ply``: fuse a sequence with its own ground-truth classes
+* ``reference SEQ --out OUT.ply``: fuse a sequence with its own ground-truth classes
   and instances (``instances/``) into a panoptic map;
-* ``transfer --map UPPER.ply --sequence SEQ --method M --out OUT.ply``: transfer classes and
+* ``transfer SEQ --map UPPER.ply --method M --out OUT.ply``: transfer classes and
   instances into every frame of SEQ and fuse them into the lower panoptic map;
 * ``evaluate GT.ply PRED.ply ...``: panoptic quality (PQ, SQ, RQ) on voxels.
 """
@@ -17,7 +17,7 @@ from pathlib import Path
 
 def register(sub) -> None:
     """Add the ``panoptic`` verb and its sub-commands."""
-    from semmatch.cli import add_quiet, add_sequence
+    from semmatch.cli.common import add_output_flags, add_sequence, number
     from semmatch.io.outputs import declare_paths
     from semmatch.transfer import DEFAULT_MAX_DISTANCE, available_methods
 
@@ -38,6 +38,7 @@ def register(sub) -> None:
                      help="clustering radius in metres (default %(default)s; notebook 10 chooses it on "
                      "validation scenes: figures/<profile>/validation_panoptic_clustering.csv)")
     seg.add_argument("--min-vertices", type=int, default=50, help="smallest instance kept (default %(default)s)")
+    add_output_flags(seg, json_what="the instances written")
     declare_paths(seg, inputs=("map",), outputs=("out",))
     seg.set_defaults(func=run_segment)
 
@@ -47,7 +48,8 @@ def register(sub) -> None:
     add_sequence(ref, "sequence folder with labels/ and instances/")
     ref.add_argument("--out", required=True, help="panoptic PLY to write")
     ref.add_argument("--voxel-size", type=float, default=0.04, help="TSDF voxel in metres (default %(default)s)")
-    ref.add_argument("--step", type=int, default=1, help="use every n-th frame for the instances (default 1)")
+    ref.add_argument("--step", type=number(int, lo=1), default=1, help="use every n-th frame for the instances (default 1)")
+    add_output_flags(ref, json_what="the map written", quiet="the progress bars")
     declare_paths(ref, inputs=("sequence", "sequence_flag"), outputs=("out",))
     ref.set_defaults(func=run_reference)
 
@@ -69,7 +71,7 @@ def register(sub) -> None:
                     help="fragments joining a touching instance: linking radius, metres (default %(default)s)")
     tr.add_argument("--min-vertices", type=int, default=50,
                     help="fragments smaller than this may join a touching instance (default %(default)s)")
-    add_quiet(tr, "the progress bar")
+    add_output_flags(tr, json_what="the map written", quiet="the progress bars")
     declare_paths(tr, inputs=("map", "sequence", "sequence_flag"), outputs=("out",))
     tr.set_defaults(func=run_transfer)
 
@@ -84,6 +86,7 @@ def register(sub) -> None:
     ev.add_argument("--warn-overlap", type=float, default=0.5, metavar="FRACTION",
                     help="warn when the occupied voxels of a prediction and the ground truth overlap less than "
                          "this (partial maps score low PQ for want of overlap; default %(default)s)")
+    add_output_flags(ev, json_what="the table (prediction -> measure -> value)")
     declare_paths(ev, inputs=("gt", "pred"), outputs=("csv",))
     ev.set_defaults(func=run_evaluate)
 
@@ -92,6 +95,7 @@ def run_segment(args: argparse.Namespace) -> int:
     """Cluster the thing classes of a map into instances."""
     import numpy as np
 
+    from semmatch.cli.common import emit
     from semmatch.io import read_map, write_map
     from semmatch.labels import NAMES
     from semmatch.panoptic import segment_instances
@@ -101,32 +105,44 @@ def run_segment(args: argparse.Namespace) -> int:
     ids = np.unique(m.instances[m.instances > 0])
     per = {NAMES[c]: len(np.unique(m.instances[(m.labels == c) & (m.instances > 0)]))
            for c in np.unique(m.labels[m.instances > 0])}
-    print(f"{args.out}: {len(ids)} instances " + ", ".join(f"{k} {v}" for k, v in per.items()))
-    return 0
+    return emit({"out": str(args.out), "instances": len(ids), "per_class": per}, args.json,
+                f"{args.out}: {len(ids)} instances " + ", ".join(f"{k} {v}" for k, v in per.items()))
+
+
+def _map_written(args: argparse.Namespace, m) -> int:
+    """Print what ``reference`` and ``transfer`` wrote (a sentence, or JSON with ``--json``)."""
+    from semmatch.cli.common import emit
+
+    n = len(set(m.instances[m.instances > 0].tolist()))
+    return emit({"out": str(args.out), "vertices": len(m), "instances": n}, args.json,
+                f"{args.out}: {len(m)} vertices, {n} instances")
 
 
 def run_reference(args: argparse.Namespace) -> int:
     """Fuse a sequence with its ground-truth classes and instances."""
-    from semmatch.cli import sequence_arg
+    from semmatch.cli.common import sequence_arg
     from semmatch.fusion import reconstruct
     from semmatch.io import read_sequence, write_map
     from semmatch.panoptic import fuse_instances, sequence_panoptic_frames
+
+    from ..progress import tqdm
 
     seq_path = sequence_arg(args)
     seq = read_sequence(seq_path)
     if not seq.has_labels:
         raise ValueError(f"{seq_path}: the sequence has no labels/ folder")
     seq.read_instances(0)  # a clear error before the fusion when instances/ is missing
-    m = reconstruct(seq, voxel_size=args.voxel_size)
-    m = fuse_instances(m, sequence_panoptic_frames(seq, step=args.step), clean=False)
+    m = reconstruct(seq, voxel_size=args.voxel_size, progress=not args.quiet)
+    frames = tqdm(sequence_panoptic_frames(seq, step=args.step), total=len(range(0, len(seq), args.step)),
+                  desc="instances", disable=args.quiet)
+    m = fuse_instances(m, frames, clean=False)
     write_map(args.out, m)
-    print(f"{args.out}: {len(m)} vertices, {len(set(m.instances[m.instances > 0].tolist()))} instances")
-    return 0
+    return _map_written(args, m)
 
 
 def run_transfer(args: argparse.Namespace) -> int:
     """Transfer classes and instances into a sequence and fuse its panoptic map."""
-    from semmatch.cli import sequence_arg
+    from semmatch.cli.common import sequence_arg
     from semmatch.fusion import reconstruct
     from semmatch.io import read_map, read_sequence, write_map
     from semmatch.panoptic import PanopticFrame, fuse_instances, require_instances, transfer_panoptic
@@ -144,11 +160,10 @@ def run_transfer(args: argparse.Namespace) -> int:
         lab, inst = transfer_panoptic(args.method, f, index)
         labels.append(lab)
         evidence.append(PanopticFrame.of(f, lab, inst, f"{seq_path} frame {i}"))
-    m = reconstruct(seq, labels, args.voxel_size)
+    m = reconstruct(seq, labels, args.voxel_size, progress=not args.quiet)
     m = fuse_instances(m, evidence, eps=args.eps, min_vertices=args.min_vertices)
     write_map(args.out, m)
-    print(f"{args.out}: {len(m)} vertices, {len(set(m.instances[m.instances > 0].tolist()))} instances")
-    return 0
+    return _map_written(args, m)
 
 
 def run_evaluate(args: argparse.Namespace) -> int:
@@ -158,6 +173,7 @@ def run_evaluate(args: argparse.Namespace) -> int:
     import numpy as np
     import pandas as pd
 
+    from semmatch.cli.common import emit_table
     from semmatch.io import atomic_write_text
     from semmatch.panoptic import panoptic_quality, panoptic_voxels
 
@@ -178,8 +194,7 @@ def run_evaluate(args: argparse.Namespace) -> int:
             row.update({f"pq_{k}": v["pq"] for k, v in q["per_class"].items()})
         rows.append(row)
     df = pd.DataFrame(rows).set_index("prediction")
-    with pd.option_context("display.width", 200, "display.max_columns", 50):
-        print(df.to_string(float_format=lambda v: f"{v:.4f}"))
+    emit_table(df, args.json)
     if args.csv:
         atomic_write_text(args.csv, df.to_csv(float_format="%.6f"))
     return 0

@@ -7,7 +7,7 @@ import argparse
 
 def register(sub) -> None:
     """Add ``semmatch predict``."""
-    from semmatch.cli import add_quiet
+    from semmatch.cli.common import add_output_flags
     from semmatch.io.outputs import declare_paths
 
     p = sub.add_parser(
@@ -26,7 +26,7 @@ def register(sub) -> None:
                    help="one network pass (default: average with the mirror image, twice the time)")
     p.add_argument("--overwrite", action="store_true",
                    help="replace an existing labels folder semmatch wrote at --out (anything else is refused)")
-    add_quiet(p)
+    add_output_flags(p, json_what="where the labels went", quiet="the progress bar")
     declare_paths(p, inputs=("sequence", "model"), outputs=("out",))
     p.set_defaults(func=run)
 
@@ -50,6 +50,7 @@ def make_segmenter(spec: str, *, seed: int = 0, device: str = "auto", flip: bool
 
 def run(args: argparse.Namespace) -> int:
     """Predict and print where the labels went."""
+    from semmatch.cli.common import emit
     from semmatch.io import read_sequence
     from semmatch.segment import predict_sequence
 
@@ -59,5 +60,6 @@ def run(args: argparse.Namespace) -> int:
     model = make_segmenter(args.model, seed=args.seed, device=args.device, flip=not args.no_flip)
     out = predict_sequence(model, seq, args.out, probs=args.probs, progress=not args.quiet,
                            overwrite=args.overwrite, inputs=[args.sequence])
-    print(f"{out}: {len(seq)} label images from {getattr(model, 'name', args.model)}")
-    return 0
+    name = getattr(model, "name", args.model)
+    return emit({"out": str(out), "frames": len(seq), "model": name, "probs": args.probs}, args.json,
+                f"{out}: {len(seq)} label images from {name}")

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import json
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -13,7 +12,7 @@ import numpy as np
 
 def register(sub) -> None:
     """Add ``semmatch reconstruct``."""
-    from semmatch.cli import add_quiet, number
+    from semmatch.cli.common import add_output_flags, number
     from semmatch.io.outputs import declare_paths
 
     p = sub.add_parser(
@@ -56,7 +55,8 @@ def register(sub) -> None:
     p.add_argument("--no-pose-graph", dest="pose_graph", action="store_false",
                    help="with --estimate-poses: chained odometry only, no pose-graph refinement")
     p.add_argument("--device", help="Open3D device (default: CUDA:0 when available, else CPU:0)")
-    add_quiet(p)
+    add_output_flags(p, json_what="the summary (vertices, faces; ATE/RPE with --estimate-poses)",
+                     quiet="the progress bars")
     declare_paths(p, inputs=("seq", "labels"), outputs=("out", "rgb_out", "points_out", "poses_out"))
     p.set_defaults(func=run)
 
@@ -168,12 +168,13 @@ def _check_memory(seq, args: argparse.Namespace, poses) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Reconstruct and print a one-line JSON summary (warnings as plain lines)."""
+    """Reconstruct and print a one-line summary, JSON with ``--json`` (warnings as plain lines)."""
     with _plain_warnings("reconstruct"):
         return _run(args)
 
 
 def _run(args: argparse.Namespace) -> int:
+    from semmatch.cli.common import emit
     from semmatch.fusion import extract, fuse
     from semmatch.io import write_map
 
@@ -231,5 +232,13 @@ def _run(args: argparse.Namespace) -> int:
     if args.points_out:
         write_map(args.points_out, extract(vol, "points", min_weight=args.min_weight))
     info = {"out": str(args.out), "vertices": len(m), "faces": int(len(m.faces)), **info}
-    print(json.dumps(info))
-    return 0
+    return emit(info, args.json, _summary(info))
+
+
+def _summary(info: dict) -> str:
+    """The sentence of ``semmatch reconstruct`` without ``--json``."""
+    text = f"{info['out']}: {info['vertices']} vertices, {info['faces']} faces"
+    if "ate_rmse" in info:
+        text += (f"; estimated poses against the ground truth: ATE RMSE {info['ate_rmse']:.3f} m, RPE "
+                 f"{info['rpe_trans']:.3f} m / {info['rpe_rot_deg']:.2f} deg over {info['n_frames']} frames")
+    return text

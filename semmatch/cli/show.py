@@ -7,7 +7,7 @@ import argparse
 
 def register(sub) -> None:
     """Add ``semmatch show``."""
-    from semmatch.cli import number
+    from semmatch.cli.common import add_output_flags, number
     from semmatch.io.outputs import declare_paths
 
     p = sub.add_parser(
@@ -31,12 +31,14 @@ def register(sub) -> None:
     p.add_argument("--voxel-size", type=float, default=0.05, help="voxels of --reference (default %(default)s)")
     p.add_argument("--max-vertices", type=number(int, lo=1), default=150_000,
                    help="display budget; larger maps are decimated (default %(default)s)")
+    add_output_flags(p, json_what="the page written")
     declare_paths(p, inputs=("map", "reference", "trajectory"), outputs=("html",))
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     """Write the page."""
+    from semmatch.cli.common import emit
     from semmatch.io import read_sequence
     from semmatch.viz import error_figure, map_figure, trajectory_name, trajectory_trace, write_html
 
@@ -51,5 +53,4 @@ def run(args: argparse.Namespace) -> int:
         colour = ("black", "rgb(204,121,167)", "rgb(0,158,115)", "rgb(86,180,233)")[k % 4]
         fig.add_trace(trajectory_trace(read_sequence(seq).poses, trajectory_name(seq), colour))
     write_html(fig, args.html, plotlyjs=args.plotlyjs)
-    print(f"{args.html}: written")
-    return 0
+    return emit({"html": str(args.html), "plotlyjs": args.plotlyjs}, args.json, f"{args.html}: written")

@@ -5,15 +5,14 @@ Examples
 --------
 ::
 
-    semmatch simulate --kind living_room --seed 3 --height 1.6 --frames 300 --out data/tmp/upper
-    semmatch simulate --ply ../shared/scenes/replica/office_3/x.ply --height 0.2 --out data/tmp/low
-    semmatch simulate --kind bedroom --height 0.2 --noise kinect --out data/tmp/real_like
+    semmatch simulate --scene-kind living_room --seed 3 --camera-height 1.6 --frames 300 --out data/tmp/upper
+    semmatch simulate --ply ../shared/scenes/replica/office_3/x.ply --camera-height 0.2 --out data/tmp/low
+    semmatch simulate --scene-kind bedroom --camera-height 0.2 --noise kinect --out data/tmp/real_like
     semmatch simulate --dataset data/scenes --train-seeds 0 1 2 --eval-seeds 100 101
 """
 
 from __future__ import annotations
 
-import argparse
 import json
 from pathlib import Path
 
@@ -43,12 +42,8 @@ def _intrinsics(args) -> Intrinsics:
         intr = read_intrinsics(args.intrinsics)
     else:
         intr = DEFAULT_INTRINSICS
-        if args.size:
-            try:
-                w, h = (int(x) for x in args.size.lower().split("x"))
-            except ValueError:
-                raise ValueError(f"--size must look like 640x480, got {args.size!r}") from None
-            intr = intr.scaled(w, h)
+        if args.image_size:
+            intr = intr.scaled(*args.image_size)
     if args.fx is not None or args.fy is not None:
         intr = Intrinsics(intr.width, intr.height, args.fx if args.fx is not None else intr.fx,
                           args.fy if args.fy is not None else (args.fx if args.fx is not None else intr.fy),
@@ -58,27 +53,33 @@ def _intrinsics(args) -> Intrinsics:
 
 def register(sub) -> None:
     """Add ``semmatch simulate``."""
-    from semmatch.cli import add_quiet
+    from semmatch.cli.common import (
+        add_camera_height,
+        add_image_size,
+        add_output_flags,
+        add_scene_kind,
+        add_scene_kinds,
+    )
     from semmatch.io.outputs import declare_paths
 
     p = sub.add_parser(
         "simulate",
         help="render scenes into sequence folders (procedural scene or PLY; or the whole data set)",
         description="Render RGB, depth, labels and instances of a scene along a trajectory.",
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
     src = p.add_mutually_exclusive_group()
-    src.add_argument("--kind", default="living_room", help="procedural scene kind")
+    add_scene_kind(src, default="living_room", old=("--kind",))
     src.add_argument("--ply", type=Path, help="semantic PLY mesh to use as the scene")
     p.add_argument("--seed", type=int, default=0, help="scene seed (and trajectory seed)")
-    p.add_argument("--height", type=float, default=1.6, help="camera height above the floor (m)")
+    add_camera_height(p, default=1.6, old=("--height",))
     p.add_argument("--frames", type=int, default=300, help="frames of the trajectory (default %(default)s)")
     p.add_argument("--tilt", type=float, default=20.0, help="periodic camera tilt amplitude (degrees)")
     p.add_argument("--trajectory", default=None,
                    help="trajectory name (upper/lower/...); default: upper above 1 m, else lower")
     p.add_argument("--margin", type=float, default=0.3, help="clearance from obstacles (m)")
     p.add_argument("--noise", default=None, help="none | kinect | JSON of NoiseConfig parameters | file.json")
-    p.add_argument("--size", default=None, help="image size WxH (intrinsics scaled from the default camera)")
+    add_image_size(p, help="image size in pixels (intrinsics scaled from the default camera's 640x480)",
+                   old=("--size",))
     p.add_argument("--fx", type=float, default=None, help="focal length (pixels)")
     p.add_argument("--fy", type=float, default=None, help="vertical focal length (pixels; default: --fx)")
     p.add_argument("--intrinsics", type=Path, default=None, help="intrinsics.json to use")
@@ -89,23 +90,24 @@ def register(sub) -> None:
                    help="raycast: Open3D ray casting (the reference); raster: OpenGL rasterising (headless EGL, "
                         "CPU or GPU); auto: raster where an OpenGL context can be made")
     p.add_argument("--pair", action="store_true",
-                   help="with --out DIR: write the person's and the robot's sequences DIR/upper (--height) and "
-                        "DIR/lower (--lower-height) of one scene, routes as --routes")
-    p.add_argument("--lower-height", type=float, default=0.2, help="robot camera height for --pair (m)")
+                   help="with --out DIR: write the person's and the robot's sequences DIR/upper (--camera-height) "
+                        "and DIR/lower (--lower-camera-height) of one scene, routes as --routes")
+    add_camera_height(p, default=0.2, flag="--lower-camera-height", old=("--lower-height",),
+                      help="robot camera height for --pair in metres")
     p.add_argument("--camera-step", type=float, default=0.15,  # sim.DEFAULT_CAMERA_STEP (not imported at start-up)
                    help="largest camera step between frames (m, default %(default)s): a tour is at most "
                         "(frames - 1) x this long, so fewer frames at a larger step fly the same tour")
     p.add_argument("--overwrite", action="store_true", help="replace an existing sequence at --out")
-    add_quiet(p)
+    add_output_flags(p, json_what="what was written", quiet="the progress bars")
     dst = p.add_mutually_exclusive_group(required=True)
     dst.add_argument("--out", type=Path, help="sequence folder to write")
     dst.add_argument("--dataset", type=Path, help="write the generated data layout under this root")
     d = p.add_argument_group("data set (--dataset)")
     d.add_argument("--train-seeds", type=int, nargs="*", default=[0, 1],
-                   help="training scenes: the i-th seed gives one scene of kind KINDS[i %% len(KINDS)]")
+                   help="training scenes: the i-th seed gives one scene of kind KINDS[i %% len(KINDS)] "
+                        "(KINDS: --scene-kinds)")
     d.add_argument("--eval-seeds", type=int, nargs="*", default=[100], help="evaluation scenes: every kind per seed")
-    d.add_argument("--kinds", nargs="*", default=["living_room", "bedroom", "office"],
-                   help="scene kinds of the dataset (default %(default)s)")
+    add_scene_kinds(d, default=["living_room", "bedroom", "office"], help="scene kinds of the data set")
     d.add_argument("--frames-lower", type=int, default=None, help="default: --frames")
     d.add_argument("--frames-sweep", type=int, default=100, help="frames of each height-sweep sequence (default %(default)s)")
     d.add_argument("--sweep", type=float, nargs="*", default=None,
@@ -130,6 +132,7 @@ def run(args) -> int:
     """Run ``semmatch simulate``."""
     from .. import sim
     from ..sim.trajectory import check_camera_step
+    from .common import emit
 
     intr = _intrinsics(args)
     noise = _noise(args.noise)
@@ -138,47 +141,50 @@ def run(args) -> int:
     if args.dataset is not None:
         sweep = sim.DEFAULT_SWEEP if args.sweep is None else (tuple(args.sweep) or None)
         res = sim.generate_dataset(
-            args.dataset, train_seeds=args.train_seeds, eval_seeds=args.eval_seeds, kinds=args.kinds,
+            args.dataset, train_seeds=args.train_seeds, eval_seeds=args.eval_seeds, kinds=args.scene_kinds,
             n_frames_upper=args.frames, n_frames_lower=args.frames_lower or args.frames,
             heights_sweep=sweep, n_frames_sweep=args.frames_sweep, tilt_deg=args.tilt, noise=noise,
             intrinsics=intr, progress=progress, jobs=args.jobs, routes=args.routes,
             route_ablation=args.route_ablation, val_seeds=args.val_seeds, renderer=args.renderer,
             scheduler=args.scheduler, camera_step=args.camera_step,
         )
-        print(f"{args.dataset}: wrote {len(res['written'])}, skipped {len(res['skipped'])} complete item(s)")
-        return 0
+        return emit({"dataset": str(args.dataset), "written": res["written"], "skipped": res["skipped"]}, args.json,
+                    f"{args.dataset}: wrote {len(res['written'])}, skipped {len(res['skipped'])} complete item(s)")
     if args.ply is not None:
         from ..sim.plyscene import scene_from_ply
 
         scene = scene_from_ply(args.ply, seed=args.seed)
     else:
-        scene = sim.generate_scene(args.kind, args.seed)
+        scene = sim.generate_scene(args.scene_kind, args.seed)
+    where = args.ply if args.ply is not None else f"{args.scene_kind} seed {args.seed}"
     if args.pair:
         if args.save_scene is not None:
             scene.save(args.save_scene)
         try:
-            up, low = sim.simulate_pair(scene, args.out, n_frames=args.frames, upper_height=args.height,
-                                        lower_height=args.lower_height, routes=args.routes, tilt_deg=args.tilt,
-                                        seed=args.seed, intrinsics=intr, noise=noise, overwrite=args.overwrite,
-                                        progress=progress, backend=args.renderer, camera_step=args.camera_step)
+            up, low = sim.simulate_pair(scene, args.out, n_frames=args.frames, upper_height=args.camera_height,
+                                        lower_height=args.lower_camera_height, routes=args.routes,
+                                        tilt_deg=args.tilt, seed=args.seed, intrinsics=intr, noise=noise,
+                                        overwrite=args.overwrite, progress=progress, backend=args.renderer,
+                                        camera_step=args.camera_step)
         except ValueError as e:
-            where = args.ply if args.ply is not None else f"{args.kind} seed {args.seed}"
             raise ValueError(f"{where}: {e}") from None
-        print(f"{up}, {low}: {args.frames} frames each of {scene.name} at {args.height:.2f} / "
-              f"{args.lower_height:.2f} m ({args.routes} routes)")
-        return 0
-    kind = args.trajectory or ("upper" if args.height > 1.0 else "lower")
+        result = {"upper": str(up), "lower": str(low), "frames": args.frames, "scene": scene.name,
+                  "camera_height": args.camera_height, "lower_camera_height": args.lower_camera_height,
+                  "routes": args.routes}
+        return emit(result, args.json, f"{up}, {low}: {args.frames} frames each of {scene.name} at "
+                    f"{args.camera_height:.2f} / {args.lower_camera_height:.2f} m ({args.routes} routes)")
+    kind = args.trajectory or ("upper" if args.camera_height > 1.0 else "lower")
     try:
-        poses = sim.make_trajectory(scene, args.height, args.frames, tilt_deg=args.tilt, seed=args.seed,
+        poses = sim.make_trajectory(scene, args.camera_height, args.frames, tilt_deg=args.tilt, seed=args.seed,
                                     kind=kind, margin=args.margin, max_step=args.camera_step)
     except ValueError as e:
-        where = args.ply if args.ply is not None else f"{args.kind} seed {args.seed}"
         raise ValueError(f"{where}: {e}") from None
     if args.save_scene is not None:
         scene.save(args.save_scene)
     out = sim.simulate_sequence(scene, poses, args.out, intrinsics=intr, noise=noise, overwrite=args.overwrite,
                                 progress=progress, fast=args.fast, backend=args.renderer,
                                 meta={"trajectory": kind, "seed": args.seed, "tilt_deg": args.tilt,
-                                      "height": args.height, "fast_render": args.fast})
-    print(f"{out}: {len(poses)} frames of {scene.name} at {args.height:.2f} m")
-    return 0
+                                      "height": args.camera_height, "fast_render": args.fast})
+    result = {"out": str(out), "frames": len(poses), "scene": scene.name, "camera_height": args.camera_height,
+              "trajectory": kind}
+    return emit(result, args.json, f"{out}: {len(poses)} frames of {scene.name} at {args.camera_height:.2f} m")

@@ -7,7 +7,7 @@ import argparse
 
 def register(sub) -> None:
     """Add ``semmatch train``."""
-    from semmatch.cli import add_quiet
+    from semmatch.cli.common import add_image_size, add_output_flags, add_scene_kinds
     from semmatch.io.outputs import declare_paths
 
     p = sub.add_parser(
@@ -24,14 +24,13 @@ def register(sub) -> None:
     p.add_argument("--batch-size", type=int, help="views per step (profile default otherwise)")
     p.add_argument("--lr", type=float, help="peak learning rate (profile default otherwise)")
     p.add_argument("--eval-every", type=int, help="validate every N steps")
-    p.add_argument("--width", type=int, help="render width of the views (profile default otherwise)")
-    p.add_argument("--height", type=int, help="render height of the views")
-    p.add_argument("--net-width", type=int, help="network input width (default: the profile's, else --width); "
-                   "smaller than the views = whole frames at reduced scale")
-    p.add_argument("--net-height", type=int, help="network input height")
+    add_image_size(p, help="render size of the views (profile default otherwise)", old_split=("--width", "--height"))
+    add_image_size(p, flag="--net-size", dest="net_size", old_split=("--net-width", "--net-height"),
+                   help="network input size (default: the profile's, else --image-size); smaller than the views "
+                        "= whole frames at reduced scale")
     p.add_argument("--zoom", nargs=2, type=float, metavar=("LO", "HI"),
-                   help="scale augmentation range; must hold width / net-width (profile default otherwise)")
-    p.add_argument("--kinds", nargs="+", help="scene kinds")
+                   help="scale augmentation range; must hold view width / network width (profile default otherwise)")
+    add_scene_kinds(p, default=None, nargs="+", help="scene kinds")
     p.add_argument("--train-seeds", nargs="+", type=int, help="training scene seeds")
     p.add_argument("--val-seeds", nargs="+", type=int, help="validation scene seeds")
     p.add_argument("--eval-seeds", nargs="+", type=int, help="evaluation scene seeds (checked to be disjoint)")
@@ -43,26 +42,35 @@ def register(sub) -> None:
     p.add_argument("--scheduler", default=None,
                    help="Dask scheduler address (tcp://host:8786) to render the views on; default "
                         "SEMMATCH_SCHEDULER, else --jobs local processes")
-    add_quiet(p)
+    add_output_flags(p, json_what="the checkpoint and its validation scores", quiet="the progress bars")
     declare_paths(p, outputs=("out",))  # no file inputs (the views are rendered; --cache-dir is read and written)
     p.set_defaults(func=run)
 
 
+def _check_sizes(args: argparse.Namespace) -> None:
+    """Refuse a size given by half (an old ``--width`` without ``--height``, ...)."""
+    for size, flag, half in ((args.image_size, "--image-size", ("--width", "--height")),
+                             (args.net_size, "--net-size", ("--net-width", "--net-height"))):
+        if size is not None and None in size:
+            raise ValueError(f"give both {half[0]} and {half[1]} (better: {flag} WxH)")
+
+
 def run(args: argparse.Namespace) -> int:
     """Train and print the checkpoint path and validation scores."""
+    from semmatch.cli.common import emit
     from semmatch.segment.training import build_views, make_config, train
 
-    for flag in ("lr", "steps", "batch_size", "eval_every", "width", "height", "jobs"):
+    for flag in ("lr", "steps", "batch_size", "eval_every", "jobs"):
         v = getattr(args, flag, None)
         if v is not None and v <= 0:
             raise ValueError(f"--{flag.replace('_', '-')} must be > 0, got {v}")
-    for a, b in (("width", "height"), ("net_width", "net_height")):
-        if bool(getattr(args, a)) != bool(getattr(args, b)):
-            raise ValueError(f"give both --{a.replace('_', '-')} and --{b.replace('_', '-')}")
+    _check_sizes(args)
+    width, height = args.image_size or (None, None)
+    net_width, net_height = args.net_size or (None, None)
     cfg = make_config(
         args.profile, out=args.out, arch=args.arch, use_depth=args.depth or None, steps=args.steps,
-        batch_size=args.batch_size, lr=args.lr, eval_every=args.eval_every, width=args.width, height=args.height,
-        net_width=args.net_width, net_height=args.net_height, zoom=args.zoom, kinds=args.kinds,
+        batch_size=args.batch_size, lr=args.lr, eval_every=args.eval_every, width=width, height=height,
+        net_width=net_width, net_height=net_height, zoom=args.zoom, kinds=args.scene_kinds,
         train_seeds=args.train_seeds, val_seeds=args.val_seeds, eval_seeds=args.eval_seeds, seed=args.seed,
         device=args.device, threads=args.threads, cache_dir=args.cache_dir, progress=not args.quiet,
     )
@@ -71,7 +79,9 @@ def run(args: argparse.Namespace) -> int:
 
     m = load_model(path).info
     met = m["metrics"]
-    print(f"{path}: {cfg.arch} ({m['n_parameters']} parameters), best at step {met['step']}: "
-          f"val mIoU(1..10) {met['miou']:.3f}, pixel acc {met['pixel_acc']:.3f}, "
-          f"{m['train_seconds']:.0f} s on {m['device']}")
-    return 0
+    result = {"checkpoint": str(path), "arch": cfg.arch, "n_parameters": m["n_parameters"], "metrics": met,
+              "train_seconds": m["train_seconds"], "device": m["device"]}
+    return emit(result, args.json,
+                f"{path}: {cfg.arch} ({m['n_parameters']} parameters), best at step {met['step']}: "
+                f"val mIoU(1..10) {met['miou']:.3f}, pixel acc {met['pixel_acc']:.3f}, "
+                f"{m['train_seconds']:.0f} s on {m['device']}")

@@ -7,7 +7,7 @@ import json
 
 def register(sub) -> None:
     """Add the ``transfer`` verb."""
-    from semmatch.cli import add_quiet, add_sequence
+    from semmatch.cli.common import add_output_flags, add_sequence
     from semmatch.io.outputs import declare_paths
     from semmatch.transfer import DEFAULT_MAX_DISTANCE, available_methods
 
@@ -32,8 +32,7 @@ def register(sub) -> None:
     p.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
                    help="method parameter (JSON value), e.g. --param n_segments=256; repeatable")
     p.add_argument("--jobs", type=int, default=1, help="worker processes (default 1)")
-    add_quiet(p, "the progress bar")
-    p.add_argument("--json", action="store_true", help="print the statistics as one JSON object")
+    add_output_flags(p, json_what="the statistics", quiet="the progress bar")
     p.add_argument("--strict", action="store_true",
                    help="exit with an error when the map supports (almost) no pixel (default: a warning)")
     p.add_argument("--no-index-cache", action="store_true",
@@ -58,7 +57,7 @@ def _parse_params(items: list[str]) -> dict:
 
 def run(args) -> int:
     """Run ``semmatch transfer``."""
-    from semmatch.cli import sequence_arg
+    from semmatch.cli.common import emit, sequence_arg
     from semmatch.io import check_output_dir, read_sequence
     from semmatch.transfer import load_index, transfer_sequence
     from semmatch.transfer.registry import check_params
@@ -93,11 +92,5 @@ def run(args) -> int:
             )
         except LowSupportWarning as e:
             raise ValueError(f"{e} (--strict: coverage below {LOW_SUPPORT:.0%}; the labels were written)") from None
-    if args.json:
-        print(json.dumps(stats))
-    else:
-        print(
-            f"{stats['method']}: {stats['frames']} frames -> {stats['out']}  coverage "
-            f"{stats['coverage']:.3f}  median {stats['ms_median']:.1f} ms/frame ({stats['fps']:.1f} FPS)"
-        )
-    return 0
+    return emit(stats, args.json, f"{stats['method']}: {stats['frames']} frames -> {stats['out']}  coverage "
+                f"{stats['coverage']:.3f}  median {stats['ms_median']:.1f} ms/frame ({stats['fps']:.1f} FPS)")

@@ -1,7 +1,8 @@
 """``semmatch bench {render,transfer,fusion,metrics,segment,train} [--json]``.
 
 Each benchmark lives in ``semmatch/cli/bench/<what>.py`` with ``register(subparsers)``; it
-prints a human table, or one JSON object with ``--json``.
+prints a human table, or one JSON object with ``--json`` (:func:`semmatch.cli.common.add_json`,
+:func:`semmatch.cli.common.emit`).
 """
 
 from __future__ import annotations
@@ -26,21 +27,6 @@ def register(sub) -> None:
                 continue
             raise
         mod.register(bsub)
-
-
-def add_json_flag(parser) -> None:
-    """The shared ``--json`` flag."""
-    parser.add_argument("--json", action="store_true", help="print one JSON object")
-
-
-def emit(result: dict, as_json: bool, table: str) -> int:
-    """Print ``result`` as JSON or ``table`` as text; return 0."""
-    if as_json:
-        json.dump(result, sys.stdout)
-        sys.stdout.write("\n")
-    else:
-        print(table)
-    return 0
 
 
 #: the environments of ``--thread-rows``: (row label, thread variables set; the others removed)
@@ -75,18 +61,24 @@ def apply_threads(args) -> dict:
 
 
 def _argv_of(args) -> list[str]:
-    """The options of ``args`` that differ from their defaults, as command-line words (without
-    ``--json``, ``--threads`` and ``--thread-rows``)."""
+    """The options of ``args`` that differ from their defaults, as command-line words in their
+    canonical spelling (without ``--json``, ``--threads`` and ``--thread-rows``)."""
+    import argparse
+
+    from semmatch.cli.common import ImageSize
+
     out: list[str] = []
     for action in args._bench_parser._actions:
         dest, flags = action.dest, [f for f in action.option_strings if f.startswith("--")]
-        if not flags or dest in ("help", "json", "threads", "thread_rows"):
-            continue
+        if not flags or dest in ("help", "json", "threads", "thread_rows") or action.help == argparse.SUPPRESS:
+            continue  # hidden old spellings: their values are the canonical option's
         value = getattr(args, dest, action.default)
         if value == action.default:
             continue
         if action.nargs == 0:  # store_true / store_false
             out.append(flags[0])
+        elif isinstance(value, ImageSize):
+            out += [flags[0], str(value)]
         elif isinstance(value, list | tuple):
             out += [flags[0], *map(str, value)]
         else:

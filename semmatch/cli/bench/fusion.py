@@ -21,11 +21,11 @@ def register(sub) -> None:
     )
     p.add_argument("--frames", type=int, default=60, help="timed frames (default 60)")
     p.add_argument("--voxel-size", type=float, default=0.04, help="voxel edge, metres (default 0.04)")
-    p.add_argument("--width", type=int, default=640, help="image width (default %(default)s)")
-    p.add_argument("--height", type=int, default=480, help="image height (default %(default)s)")
-    p.add_argument("--camera-height", type=float, default=0.2,
-                   help="camera height above the floor (default 0.2: the robot view)")
-    p.add_argument("--scene", default="living_room", help="procedural scene kind (default living_room)")
+    from semmatch.cli.common import ImageSize, add_camera_height, add_image_size, add_json, add_scene_kind
+
+    add_image_size(p, default=ImageSize(640, 480), old_split=("--width", "--height"))
+    add_camera_height(p, default=0.2, help="camera height above the floor in metres (default 0.2: the robot view)")
+    add_scene_kind(p, default="living_room", old=("--scene",))
     p.add_argument("--trunc-voxels", type=float, default=4.0, help="TSDF truncation in voxels (default 4)")
     p.add_argument("--label-stride", type=int, default=2, help="label evidence every Nth pixel (default 2)")
     p.add_argument("--probabilities", action="store_true",
@@ -35,10 +35,10 @@ def register(sub) -> None:
                    "of the pixels set to random ids) as separate reconstruct() calls and as one "
                    "reconstruct_many() call, and time both (default 0: skip)")
     p.add_argument("--seed", type=int, default=0, help="scene seed (default 0)")
-    from semmatch.cli.bench import add_json_flag, add_thread_flags
+    from semmatch.cli.bench import add_thread_flags
 
     add_thread_flags(p, "fusion")
-    add_json_flag(p)
+    add_json(p, "the timings")
     p.set_defaults(func=run)
 
 
@@ -61,7 +61,8 @@ def run(args: argparse.Namespace) -> int:
     """Time the integration and print a table or JSON."""
     if args.frames < 1:
         raise ValueError("--frames must be >= 1")
-    from semmatch.cli.bench import apply_threads, emit
+    from semmatch.cli.bench import apply_threads
+    from semmatch.cli.common import emit
 
     if args.thread_rows:
         return _print_thread_rows(args)
@@ -69,7 +70,8 @@ def run(args: argparse.Namespace) -> int:
     from semmatch.fusion import SemanticTSDF
     from semmatch.threads import current
 
-    frames = render_frames(args.scene, args.frames, args.width, args.height, args.camera_height, args.seed)
+    width, height = args.image_size
+    frames = render_frames(args.scene_kind, args.frames, width, height, args.camera_height, args.seed)
     labels = [_as_probabilities(f.labels) if args.probabilities else f.labels for f in frames]
     rss0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     # warm-up volume (first calls allocate and load kernels), then the timed one
@@ -93,8 +95,8 @@ def run(args: argparse.Namespace) -> int:
         "cpu_fps": args.frames / cpu,  # frames per CPU-second: less sensitive to other processes
         "load_average": os.getloadavg()[0],
         "voxel_size": args.voxel_size,
-        "width": args.width,
-        "height": args.height,
+        "width": width,
+        "height": height,
         "frames": args.frames,
         "labels": "probabilities" if args.probabilities else "ids",
         "label_stride": args.label_stride,
@@ -106,7 +108,7 @@ def run(args: argparse.Namespace) -> int:
         "rss_growth_mb": (peak - rss0) / 1024,
         "mesh_vertices": len(mesh),
         "extract_seconds": t_mesh,
-        "scene": args.scene,
+        "scene": args.scene_kind,
         "camera_height": args.camera_height,
     }
     if args.labelings > 0:
@@ -119,7 +121,8 @@ def run(args: argparse.Namespace) -> int:
 
 def _print_thread_rows(args: argparse.Namespace) -> int:
     """``--thread-rows``: the benchmark in a fresh process per thread environment, one row each."""
-    from semmatch.cli.bench import emit, thread_rows
+    from semmatch.cli.bench import thread_rows
+    from semmatch.cli.common import emit
 
     rows = thread_rows(args, "fusion")
     lines = [f"{'environment':<30} {'FPS':>7} {'CPU-FPS':>8} {'load':>5} {'torch':>5} {'Open3D':>6} {'BLAS/OpenMP':>12}"]
@@ -129,7 +132,7 @@ def _print_thread_rows(args: argparse.Namespace) -> int:
         lines.append(f"{r['row']:<30} {r['fps']:7.1f} {r['cpu_fps']:8.1f} {r['load_average']:5.1f} "
                      f"{th.get('torch', '-')!s:>5} {th.get('open3d', '-')!s:>6} {rt:>12}")
     base = rows[1]["cpu_fps"]
-    lines.append(f"({args.frames} frames {args.width}x{args.height}, voxel {args.voxel_size} m; default "
+    lines.append(f"({args.frames} frames {args.image_size}, voxel {args.voxel_size} m; default "
                  f"environment at {rows[0]['cpu_fps'] / base:.2f}x and no limit at {rows[2]['cpu_fps'] / base:.2f}x "
                  f"the CPU-FPS of OMP_NUM_THREADS=1; {os.cpu_count()} CPUs)")
     return emit({"rows": rows}, args.json, "\n".join(lines))

@@ -10,7 +10,7 @@ import numpy as np
 
 def register(sub) -> None:
     """Add ``semmatch bench metrics``."""
-    from . import add_json_flag
+    from semmatch.cli.common import add_json, add_scene_kind
 
     p = sub.add_parser(
         "metrics",
@@ -23,9 +23,9 @@ def register(sub) -> None:
     p.add_argument("--voxel-size", type=float, default=0.05, help="voxel edge, metres (default 0.05)")
     p.add_argument("--repeat", type=int, default=3, help="timed runs of the vectorised version (best)")
     p.add_argument("--no-dict-loop", action="store_true", help="skip the (slow) dict-loop reference")
-    p.add_argument("--scene", default="apartment", help="procedural scene kind (default apartment)")
+    add_scene_kind(p, default="apartment", old=("--scene",))
     p.add_argument("--seed", type=int, default=0, help="seed of the scene and of the sampled maps (default 0)")
-    add_json_flag(p)
+    add_json(p, "the timings")
     p.set_defaults(func=run)
 
 
@@ -58,12 +58,12 @@ def surface_maps(n: int, *, scene_kind: str = "apartment", seed: int = 0):
 
 def run(args: argparse.Namespace) -> int:
     """Time both evaluators and print a table or JSON."""
-    from semmatch.cli.bench import emit
+    from semmatch.cli.common import emit
     from semmatch.evaluate.metrics import MEASURES, compare, compare_dict_loop
 
     if args.vertices < 1 or args.repeat < 1:
         raise ValueError("--vertices and --repeat must be >= 1")
-    gt, pred = surface_maps(args.vertices, scene_kind=args.scene, seed=args.seed)
+    gt, pred = surface_maps(args.vertices, scene_kind=args.scene_kind, seed=args.seed)
     times = []
     for _ in range(args.repeat):
         t = time.perf_counter()

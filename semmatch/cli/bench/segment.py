@@ -6,7 +6,9 @@ import argparse
 import os
 import time
 
-from . import add_json_flag, add_thread_flags, apply_threads, emit, thread_rows
+from semmatch.cli.common import add_json, emit
+
+from . import add_thread_flags, apply_threads, thread_rows
 
 
 def register(sub) -> None:
@@ -20,7 +22,7 @@ def register(sub) -> None:
     p.add_argument("--no-flip", action="store_true",
                    help="time one network pass (default: with the mirror-image average, as predictions run)")
     add_thread_flags(p, "segment")
-    add_json_flag(p)
+    add_json(p, "the timings")
     p.set_defaults(func=run)
 
 

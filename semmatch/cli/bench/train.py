@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 import time
 
-from . import add_json_flag, emit
+from semmatch.cli.common import add_json, emit
 
 
 def register(sub) -> None:
@@ -26,7 +26,7 @@ def register(sub) -> None:
                    help="steps to project the training time for, e.g. compact=2000 strong=1000 (the pipeline's "
                         "full profile; default: the training profile's steps)")
     p.add_argument("--threads", type=int, help="torch threads (default: torch's choice)")
-    add_json_flag(p)
+    add_json(p, "the timings")
     p.set_defaults(func=run)
 
 

@@ -6,11 +6,13 @@ from __future__ import annotations
 import os
 import time
 
-from . import add_json_flag, emit
+from semmatch.cli.common import add_camera_height, add_json, emit
 
 
 def register(sub) -> None:
     """Add ``semmatch bench transfer``."""
+    from semmatch.transfer import available_methods
+
     p = sub.add_parser(
         "transfer",
         help="time the transfer methods and the published reference on 640x480 frames",
@@ -24,27 +26,24 @@ def register(sub) -> None:
     )
     p.add_argument("--frames", type=int, default=10, help="frames per method (default %(default)s)")
     p.add_argument("--seed", type=int, default=0, help="scene and trajectory seed")
-    p.add_argument("--height", type=float, default=0.25, help="lower camera height (metres)")
-    p.add_argument("--methods", nargs="*", default=None,
-                   help="subset of methods (default: the paper's five and fused)")
-    add_json_flag(p)
+    add_camera_height(p, default=0.25, help="lower camera height in metres", old=("--height",))
+    p.add_argument("--methods", nargs="*", default=None, choices=available_methods(), metavar="METHOD",
+                   help=f"subset of methods, of {', '.join(available_methods())} (default: the paper's five and "
+                        "fused)")
+    add_json(p, "the timings")
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
     """Run the benchmark."""
     from semmatch.sim import render_frames
-    from semmatch.transfer import METHODS, available_methods, prepare
+    from semmatch.transfer import METHODS, prepare
     from semmatch.transfer.benchmark import bench_scene, time_methods
 
     if args.frames < 1:
         raise ValueError("--frames must be >= 1")
-    methods = list(args.methods or (*METHODS, "fused"))
-    valid = available_methods()
-    for m in methods:
-        if m not in valid:
-            raise ValueError(f"unknown method {m!r}; valid: {', '.join(valid)}")
-    scene, poses = bench_scene(args.seed, args.frames, args.height)
+    methods = list(args.methods or (*METHODS, "fused"))  # argparse checked the names
+    scene, poses = bench_scene(args.seed, args.frames, args.camera_height)
     frames = render_frames(scene, poses)
     gt_map = scene.to_semantic_map()
     t, c = time.perf_counter(), time.process_time()
