@@ -270,3 +270,63 @@ def test_out_of_memory_is_a_clear_error_not_a_traceback(monkeypatch, capsys):
         action.set_defaults(func=boom)
     assert cli.main(["evaluate", "a.ply", "b.ply"]) == 2
     assert "out of memory" in capsys.readouterr().err
+
+
+def _frame(**changes):
+    import dataclasses
+
+    from semmatch.io import Frame
+
+    intr = g.Intrinsics(160, 120, 100.0, 100.0, 80.0, 60.0)
+    f = Frame(np.zeros((120, 160, 3), np.uint8), np.full((120, 160), 2.0, np.float32), None, np.eye(4), intr, index=4)
+    return dataclasses.replace(f, **changes)
+
+
+@pytest.mark.parametrize("bad, message", [
+    (dict(depth=np.full((120, 160), 2000.0, np.float32)), r"frame 4: median depth is 2000 m.*wrong unit"),
+    (dict(depth=np.full((120, 160), 2000, np.uint16)), r"frame 4: depth must be float metres, got dtype uint16"),
+    (dict(depth=np.full((119, 160), 2.0, np.float32)), r"frame 4: depth is 160x119 \(WxH\) but the intrinsics say 160x120"),
+    (dict(rgb=np.zeros((120, 159, 3), np.uint8)), r"frame 4: RGB is 159x120 \(WxH\) but the intrinsics say 160x120"),
+    (dict(rgb=np.zeros((120, 160), np.uint8)), r"frame 4: expected an \(H,W,3\) RGB image, got shape \(120, 160\)"),
+    (dict(rgb=np.zeros((120, 160, 3), np.float32)), r"frame 4: expected uint8 RGB, got dtype float32"),
+])
+def test_transfer_and_fusion_refuse_a_frame_alike(bad, message):
+    """The frame contract (semmatch.io.contract) is one check: label transfer and fusion refuse
+    the same frame with the same message."""
+    from semmatch.fusion import SemanticTSDF
+    from semmatch.transfer.frames import check_frame
+
+    f = _frame(**bad)
+    with pytest.raises(ValueError, match=message):
+        check_frame(f)
+    with pytest.raises(ValueError, match=message):
+        SemanticTSDF(0.05).integrate(f.depth, f.rgb, f.pose, f.intrinsics, where="frame 4")
+
+
+def test_frame_contract_cleans_depth_and_checks_labels():
+    from semmatch.io import check_depth, check_intrinsics, check_labels, check_rgb
+
+    d = np.full((4, 6), 2.0, np.float32)
+    assert check_depth(d, (4, 6)) is d  # clean float32 depth is not copied
+    d[0, :3] = [np.nan, np.inf, -1.0]
+    out = check_depth(d, (4, 6))
+    assert (out[0, :3] == 0).all() and (out[1:] == 2.0).all() and out.dtype == np.float32
+    assert check_depth(np.full((4, 6), 2000.0), (4, 6), units=False).max() == 2000.0
+    with pytest.raises(ValueError, match=r"depth\[0\]: depth is 6x3 \(WxH\) but the RGB image is 6x4"):
+        check_depth(np.ones((3, 6)), (4, 6), where="depth[0]", against="the RGB image is")
+    assert check_rgb(np.full((4, 6, 3), 0.5), floats=True).dtype == np.float64
+    for img, msg in ((np.full((4, 6, 3), 2.0), r"\[0, 1\]"), (np.full((4, 6, 3), np.nan), "NaN"),
+                     (np.zeros((4, 6, 3), np.uint16), r"uint8 \(or float in \[0, 1\]\) RGB, got dtype uint16")):
+        with pytest.raises(ValueError, match=msg):
+            check_rgb(img, floats=True)
+    with pytest.raises(ValueError, match="no RGB image"):
+        check_rgb(None)
+    with pytest.raises(ValueError, match="intrinsics must be a semmatch.geometry.Intrinsics, got tuple"):
+        check_intrinsics((160, 120))
+    ids = np.arange(24, dtype=np.uint8).reshape(4, 6)
+    np.testing.assert_array_equal(check_labels(ids, (4, 6), n_classes=41, stride=2), ids[::2, ::2].ravel())
+    assert check_labels(np.full((4, 6, 3), 1 / 3), (4, 6), n_classes=3).shape == (24, 3)
+    for lab, msg in ((ids, "label id 23 outside 0..9"), (ids.astype(float), "must be integers"),
+                     (ids[:3], r"\(H,W\)=\(4, 6\), got \(3, 6\)"), (np.full((4, 6, 3), -1.0), "negative")):
+        with pytest.raises(ValueError, match=msg):
+            check_labels(lab, (4, 6), n_classes=10 if lab.ndim == 2 else 3)

@@ -33,7 +33,7 @@ import numpy as np
 
 from ..engine import default_device
 from ..geometry import Intrinsics, check_pose, pixel_rays
-from ..io import SemanticMap, check_depth_units, depth_to_uint16
+from ..io import SemanticMap, check_depth, check_labels, check_rgb, depth_to_uint16
 from ..labels import NUM_CLASSES
 
 __all__ = ["SemanticTSDF", "EvidencePixels"]
@@ -237,18 +237,16 @@ class SemanticTSDF:
         Raises
         ------
         ValueError
-            Shapes that disagree with the intrinsics, a bad pose, depth in the wrong unit,
-            label ids or probability channels that do not fit ``n_classes``.
+            Arrays that break the frame contract (:mod:`semmatch.io.contract`: shapes that
+            disagree with the intrinsics, depth that is not float or in the wrong unit, RGB
+            that is not uint8), a bad pose, label ids or probability channels that do not fit
+            ``n_classes``.
         """
         import open3d as o3d
         import open3d.core as o3c
 
         H, W = intrinsics.shape
-        depth = np.asarray(depth)
-        if depth.shape != (H, W):
-            raise ValueError(f"{where}: depth is {depth.shape}, intrinsics say {(H, W)}")
-        depth = np.where(np.isfinite(depth), depth, 0).astype(np.float32, copy=False)
-        check_depth_units(depth, where=where)
+        depth = check_depth(depth, (H, W), where=where)  # 0 = no measurement
         T = check_pose(pose, what=f"{where} pose")
         if np.count_nonzero((depth > 0) & (depth <= self.depth_max)) < self.MIN_VALID_DEPTH * H * W:
             self.skipped.append(where)
@@ -256,10 +254,7 @@ class SemanticTSDF:
         if rgb is None:
             color = np.full((H, W, 3), 128, dtype=np.uint8)
         else:
-            rgb = np.asarray(rgb)
-            if rgb.shape != (H, W, 3):
-                raise ValueError(f"{where}: rgb is {rgb.shape}, expected {(H, W, 3)}")
-            color = np.ascontiguousarray(rgb, dtype=np.uint8)
+            color = np.ascontiguousarray(check_rgb(rgb, (H, W), where=where))
         K = self._K.get(intrinsics)
         if K is None:
             K = self._K[intrinsics] = o3c.Tensor(intrinsics.K)
@@ -302,28 +297,10 @@ class SemanticTSDF:
     def _sampled_labels(
         self, labels: np.ndarray, intr: Intrinsics, where: str
     ) -> tuple[np.ndarray, np.ndarray | None]:
-        """Checked labels of the evidence pixels: ids (M,) and their ``id > 0`` mask, or
-        probabilities (M, C) and None."""
-        H, W = intr.shape
-        C = self.n_classes
-        s = self.label_stride
-        probs = labels.ndim == 3
-        if labels.shape[:2] != (H, W) or (probs and labels.shape[2] != C) or labels.ndim not in (2, 3):
-            raise ValueError(
-                f"{where}: labels must be (H,W) ids or (H,W,{C}) probabilities with (H,W)={(H, W)}, "
-                f"got {labels.shape}"
-            )
-        if probs:
-            p = labels[::s, ::s].reshape(-1, C)
-            if not np.isfinite(p).all() or p.min() < 0:
-                raise ValueError(f"{where}: label probabilities hold NaN/inf or negative values")
-            return p, None
-        lab = labels[::s, ::s].reshape(-1)
-        if not np.issubdtype(lab.dtype, np.integer):
-            raise ValueError(f"{where}: label ids must be integers, got {lab.dtype}")
-        if lab.size and int(lab.max()) >= C:
-            raise ValueError(f"{where}: label id {int(lab.max())} outside 0..{C - 1}")
-        return lab, lab > 0
+        """Checked labels of the evidence pixels (:func:`semmatch.io.check_labels`): ids (M,)
+        and their ``id > 0`` mask, or probabilities (M, C) and None."""
+        values = check_labels(labels, intr.shape, n_classes=self.n_classes, where=where, stride=self.label_stride)
+        return (values, None) if values.ndim == 2 else (values, values > 0)
 
     def _voxels_of(self, d: np.ndarray, sel: np.ndarray, T: np.ndarray, intr: Intrinsics):
         """Flat index into the ``label`` attribute of the voxel sample nearest to the surface

@@ -3,7 +3,9 @@
 Submodules, by what they handle: :mod:`~semmatch.io.files` (atomic writes, output folders that
 never replace what semmatch did not write), :mod:`~semmatch.io.images` (RGB, depth and palette
 label PNGs, the depth-unit check), :mod:`~semmatch.io.sequences` (intrinsics, TUM poses,
-frames, sequence readers and the writer, label folders), :mod:`~semmatch.io.maps` (semantic maps as PLY),
+frames, sequence readers and the writer, label folders), :mod:`~semmatch.io.contract` (the
+frame contract: the checks of a frame's RGB, depth, labels and intrinsics that segmentation,
+transfer and fusion share), :mod:`~semmatch.io.maps` (semantic maps as PLY),
 :mod:`~semmatch.io.outputs` (the output policy of every command). Every public name
 is importable from ``semmatch.io`` itself.
 
@@ -12,6 +14,7 @@ same folder and renamed; a sequence is written into a hidden temporary folder an
 its final name only when complete.
 """
 
+from .contract import check_depth, check_intrinsics, check_labels, check_rgb
 from .files import (
     OUTPUT_MARKER,
     atomic_path,
@@ -78,6 +81,10 @@ __all__ = [
     "depth_to_uint16",
     "check_depth_units",
     "DEPTH_UNIT_RANGE",
+    "check_rgb",
+    "check_depth",
+    "check_labels",
+    "check_intrinsics",
     "read_labels_folder",
     "write_labels_folder",
     "OUTPUT_MARKER",

@@ -1,12 +1,14 @@
 """Load a trained network and predict per-class probabilities for images and sequences.
 
-Input conventions (documented conversions, everything else is a ``ValueError``):
+Input conventions (the frame contract, :mod:`semmatch.io.contract`, with documented
+conversions; everything else is a ``ValueError``):
 
 - ``rgb``: ``uint8 (H,W,3)``; floating point images in [0, 1] are accepted as they are.
   Other dtypes, other shapes, NaN/inf or float values outside [0, 1] are refused.
-- ``depth`` (networks with a depth channel): float metres ``(H,W)``; NaN/inf and values <= 0
-  read as "no measurement" (0), as in the data contract; ``uint16`` is refused (convert with
-  the sequence's ``depth_scale`` first).
+- ``depth`` (networks with a depth channel): float metres ``(H,W)`` of the RGB image's size;
+  NaN/inf and values <= 0 read as "no measurement" (0), as in the data contract; ``uint16`` is
+  refused (convert with the sequence's ``depth_scale`` first), and so is depth whose median is
+  not plausible in metres.
 - An image of another size than the network's is resized to it (area interpolation; depth
   nearest) and the probabilities are restored to the input size (bilinear interpolation of
   the probabilities, which keeps them summing to 1).
@@ -27,7 +29,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from ..io import Frame, read_sequence, write_labels_folder
+from ..io import Frame, contract, read_sequence, write_labels_folder
 from ..labels import NUM_CLASSES, table_fingerprint
 from ..progress import tqdm
 from .models import CHECKPOINT_FORMAT, ModelConfig, build_network, normalise_inputs, read_checkpoint
@@ -36,30 +38,16 @@ __all__ = ["Segmenter", "load_model", "training_histories", "predict_sequence", 
 
 
 def check_rgb(rgb: np.ndarray, what: str = "rgb") -> np.ndarray:
-    """Validate an RGB image and return it as float32 in [0, 1] (see the module notes)."""
-    a = np.asarray(rgb)
-    if a.ndim != 3 or a.shape[2] != 3:
-        raise ValueError(f"{what}: expected an (H,W,3) RGB image, got shape {a.shape}")
-    if a.dtype == np.uint8:
-        return a.astype(np.float32) / np.float32(255.0)
-    if np.issubdtype(a.dtype, np.floating):
-        if not np.isfinite(a).all():
-            raise ValueError(f"{what}: holds NaN or inf")
-        if a.size and (a.min() < 0.0 or a.max() > 1.0):
-            raise ValueError(f"{what}: float images must lie in [0, 1], got {a.min():.3g}..{a.max():.3g}")
-        return a.astype(np.float32)
-    raise ValueError(f"{what}: expected uint8 (or float in [0, 1]) RGB, got dtype {a.dtype}")
+    """Validate an RGB image (:func:`semmatch.io.check_rgb`, float images in [0, 1] accepted)
+    and return it as float32 in [0, 1] (see the module notes)."""
+    a = contract.check_rgb(rgb, where=what, floats=True)
+    return a.astype(np.float32) / np.float32(255.0) if a.dtype == np.uint8 else a.astype(np.float32)
 
 
 def check_depth(depth: np.ndarray, shape: tuple[int, int], what: str = "depth") -> np.ndarray:
-    """Validate metric depth and return float32 with non-finite / non-positive values set to 0."""
-    d = np.asarray(depth)
-    if d.shape != shape:
-        raise ValueError(f"{what}: shape {d.shape} does not match the RGB image {shape}")
-    if not np.issubdtype(d.dtype, np.floating):
-        raise ValueError(f"{what}: expected float metres, got dtype {d.dtype} (divide by depth_scale first)")
-    d = d.astype(np.float32)
-    return np.where(np.isfinite(d) & (d > 0), d, np.float32(0.0))
+    """Validate metric depth of an RGB image of size ``shape`` (:func:`semmatch.io.check_depth`)
+    and return float32 with non-finite / non-positive values set to 0."""
+    return contract.check_depth(depth, shape, where=what, against="the RGB image is")
 
 
 class Segmenter:

@@ -9,7 +9,7 @@ import cv2
 import numpy as np
 
 from ..geometry import Intrinsics, check_pose
-from ..io import Frame
+from ..io import Frame, check_depth, check_intrinsics, check_rgb
 
 __all__ = ["FrameData", "check_frame"]
 
@@ -91,7 +91,8 @@ def _pixel_grid(width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def check_frame(frame: Frame, *, need_rgb: bool = True) -> FrameData:
-    """Validate a :class:`~semmatch.io.Frame` for label transfer.
+    """Validate a :class:`~semmatch.io.Frame` for label transfer (the frame contract of
+    :mod:`semmatch.io.contract`, and a pose).
 
     Parameters
     ----------
@@ -103,8 +104,8 @@ def check_frame(frame: Frame, *, need_rgb: bool = True) -> FrameData:
     ------
     ValueError
         Missing pose, pose with NaN or a non-rotation block, image sizes that do not match the
-        intrinsics, RGB that is not ``uint8 (H,W,3)``, depth whose median is not plausible in
-        metres (:func:`semmatch.io.check_depth_units`).
+        intrinsics, RGB that is not ``uint8 (H,W,3)``, depth that is not float or whose median
+        is not plausible in metres (:func:`semmatch.io.check_depth_units`).
     TypeError
         ``frame`` is not a Frame-like object.
     """
@@ -112,33 +113,12 @@ def check_frame(frame: Frame, *, need_rgb: bool = True) -> FrameData:
     for attr in ("depth", "pose", "intrinsics"):
         if not hasattr(frame, attr):
             raise TypeError(f"{name}: expected a semmatch.io.Frame, got {type(frame).__name__}")
-    intr = frame.intrinsics
-    if not isinstance(intr, Intrinsics):
-        raise ValueError(f"{name}: intrinsics must be a semmatch.geometry.Intrinsics")
+    intr = check_intrinsics(frame.intrinsics, where=name)
     if frame.pose is None:
         raise ValueError(f"{name}: the frame has no pose; label transfer needs T_world_camera")
     pose = check_pose(frame.pose, what=f"{name} pose")
-    depth = np.asarray(frame.depth)
-    if depth.shape != intr.shape:
-        raise ValueError(
-            f"{name}: depth is {depth.shape[1::-1] if depth.ndim >= 2 else depth.shape} (WxH) but the "
-            f"intrinsics say {intr.width}x{intr.height}"
-        )
-    if not np.issubdtype(depth.dtype, np.floating):
-        raise ValueError(f"{name}: depth must be float metres, got {depth.dtype}")
-    depth = depth.astype(np.float32, copy=False)
-    from ..io import check_depth_units
-
-    check_depth_units(depth, where=name)  # millimetres read as metres would silently find no support
-    valid = depth > 0  # NaN compares False
-    if np.isinf(depth).any():
-        valid &= np.isfinite(depth)
-    if not (valid | (depth == 0)).all():
-        depth = np.where(valid, depth, 0).astype(np.float32)
+    depth = check_depth(frame.depth, intr.shape, where=name)  # 0 = no measurement
     rgb = frame.rgb
     if need_rgb or rgb is not None:
-        rgb = np.asarray(rgb) if rgb is not None else None
-        if rgb is None or rgb.shape != intr.shape + (3,) or rgb.dtype != np.uint8:
-            got = "nothing" if rgb is None else f"{rgb.dtype} {rgb.shape}"
-            raise ValueError(f"{name}: RGB must be uint8 {intr.shape + (3,)} to match the intrinsics, got {got}")
-    return FrameData(rgb, depth, valid, pose, intr, name)
+        rgb = check_rgb(rgb, intr.shape, where=name)
+    return FrameData(rgb, depth, depth > 0, pose, intr, name)
