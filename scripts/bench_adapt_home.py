@@ -1,6 +1,6 @@
 """Time ``semmatch adapt --home`` on one simulated home (issue 38 item 5: <= 3 min per home).
 
-``python scripts/bench_adapt_home.py OUT [--model models/full/compact.pt] [--frames 60] [--size 320x240]``
+``python scripts/bench_adapt_home.py OUT [--model models/full/compact.pt] [--frames 60] [--image-size 320x240]``
 
 Writes a person/robot pair of one procedural home (``semmatch simulate --pair``) and the person's map
 (``semmatch reconstruct`` of the person's tour with its labels) into OUT: the home's setup, not timed
@@ -26,29 +26,32 @@ def main() -> None:
 
     from semmatch.adapt import AdaptRecipe, adapt_in_home
     from semmatch.cli import main as cli
+    from semmatch.cli.common import ImageSize, add_image_size, add_scene_kind
     from semmatch.segment.training import TrainConfig, build_views
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("out", type=Path, help="work folder (the home, the map, the checkpoints, the timings)")
     ap.add_argument("--model", type=Path, default=Path("models/full/compact.pt"), help="network to adapt")
-    ap.add_argument("--kind", default="apartment", help="procedural home kind (default %(default)s)")
+    add_scene_kind(ap, default="apartment", help="procedural home kind (default %(default)s)", old=("--kind",))
     ap.add_argument("--seed", type=int, default=1,
                     help="home seed (default %(default)s: a training scene, so that no seed a reader may pass to "
                     "make confirm is generated here; the timing does not depend on it)")
     ap.add_argument("--frames", type=int, default=60, help="frames of each tour (default %(default)s)")
-    ap.add_argument("--size", default="320x240", help="image size (default %(default)s)")
+    add_image_size(ap, default=ImageSize(320, 240), help="image size (default %(default)s)", old=("--size",))
     ap.add_argument("--steps", type=int, default=AdaptRecipe.steps, help="fine-tuning steps (default %(default)s)")
     ap.add_argument("--cache-dir", type=Path, default=None, help="views cache (default OUT/cache)")
     args = ap.parse_args()
     out = args.out
     out.mkdir(parents=True, exist_ok=True)
     res: dict = {"load_start": os.getloadavg(), "threads": torch.get_num_threads(), "model": str(args.model),
-                 "kind": args.kind, "seed": args.seed, "frames": args.frames, "size": args.size, "steps": args.steps}
+                 "kind": args.scene_kind, "seed": args.seed, "frames": args.frames, "size": str(args.image_size),
+                 "steps": args.steps}
     t = time.perf_counter()
     pair = out / "pair"
     if not (pair / "lower" / "poses.txt").is_file():
-        assert cli(["simulate", "--kind", args.kind, "--seed", str(args.seed), "--pair", "--frames", str(args.frames),
-                    "--size", args.size, "--out", str(pair), "--quiet", "--overwrite"]) == 0
+        assert cli(["simulate", "--scene-kind", args.scene_kind, "--seed", str(args.seed), "--pair", "--frames",
+                    str(args.frames), "--image-size", str(args.image_size), "--out", str(pair), "--quiet",
+                    "--overwrite"]) == 0
     if not (out / "map.ply").is_file():
         assert cli(["reconstruct", str(pair / "upper"), "--out", str(out / "map.ply"), "--quiet"]) == 0
     res["setup_s"] = time.perf_counter() - t
