@@ -23,7 +23,7 @@ import pandas as pd
 
 def main() -> None:
     from semmatch.experiments.pipeline import notebook_parameters
-    from semmatch.fusion import extract, fuse
+    from semmatch.fusion import extract, fuse_sequence
     from semmatch.geometry import DEFAULT_INTRINSICS
     from semmatch.io import read_sequence, write_map
     from semmatch.sim import generate_scene, simulate_pair
@@ -50,7 +50,7 @@ def main() -> None:
             with tempfile.TemporaryDirectory() as tmp:
                 up, low = simulate_pair(scene, tmp, n_frames=n, camera_step=step, seed=seed, intrinsics=intr,
                                         progress=False)
-                vol = fuse(read_sequence(up), voxel_size=p["voxel_size"], progress=False)
+                vol = fuse_sequence(read_sequence(up), voxel_size=p["voxel_size"], progress=False)
                 write_map(Path(tmp) / "upper.ply", extract(vol, "mesh"))
                 index = load_index(Path(tmp) / "upper.ply", cache=False)
                 stats = transfer_sequence("3d-neighborhood", read_sequence(low), index, Path(tmp) / "lab",

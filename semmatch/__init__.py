@@ -11,7 +11,8 @@ kernels), :mod:`semmatch.evaluate` (measures, reference, statistics),
 
 Modules that moved into these packages keep their old import path for one release: a thin
 module there makes the old name an alias of the new module and emits a
-:class:`DeprecationWarning` naming the new path (:func:`_moved_module`).
+:class:`DeprecationWarning` naming the new path (:func:`_moved_module`). Renamed functions keep
+their old name as well, for one release (:func:`_renamed_function`).
 """
 
 import os as _os
@@ -53,3 +54,35 @@ def _moved_module(old: str, new: str) -> None:
     warnings.warn(f"{old} has moved to {new}: import it from there ({old} will be removed in the next release)",
                   DeprecationWarning, stacklevel=3)
     sys.modules[old] = module
+
+
+def _renamed_function(new, old: str, new_name: str):
+    """A deprecated alias of the function ``new`` under its old name, kept for one release.
+
+    Parameters
+    ----------
+    new : callable
+        The function under its new name.
+    old : str
+        The old public name (``"semmatch.fusion.fuse"``).
+    new_name : str
+        The new public name (``"semmatch.fusion.fuse_sequence"``).
+
+    Returns
+    -------
+    callable
+        Calls ``new`` with the same arguments and returns its result, after a
+        :class:`DeprecationWarning` that names ``new_name``, attributed to the caller.
+    """
+    import functools
+    import warnings
+
+    @functools.wraps(new)
+    def alias(*args, **kwargs):
+        warnings.warn(f"{old} is deprecated: call {new_name} (the same function under a name that says what it "
+                      f"computes; {old} will be removed in the next release)", DeprecationWarning, stacklevel=2)
+        return new(*args, **kwargs)
+
+    alias.__name__ = alias.__qualname__ = old.rpartition(".")[2]
+    alias.__doc__ = f"Deprecated name of :func:`{new_name}` (same arguments, same result); goes in the next release."
+    return alias

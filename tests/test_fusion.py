@@ -5,7 +5,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from semmatch.fusion import SemanticTSDF, check_depth_units, extract, fuse, reconstruct, reconstruct_many
+from semmatch.fusion import (
+    SemanticTSDF,
+    check_depth_units,
+    extract,
+    fuse,
+    fuse_sequence,
+    reconstruct,
+    reconstruct_many,
+)
 from semmatch.geometry import DEFAULT_INTRINSICS, look_at
 from semmatch.io import Frame, SequenceWriter, read_map, read_sequence, write_labels_folder, write_map
 from semmatch.labels import NUM_CLASSES
@@ -88,7 +96,7 @@ def test_labels_from_folder_and_outputs(tmp_path, room_frames):
     # a labels folder that says "sofa" everywhere replaces the sequence's own labels
     write_labels_folder(tmp_path / "sofa", [np.full(INTR.shape, 10, np.uint8)] * 6)
     out, rgb_out, pts_out = tmp_path / "m.ply", tmp_path / "rgb.ply", tmp_path / "p.ply"
-    vol = fuse(read_sequence(seq_dir), labels=tmp_path / "sofa", voxel_size=VS)
+    vol = fuse_sequence(read_sequence(seq_dir), labels=tmp_path / "sofa", voxel_size=VS)
     m = extract(vol)
     write_map(out, m)
     write_map(rgb_out, m, colors="rgb")
@@ -106,6 +114,11 @@ def test_labels_from_folder_and_outputs(tmp_path, room_frames):
     with pytest.raises(ValueError, match="5 images for 6 frames"):
         write_labels_folder(tmp_path / "short", [np.zeros(INTR.shape, np.uint8)] * 5)
         reconstruct(read_sequence(seq_dir), labels=tmp_path / "short")
+    # the old name: the same function, for one release, with a warning that names the new one
+    with pytest.warns(DeprecationWarning, match=r"semmatch\.fusion\.fuse is deprecated: call semmatch\.fusion\.fuse_sequence"):
+        old = extract(fuse(read_sequence(seq_dir), labels=tmp_path / "sofa", voxel_size=VS))
+    assert np.array_equal(old.points, m.points) and np.array_equal(old.labels, m.labels)
+    assert fuse.__name__ == "fuse" and "fuse_sequence" in fuse.__doc__
 
 
 def _same_map(a, b) -> bool:

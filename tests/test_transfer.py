@@ -17,6 +17,7 @@ from semmatch.transfer import (
     METHODS,
     MapIndex,
     fuse,
+    fuse_with_probabilities,
     prepare,
     superpixels,
     transfer,
@@ -281,18 +282,18 @@ def test_fused_reaches_full_coverage_and_beats_both_inputs():
     right = rng.random(gt.shape) < 0.8  # the network is right on 80% of pixels
     probs[right, gt[right]] += 2.0
     probs /= probs.sum(axis=2, keepdims=True)
-    fused = fuse(transferred, probs, purity=purity, min_purity=0.5)
+    fused = fuse_with_probabilities(transferred, probs, purity=purity, min_purity=0.5)
     acc_t = (transferred == gt).mean()
     acc_n = ((np.argmax(probs[..., 1:], axis=2) + 1) == gt).mean()
     acc_f = (fused == gt).mean()
     assert (fused > 0).all()
     assert acc_f >= max(acc_t, acc_n) and acc_f > 0.9
     with pytest.raises(ValueError, match="probs"):
-        fuse(transferred, probs[:-1])
+        fuse_with_probabilities(transferred, probs[:-1])
 
 
-def test_fuse_takes_the_network_argmax_only_where_it_decides():
-    """``fuse`` computes the network's class only on the pixels the map leaves to it; the result
+def test_fuse_with_probabilities_takes_the_network_argmax_only_where_it_decides():
+    """``fuse_with_probabilities`` computes the network's class only on the pixels the map leaves to it; the result
     equals the whole-image formulation, ties (first maximum) included."""
     rng = np.random.default_rng(3)
     labels = rng.integers(0, 21, (40, 50)).astype(np.uint8)
@@ -303,12 +304,17 @@ def test_fuse_takes_the_network_argmax_only_where_it_decides():
         for pur in (None, purity):
             keep = (labels > 0) & (True if pur is None else pur >= 0.5)
             want = np.where(keep, labels, net).astype(np.uint8)
-            got = fuse(labels, probs, purity=pur, min_purity=0.5)
+            got = fuse_with_probabilities(labels, probs, purity=pur, min_purity=0.5)
             assert got.dtype == np.uint8 and np.array_equal(got, want), C
-    all_kept = fuse(np.ones((4, 5), np.uint8), np.zeros((4, 5, 21), np.float32))
+    all_kept = fuse_with_probabilities(np.ones((4, 5), np.uint8), np.zeros((4, 5, 21), np.float32))
     assert (all_kept == 1).all()
     with pytest.raises(ValueError, match="NaN"):
-        fuse(labels, np.full((40, 50, 21), np.nan, np.float32))
+        fuse_with_probabilities(labels, np.full((40, 50, 21), np.nan, np.float32))
+    # the old name: the same function, for one release, with a warning that names the new one
+    with pytest.warns(DeprecationWarning, match=r"semmatch\.transfer\.fuse is deprecated: call "
+                                                r"semmatch\.transfer\.fuse_with_probabilities"):
+        old = fuse(labels, probs, purity=purity, min_purity=0.5)
+    assert np.array_equal(old, fuse_with_probabilities(labels, probs, purity=purity, min_purity=0.5))
 
 
 def test_fused_method(frames, index):

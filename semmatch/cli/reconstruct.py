@@ -175,7 +175,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _run(args: argparse.Namespace) -> int:
     from semmatch.cli.common import emit
-    from semmatch.fusion import extract, fuse
+    from semmatch.fusion import extract, fuse_sequence
     from semmatch.io import write_map
 
     seq = open_any_sequence(args.seq)
@@ -211,7 +211,7 @@ def _run(args: argparse.Namespace) -> int:
             warnings.warn(f"{args.seq}: the ground truth has fewer than 3 frames or no two consecutive ones; "
                           "no ATE/RPE is reported", UserWarning, stacklevel=2)
     _check_memory(seq, args, poses)
-    vol = fuse(
+    vol = fuse_sequence(
         seq,
         labels=args.labels,
         voxel_size=args.voxel_size,

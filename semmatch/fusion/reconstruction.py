@@ -1,6 +1,6 @@
 """Fuse whole RGB-D sequences into semantic maps with :class:`~semmatch.fusion.tsdf.SemanticTSDF`.
 
-:func:`fuse` integrates a posed sequence and its labels (the frames' own, a labels folder, or
+:func:`fuse_sequence` integrates a posed sequence and its labels (the frames' own, a labels folder, or
 one label or probability image per frame) into a volume, :func:`extract` takes its mesh or point
 cloud, :func:`reconstruct` does both, and :func:`reconstruct_many` fuses the geometry once for
 several labelings of the same frames. The sequence is checked as it is read: poses, label
@@ -17,10 +17,11 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import _renamed_function
 from ..io import Frame, SemanticMap, read_label_image, read_labels_folder, write_map
 from .tsdf import SemanticTSDF
 
-__all__ = ["fuse", "extract", "reconstruct", "reconstruct_many"]
+__all__ = ["fuse_sequence", "fuse", "extract", "reconstruct", "reconstruct_many"]
 
 
 def _label_source(labels, n: int | None) -> Iterator[np.ndarray | None] | None:
@@ -91,7 +92,7 @@ def _check_counts(count: int, lab_iter: Iterator | None, name: str) -> None:
         raise ValueError(f"more label images than the {count} frames of {name}")
 
 
-def fuse(
+def fuse_sequence(
     seq: Iterable[Frame],
     labels: str | os.PathLike | Iterable[np.ndarray] | None = None,
     voxel_size: float = 0.04,
@@ -150,6 +151,10 @@ def fuse(
     return vol
 
 
+#: the old name of :func:`fuse_sequence` (deprecated; one release)
+fuse = _renamed_function(fuse_sequence, "semmatch.fusion.fuse", "semmatch.fusion.fuse_sequence")
+
+
 def reconstruct(
     seq: Iterable[Frame],
     labels: str | os.PathLike | Iterable[np.ndarray] | None = None,
@@ -161,12 +166,12 @@ def reconstruct(
     progress: bool = False,
     **tsdf_options,
 ) -> SemanticMap:
-    """Fuse posed RGB-D frames and their labels into a semantic map (:func:`fuse`, then extract).
+    """Fuse posed RGB-D frames and their labels into a semantic map (:func:`fuse_sequence`, then extract).
 
     Parameters
     ----------
     seq, labels, voxel_size, poses, progress, **tsdf_options
-        As :func:`fuse`.
+        As :func:`fuse_sequence`.
     output : {"mesh", "points"}
         What to extract: the marching-cubes mesh or the surface point cloud.
     min_weight : float
@@ -181,7 +186,7 @@ def reconstruct(
     Raises
     ------
     ValueError
-        As :func:`fuse`; also a reconstruction with no surface.
+        As :func:`fuse_sequence`; also a reconstruction with no surface.
 
     Examples
     --------
@@ -191,7 +196,7 @@ def reconstruct(
     """
     if output not in ("mesh", "points"):
         raise ValueError(f"output must be 'mesh' or 'points', got {output!r}")
-    vol = fuse(seq, labels, voxel_size, poses=poses, progress=progress, **tsdf_options)
+    vol = fuse_sequence(seq, labels, voxel_size, poses=poses, progress=progress, **tsdf_options)
     return extract(vol, output, min_weight=min_weight)
 
 

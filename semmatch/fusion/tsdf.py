@@ -153,7 +153,7 @@ class SemanticTSDF:
         self._rays: dict[tuple[Intrinsics, int], np.ndarray] = {}
         self._K: dict[Intrinsics, object] = {}
         self.n_frames = 0
-        self.name = "sequence"  # what was fused, for messages (set by fuse())
+        self.name = "sequence"  # what was fused, for messages (set by fuse_sequence())
         self.n_label_points = 0
         #: frames skipped for lack of valid depth (sensor dropouts), by their ``where`` names
         self.skipped: list[str] = []

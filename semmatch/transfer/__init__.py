@@ -12,7 +12,7 @@ plus ``fused`` (transferred labels + a network's probabilities) and
 a method (the CLI, the benchmark and the notebooks pick it up).
 """
 
-from .fused import fuse, fuse_labels, write_fused_labels
+from .fused import fuse, fuse_labels, fuse_with_probabilities, write_fused_labels
 from .index import DEFAULT_MAX_DISTANCE, MapIndex, load_index, prepare
 from .registry import (
     ALL_METHODS,
@@ -45,6 +45,7 @@ __all__ = [
     "prepare",
     "DEFAULT_MAX_DISTANCE",
     "method_params",
+    "fuse_with_probabilities",
     "fuse",
     "fuse_labels",
     "write_fused_labels",

@@ -7,12 +7,13 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import _renamed_function
 from ..labels import NUM_CLASSES
 
-__all__ = ["fuse", "fuse_labels", "write_fused_labels"]
+__all__ = ["fuse_with_probabilities", "fuse", "fuse_labels", "write_fused_labels"]
 
 
-def fuse(
+def fuse_with_probabilities(
     labels: np.ndarray,
     probs: np.ndarray,
     *,
@@ -74,11 +75,15 @@ def fuse(
     return out
 
 
+#: the old name of :func:`fuse_with_probabilities` (deprecated; one release)
+fuse = _renamed_function(fuse_with_probabilities, "semmatch.transfer.fuse", "semmatch.transfer.fuse_with_probabilities")
+
+
 def fuse_labels(transferred: np.ndarray, predicted: np.ndarray) -> np.ndarray:
     """Transferred labels where the map supports a pixel (label > 0), a prediction elsewhere.
 
     The evaluation protocol's ``fused`` rows: what a user deploys when the person's map does not
-    cover everything the robot sees (:func:`fuse` without probabilities or purity).
+    cover everything the robot sees (:func:`fuse_with_probabilities` without probabilities or purity).
 
     Parameters
     ----------

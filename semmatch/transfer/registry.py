@@ -12,7 +12,7 @@ import numpy as np
 from ..io import Frame, SemanticMap
 from . import methods as _m
 from .frames import check_frame
-from .fused import fuse
+from .fused import fuse_with_probabilities
 from .index import MapIndex, prepare
 
 __all__ = [
@@ -263,7 +263,7 @@ def transfer_frame(
             raise ValueError(f"fused: base must be one of {', '.join(_REGISTRY)}, got {base!r}")
         fd = check_frame(frame, need_rgb=_REGISTRY[base].needs_rgb)
         labels, purity, groups = _call(base, fd, index, params)
-        labels = fuse(labels, probs, purity=purity, min_purity=min_purity)
+        labels = fuse_with_probabilities(labels, probs, purity=purity, min_purity=min_purity)
         purity = np.where(labels == 0, 0, purity).astype(np.float32)
     else:
         fd = check_frame(frame, need_rgb=_REGISTRY[name].needs_rgb)
