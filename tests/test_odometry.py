@@ -134,9 +134,12 @@ def test_pose_graph_removes_drift_from_chained_poses():
         refine_pose_graph(depths[:3], intr, drifted)
 
 
-def test_real_like_chain_on_a_noisy_simulated_sequence(tmp_path, capsys):
-    from semmatch.io import read_sequence
-    from semmatch.poses.odometry import real_like_chain
+def test_reconstruct_estimates_the_poses_of_a_noisy_simulated_sequence(tmp_path, capsys):
+    """``semmatch reconstruct --estimate-poses --prior``: poses tracked from the noisy frames,
+    seeded by the recorded drifting ones, scored against poses_gt.txt."""
+    import json
+
+    from semmatch.cli import main
     from semmatch.sim import NoiseConfig, make_trajectory, simulate_sequence
 
     scene = generate_scene("living_room", 0)
@@ -144,19 +147,6 @@ def test_real_like_chain_on_a_noisy_simulated_sequence(tmp_path, capsys):
     poses = make_trajectory(scene, 0.2, 300, kind="lower", seed=0)[:10]
     simulate_sequence(scene, poses, tmp_path / "lower", intrinsics=intr, noise=NoiseConfig.kinect(0),
                       progress=False)
-    seq = read_sequence(tmp_path / "lower")
-    res = real_like_chain(seq, prior="recorded")
-    assert res["poses"].shape == (10, 4, 4) and np.allclose(res["poses"][0], poses[0])
-    assert res["trajectory"]["ate_rmse"] < 0.05, res["trajectory"]
-    s = res["scores"]
-    assert s["color_acc"] > 0.9 and 0.3 < s["mean_acc"] <= 1.0 and res["map"].is_mesh, s
-    with pytest.raises(ValueError, match="prior must be"):
-        real_like_chain(seq, prior="wheel")
-    # the same from the command line: estimated poses, ATE against poses_gt.txt
-    import json
-
-    from semmatch.cli import main
-
     rc = main(["reconstruct", str(tmp_path / "lower"), "--out", str(tmp_path / "m.ply"), "--estimate-poses",
                "--prior", "--quiet", "--poses-out", str(tmp_path / "est.txt"), "--json"])
     assert rc == 0

@@ -1,4 +1,4 @@
-"""Camera poses of recordings without them: RGB-D odometry, and a one-recording estimate-fuse-score chain.
+"""Camera poses of recordings without them: RGB-D odometry.
 
 Tracker (:func:`estimate_poses`): multi-scale frame-to-frame RGB-D odometry with the kernels of
 ``open3d.t.pipelines.odometry``, made repeatable run to run by :mod:`semmatch.poses.rgbd_odometry`
@@ -8,8 +8,6 @@ says how this was chosen on real and simulated frames), chained, then refined by
 default; pass the known start pose, :func:`start_pose`, to build maps in the world frame).
 Trajectory errors against ground truth are :mod:`semmatch.poses.trajectory_metrics`; how much drift
 the pose graph removes is measured in docs/protocol.md ("Odometry").
-
-One module (about 500 lines): the tracker and the one-recording chain that runs it.
 """
 
 from __future__ import annotations
@@ -23,10 +21,9 @@ from ..engine import default_device
 from ..geometry import check_pose
 from ..io import Frame, check_depth_units, depth_to_uint16
 from .pose_graph import CompressedDepths, refine_pose_graph
-from .trajectory_metrics import align_trajectory, rotation_deg, trajectory_errors
+from .trajectory_metrics import rotation_deg
 
-__all__ = ["estimate_poses", "shrink_frame", "ground_truth_poses", "start_pose", "anchor_to_ground_truth",
-           "real_like_chain"]
+__all__ = ["estimate_poses", "shrink_frame", "ground_truth_poses", "start_pose", "anchor_to_ground_truth"]
 
 #: a frame with fewer valid depth pixels than this share is a sensor dropout (as in fusion)
 MIN_VALID_DEPTH = 0.001
@@ -447,107 +444,3 @@ def anchor_to_ground_truth(poses: np.ndarray, true_poses: np.ndarray | None,
                   f"at frame {k}'s true pose (frames 0-{k - 1} are placed by odometry alone, and ATE/RPE use only "
                   "frames with ground truth)", UserWarning, stacklevel=2)
     return np.asarray(true_poses[k]) @ np.linalg.inv(poses[k]) @ poses, k
-
-
-def real_like_chain(
-    seq,
-    *,
-    labels=None,
-    gt_poses: np.ndarray | None = None,
-    reference=None,
-    prior: np.ndarray | str | None = None,
-    voxel_size: float = 0.04,
-    eval_voxel_size: float = 0.05,
-    align: str | None = "icp",
-    progress: bool = False,
-    **fusion_options,
-) -> dict:
-    """The "real-like" chain: poses withheld -> estimated -> semantic map -> evaluated.
-
-    Parameters
-    ----------
-    seq : sequence of Frame
-        E.g. a simulated sequence with sensor noise (``read_sequence``; its ``poses.txt`` is
-        ignored) or a TUM RGB-D folder (``read_tum_rgbd``).
-    labels : None, path or iterable
-        Labels to fuse, as :func:`semmatch.fusion.reconstruct` (None: the frames' own).
-    gt_poses : (N, 4, 4), optional
-        Ground-truth poses; default: ``<seq>/poses_gt.txt`` of a simulated sequence, or the
-        ground truth of a TUM folder. They give the first pose (the start pose is known) and
-        the trajectory errors.
-    reference : SemanticMap or path, optional
-        Map to evaluate against; default: the same frames and labels fused at the ground-truth
-        poses (so the score measures what the pose estimate costs).
-    prior : (N, 4, 4), "recorded" or None
-        Rough poses seeding the tracker (see :func:`estimate_poses`); ``"recorded"``: the
-        sequence's own ``poses`` (for a simulated real-like sequence, its noisy drifting
-        estimate, like wheel odometry). None: RGB-D only.
-    voxel_size, eval_voxel_size : float
-        Fusion and evaluation voxel (metres).
-    align : {"icp", "trajectory", None}
-        How the estimated map is registered to the reference before the voxel comparison
-        (5 cm voxels make the measures very sensitive to a global offset): the trajectory
-        alignment of :func:`align_trajectory`, refined by point-to-plane ICP of the maps
-        ("icp"), the trajectory alignment alone, or none (the anchored first pose only).
-    progress : bool
-    **fusion_options
-        Passed to :func:`semmatch.fusion.reconstruct`.
-
-    Returns
-    -------
-    dict
-        ``poses`` (N,4,4) estimated, ``map`` (SemanticMap), ``trajectory`` (dict of
-        :func:`trajectory_errors`, or None without ground truth), ``scores`` (dict of
-        :func:`semmatch.evaluate.metrics.compare`, or None without reference and ground truth),
-        ``alignment`` (4x4 applied to the map for the comparison).
-    """
-    from ..evaluate.metrics import compare
-    from ..fusion import reconstruct
-
-    if gt_poses is None:
-        gt_poses = ground_truth_poses(seq)
-    if gt_poses is not None:
-        gt_poses = np.asarray(gt_poses, dtype=np.float64)
-        if len(gt_poses) != len(seq):
-            raise ValueError(f"{len(gt_poses)} ground-truth poses for {len(seq)} frames")
-    init = start_pose(gt_poses)
-    if isinstance(prior, str):
-        if prior != "recorded" or getattr(seq, "poses", None) is None:
-            raise ValueError(f"prior must be an (N,4,4) array, 'recorded' (with a sequence that has poses) or None, got {prior!r}")
-        prior = seq.poses
-    est = estimate_poses(seq, init_pose=init, prior=prior, progress=progress)
-    est = anchor_to_ground_truth(est, gt_poses, name=str(getattr(seq, "path", "sequence")))[0]
-    m = reconstruct(seq, labels=labels, voxel_size=voxel_size, poses=est, progress=progress, **fusion_options)
-    errors = trajectory_errors(est, gt_poses) if gt_poses is not None else None
-    if reference is None and gt_poses is not None and np.isfinite(gt_poses).all():
-        reference = reconstruct(seq, labels=labels, voxel_size=voxel_size, poses=gt_poses, **fusion_options)
-    if align not in ("icp", "trajectory", None):
-        raise ValueError(f"align must be 'icp', 'trajectory' or None, got {align!r}")
-    S = np.eye(4)
-    if align and gt_poses is not None and np.isfinite(gt_poses).all():
-        S = align_trajectory(est, gt_poses)
-    scores = None
-    if reference is not None:
-        if align == "icp":
-            S = _icp(m, reference, S, max_distance=2 * eval_voxel_size)
-        scores = compare(reference, m, eval_voxel_size, transform=S)
-    return {"poses": est, "map": m, "trajectory": errors, "scores": scores, "alignment": S}
-
-
-def _icp(source, target, init: np.ndarray, *, max_distance: float) -> np.ndarray:
-    """Point-to-plane ICP (Open3D) of map ``source`` onto map ``target``, starting at ``init``."""
-    import open3d as o3d
-
-    from ..io import read_map
-
-    if not hasattr(target, "points"):
-        target = read_map(target)
-    src = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(source.points.astype(np.float64)))
-    dst = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(target.points.astype(np.float64)))
-    src, dst = src.voxel_down_sample(max_distance / 2), dst.voxel_down_sample(max_distance / 2)
-    dst.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=2 * max_distance, max_nn=30))
-    reg = o3d.pipelines.registration.registration_icp(
-        src, dst, max_distance, init, o3d.pipelines.registration.TransformationEstimationPointToPlane(),
-        o3d.pipelines.registration.ICPConvergenceCriteria(max_iteration=50),
-    )
-    return np.asarray(reg.transformation)
