@@ -36,8 +36,8 @@ def main() -> None:
         robot_map_comparison,
         robot_views,
     )
-    from semmatch.experiments.claims import summarize_over_scenes
     from semmatch.experiments.pipeline import notebook_parameters
+    from semmatch.experiments.summaries import summarize_over_scenes
     from semmatch.experiments.tables import save_interval_table, save_table
     from semmatch.plots import plot_height_study
 

@@ -1,4 +1,5 @@
-"""semmatch.experiments.claims: the analysis plan, intervals over scenes and verdicts of the paper's claims."""
+"""The analysis plan (experiments.analysis_plan), intervals over scenes (experiments.summaries) and
+verdicts of the paper's claims (experiments.claims)."""
 
 from __future__ import annotations
 
@@ -9,19 +10,16 @@ import pandas as pd
 import pytest
 
 from semmatch.evaluate.stats import bootstrap_ci, stratified_estimate, stratified_t_ci, t_test_pvalue
+from semmatch.experiments.analysis_plan import CLAIMS, PLAN_FILE, Claim, load_analysis_plan
 from semmatch.experiments.claims import (
-    CLAIMS,
-    PLAN_FILE,
-    Claim,
     check_claims,
     claim_verdicts,
     claims_markdown,
-    format_with_intervals,
     judge_speed_claims,
-    load_analysis_plan,
-    summarize_over_scenes,
     verdict_table,
 )
+from semmatch.experiments.summaries import summarize_over_scenes
+from semmatch.experiments.tables import format_with_intervals
 
 SCENES = [f"office_70{i:02d}" for i in range(6)]
 ALL_METHODS = ["2d-slic", "3d-projected-sp", "3d-slic", "dbscan", "3d-neighborhood"]
@@ -445,7 +443,7 @@ def test_support_regression_recovers_the_slope():
     gain = -0.1 + 0.3 * support + np.array([0.01, -0.01, 0.0, 0.01, -0.01, 0.0])
     t2 = table({("compact", "lower"): 0.0, ("compact", "3d-neighborhood"): gain})
     sup = pd.DataFrame(dict(scene=SCENES * 2, route=["own"] * 6 + ["shared"] * 6, support=np.r_[support, support[::-1]]))
-    from semmatch.experiments.claims import support_regression
+    from semmatch.experiments.summaries import support_regression
 
     (row,) = support_regression(t2, sup).itertuples()
     assert row.method == "3d-neighborhood" and row.scenes == 6
@@ -454,7 +452,7 @@ def test_support_regression_recovers_the_slope():
 
 
 def test_per_kind_means():
-    from semmatch.experiments.claims import per_kind_means
+    from semmatch.experiments.summaries import per_kind_means
 
     df = pd.DataFrame(dict(scene=["office_1", "office_2", "bedroom_1"], model="m", method="lower",
                            mean_acc=[0.2, 0.4, 0.9]))
@@ -482,3 +480,13 @@ def test_judge_figures_writes_one_verdict_table(tmp_path):
         assert (out / name).is_file(), name
     with pytest.raises(FileNotFoundError, match="no per-scene table"):
         judge_figures(tmp_path / "out")
+
+
+def test_the_names_that_moved_out_of_claims_are_importable_from_it_as_before():
+    from semmatch.experiments import analysis_plan, claims, summaries, tables
+
+    for name in ("CLAIMS", "PLAN_FILE", "Claim", "AnalysisPlan", "load_analysis_plan", "MEASURE_LABELS", "VERDICTS"):
+        assert getattr(claims, name) is getattr(analysis_plan, name), name
+    for name in ("summarize_over_scenes", "support_regression", "per_kind_means"):
+        assert getattr(claims, name) is getattr(summaries, name), name
+    assert claims.format_with_intervals is tables.format_with_intervals

@@ -24,12 +24,6 @@ ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "semmatch"
 #: at most this many loose modules directly under semmatch/ (shims, __init__ and __main__ aside)
 MAX_LOOSE = 10
-#: import circles between modules inside one unit that predate the layout check (issue 39, item
-#: 6), each made by an import inside a function; this set may only shrink (claims <-> tables:
-#: ``format_with_intervals`` belongs in tables, which claims imports)
-KNOWN_MODULE_CIRCLES = {
-    frozenset({"semmatch.experiments.claims", "semmatch.experiments.tables"}),
-}
 
 
 def _modules() -> dict[str, tuple[Path, bool]]:
@@ -182,10 +176,10 @@ def test_no_circles_between_the_packages_parts():
     assert not circles, f"import circles between parts of semmatch: {circles}"
 
 
-def test_no_new_circles_between_modules():
-    circles = set(_circles(_graph()))
-    assert circles <= KNOWN_MODULE_CIRCLES, f"new import circles between modules: {circles - KNOWN_MODULE_CIRCLES}"
-    assert circles == KNOWN_MODULE_CIRCLES, f"circles broken, take them off KNOWN_MODULE_CIRCLES: {KNOWN_MODULE_CIRCLES - circles}"
+def test_no_circles_between_modules():
+    """No module imports from a module that imports it, also inside one part and inside functions."""
+    circles = _circles(_graph())
+    assert not circles, f"import circles between modules: {circles}"
 
 
 def test_the_circle_finder_finds_circles():

@@ -173,7 +173,7 @@ def test_readme_headline_comes_from_the_plans_confirmatory_run(tmp_path):
     assert "| confirm |" in confirm_doc and "make confirm" in confirm_doc and "| dev |" not in confirm_doc
     assert "| dev |" in (tmp_path / "docs" / "results.md").read_text()
     assert not readme.update_readme(r, dev, confirmatory_dir=run, judge=False)
-    from semmatch.experiments.claims import load_analysis_plan
+    from semmatch.experiments.analysis_plan import load_analysis_plan
 
     assert readme.confirmatory_run(figs, load_analysis_plan()) is None  # the committed plan's seeds: 8001-8006
 

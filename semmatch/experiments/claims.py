@@ -1,12 +1,9 @@
-"""Intervals over scenes, and a verdict for every comparative claim of the paper by the analysis plan.
+"""A verdict for every comparative claim of the paper by the analysis plan.
 
-The analysis plan (``analysis_plan.yaml`` beside this module, explained in
-``docs/analysis_plan.md``) fixes the claims, their comparisons and measures, the references, the
-interval method, the smallest effect size of interest (SESOI) per measure, the multiplicity rule
-and the verdict rules; :func:`load_analysis_plan` reads it and the functions here apply it.
+The analysis plan (:mod:`semmatch.experiments.analysis_plan`) fixes the claims, their
+comparisons and measures, the references, the smallest effect size of interest (SESOI) per
+measure, the multiplicity rule and the verdict rules; the functions here apply it.
 
-* :func:`summarize_over_scenes`: mean of each measure over scenes with the plan's interval
-  (a t interval over scenes).
 * :func:`check_claims`: every comparison of every claim, under each reference, on paired
   per-scene differences: the mean difference with its 95 % interval, Holm-adjusted one-sided
   tests within the claim's family (its comparisons under one reference), a verdict (``holds``,
@@ -15,23 +12,40 @@ and the verdict rules; :func:`load_analysis_plan` reads it and the functions her
 * :func:`claim_verdicts`: one verdict per claim and reference by the plan's claim rule, and
   :func:`verdict_table` the claims with the primary and the secondary reference side by side.
 * :func:`judge_speed_claims`: the paper's speed statements on Table 1.
-* :func:`judge_figures`: all of it on one run's per-scene tables, in one verdict table.
+* :func:`judge_figures`: all of it on one run's per-scene tables, in one verdict table, with the
+  secondary analyses of :mod:`semmatch.experiments.summaries`.
+
+The plan's names (:func:`load_analysis_plan`, :class:`Claim` ...), the summaries over scenes
+(:func:`summarize_over_scenes` ...) and :func:`~semmatch.experiments.tables.format_with_intervals`
+were defined here before; they are importable from here as before.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
-from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
-import yaml
 
 from ..evaluate.metrics import MEASURES
 from ..evaluate.stats import holm, interval, scene_kind, stratified_estimate, t_test_pvalue
+from .analysis_plan import (
+    _DATA,
+    ALL_OTHERS,
+    CLAIMS,
+    FRAMES_REFERENCE,
+    MEASURE_LABELS,
+    PLAN_FILE,
+    TOP_HEIGHT,
+    VERDICTS,
+    AnalysisPlan,
+    Claim,
+    load_analysis_plan,
+)
 from .paper import FIG3_MEAN_ACC, PAPER_MODEL_OF, TABLE2, TABLE3
+from .summaries import per_kind_means, summarize_over_scenes, support_regression
+from .tables import format_with_intervals, save_table
 
 __all__ = [
     "MEASURES",
@@ -40,6 +54,7 @@ __all__ = [
     "ALL_OTHERS",
     "TOP_HEIGHT",
     "PLAN_FILE",
+    "FRAMES_REFERENCE",
     "Claim",
     "AnalysisPlan",
     "load_analysis_plan",
@@ -56,298 +71,8 @@ __all__ = [
     "per_kind_means",
 ]
 
-MEASURE_LABELS = {
-    "jaccard": "Jaccard",
-    "sorensen": "Sorensen",
-    "color_acc": "Color Acc.",
-    "mean_acc": "Mean Acc.",
-    "miou": "mIoU",
-}
-VERDICTS = ("holds", "does not hold", "equivalent", "inconclusive")
-
-#: in :attr:`Claim.others`: every other transfer method (tables) or every other height (Fig. 3)
-ALL_OTHERS = "<all others>"
-#: in :attr:`Claim.others`: the highest camera height of the sweep
-TOP_HEIGHT = "<top height>"
-#: the analysis plan read by :func:`load_analysis_plan`
-PLAN_FILE = Path(__file__).with_name("analysis_plan.yaml")
-
 _GT = "ground truth"
-#: columns that split a per-scene table into separate tables (never pooled)
-_SPLITS = ("reference", "route")
 _BASELINES = ("lower", "upper")
-_DATA = {"synthetic": "table2", "real-like": "table3", "height sweep": "fig3", "depth noise": "noise"}
-_KINDS = ("beats", "best", "worst", "similar")
-_MODELS = ("networks", "ground truth", "all")
-_ROLES = ("primary", "secondary")
-#: the reference name of Fig. 3's rows (per-frame scores against ground-truth label images)
-FRAMES_REFERENCE = "frames"
-
-
-@dataclass(frozen=True)
-class Claim:
-    """One comparative claim of the paper and how it is judged.
-
-    Attributes
-    ----------
-    id : str
-        Short id (``C1`` ...).
-    statement : str
-        The claim in words.
-    section : str
-        Where the paper makes it.
-    data : str
-        ``"synthetic"`` (Table 2), ``"real-like"`` (Table 3), ``"height sweep"`` (Fig. 3) or
-        ``"depth noise"`` (the depth-noise study's per-scene drops,
-        :func:`semmatch.experiments.depth_noise.noise_drops`).
-    kind : str
-        ``"beats"``, ``"best"``, ``"worst"`` or ``"similar"``.
-    subjects : tuple
-        The A of the comparison: methods (``"lower"``, ``"upper"`` or a transfer method) or
-        camera heights in metres.
-    others : tuple
-        The B side: methods or heights, :data:`ALL_OTHERS` or :data:`TOP_HEIGHT`.
-    measure : str
-        The per-scene measure compared.
-    models : str
-        Upper maps the claim is judged for: ``"networks"``, ``"ground truth"`` or ``"all"``.
-    role : str
-        ``"primary"`` (confirmatory) or ``"secondary"`` (declared, reported).
-    note : str
-        Remarks of the plan (e.g. where the paper contradicts itself).
-    """
-
-    id: str
-    statement: str
-    section: str
-    data: str
-    kind: str
-    subjects: tuple[str | float, ...]
-    others: tuple[str | float, ...]
-    measure: str = "mean_acc"
-    models: str = "networks"
-    role: str = "primary"
-    note: str = ""
-
-    def __post_init__(self) -> None:
-        if self.data not in _DATA:
-            raise ValueError(f"Claim {self.id}: data must be one of {tuple(_DATA)}, got {self.data!r}")
-        if self.kind not in _KINDS:
-            raise ValueError(f"Claim {self.id}: kind must be one of {_KINDS}, got {self.kind!r}")
-        if self.models not in _MODELS:
-            raise ValueError(f"Claim {self.id}: models must be one of {_MODELS}, got {self.models!r}")
-        if self.role not in _ROLES:
-            raise ValueError(f"Claim {self.id}: role must be one of {_ROLES}, got {self.role!r}")
-
-
-@dataclass(frozen=True)
-class AnalysisPlan:
-    """The analysis plan's settings as the code uses them (see ``analysis_plan.yaml``).
-
-    Attributes
-    ----------
-    claims : tuple of Claim
-    sesoi : dict
-        Smallest effect size of interest per measure.
-    interval : str
-        Interval method (:data:`semmatch.evaluate.stats.INTERVAL_METHODS`).
-    confidence : float
-        Level of the two-sided intervals.
-    alpha : float
-        Level of the Holm-adjusted one-sided tests.
-    min_scenes : int
-        Fewer complete scene pairs make a comparison inconclusive.
-    primary_reference : str
-    secondary_references : tuple of str
-    route : str
-    speed_claims : tuple of dict
-    raw : dict
-        The whole YAML document.
-    """
-
-    claims: tuple[Claim, ...]
-    sesoi: dict[str, float]
-    interval: str = "t"
-    confidence: float = 0.95
-    alpha: float = 0.05
-    min_scenes: int = 2
-    primary_reference: str = "fusion"
-    secondary_references: tuple[str, ...] = ("mesh",)
-    route: str = "own"
-    speed_claims: tuple[dict, ...] = ()
-    raw: dict = field(default_factory=dict, compare=False, repr=False)
-
-    @property
-    def references(self) -> tuple[str, ...]:
-        """The primary reference, then the secondary ones."""
-        return (self.primary_reference, *self.secondary_references)
-
-
-def _level(v: object) -> str | float:
-    return float(v) if isinstance(v, int | float) else str(v)
-
-
-def _parse_plan(data: dict, source: str) -> AnalysisPlan:
-    try:
-        inf, refs = data["inference"], data["references"]
-        claims = tuple(
-            Claim(id=str(c["id"]), statement=str(c["statement"]), section=str(c["section"]), data=c["data"],
-                  kind=c["kind"], subjects=tuple(_level(v) for v in c["subjects"]),
-                  others=tuple(_level(v) for v in c["others"]), measure=c.get("measure", "mean_acc"),
-                  models=c.get("models", "networks"), role=c.get("role", "primary"), note=str(c.get("note", "")))
-            for c in data["claims"]
-        )
-        plan = AnalysisPlan(
-            claims=claims, sesoi={str(k): float(v) for k, v in data["sesoi"].items()},
-            interval=str(inf["interval"]), confidence=float(inf["confidence"]), alpha=float(inf["alpha"]),
-            min_scenes=int(inf["min_scenes"]), primary_reference=str(refs["primary"]),
-            secondary_references=tuple(str(r) for r in refs.get("secondary", ())), route=str(data["route"]),
-            speed_claims=tuple(data.get("speed_claims", ())), raw=data,
-        )
-    except (KeyError, TypeError) as e:
-        raise ValueError(f"{source}: not a valid analysis plan ({type(e).__name__}: {e})") from e
-    ids = [c.id for c in plan.claims]
-    if len(set(ids)) != len(ids):
-        raise ValueError(f"{source}: claim ids repeat: {sorted({i for i in ids if ids.count(i) > 1})}")
-    missing = sorted({c.measure for c in plan.claims} - set(plan.sesoi))
-    if missing:
-        raise ValueError(f"{source}: no smallest effect size of interest (sesoi) for {missing}")
-    return plan
-
-
-@lru_cache(maxsize=8)
-def _load_cached(path: str, mtime: float) -> AnalysisPlan:
-    data = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
-    if not isinstance(data, dict):
-        raise ValueError(f"{path}: not a valid analysis plan (expected a YAML mapping)")
-    return _parse_plan(data, path)
-
-
-def load_analysis_plan(path: str | Path | None = None) -> AnalysisPlan:
-    """Read the analysis plan.
-
-    Parameters
-    ----------
-    path : str or Path, optional
-        A plan file; default :data:`PLAN_FILE` (the committed plan).
-
-    Returns
-    -------
-    AnalysisPlan
-
-    Raises
-    ------
-    ValueError
-        If the file is not a valid plan (names the file and what is missing).
-    FileNotFoundError
-        If the file does not exist.
-    """
-    p = Path(path) if path is not None else PLAN_FILE
-    return _load_cached(str(p.resolve()), p.stat().st_mtime)
-
-
-#: The comparative claims of the analysis plan (the paper's §4-5 and the abstract's summary of
-#: them, plus the plan's declared secondary claims).
-CLAIMS: tuple[Claim, ...] = load_analysis_plan().claims
-
-
-# ------------------------------------------------------------------------------------------------
-# summaries over scenes
-
-
-def summarize_over_scenes(
-    df: pd.DataFrame,
-    measures: Sequence[str] = MEASURES,
-    *,
-    by: Sequence[str] = ("model", "method"),
-    seed: int = 0,
-    method: str | None = None,
-    confidence: float | None = None,
-) -> pd.DataFrame:
-    """Mean of each measure over scenes per group, with the analysis plan's interval.
-
-    Parameters
-    ----------
-    df : DataFrame
-        Per-scene rows: a ``scene`` column, the ``by`` columns and the measures. A ``reference``
-        or ``route`` column not in ``by`` that holds several values is added to the grouping
-        (rows scored against different references, or on different robot routes, are never
-        pooled); one holding a single value is left out.
-    measures : sequence of str, optional
-        Measure columns to summarise (those absent from ``df`` are left out).
-    by : sequence of str, optional
-        Grouping columns; groups keep their order of first appearance.
-    seed : int, optional
-        Seed of the bootstrap (bootstrap interval methods only).
-    method : str, optional
-        Interval method (:func:`semmatch.evaluate.stats.interval`); default the plan's (``t``). The
-        ``stratified-*`` methods take the scene kinds from the ``scene`` column's names.
-    confidence : float, optional
-        Confidence level; default the plan's (0.95).
-
-    Returns
-    -------
-    DataFrame
-        The ``by`` columns, ``scenes`` (number of distinct scenes) and, per measure, the mean
-        and ``<measure>_lo`` / ``<measure>_hi``; NaN where a group has no value of a measure.
-    """
-    by = list(by)
-    by += [c for c in _SPLITS if c in df.columns and c not in by and df[c].nunique(dropna=False) > 1]
-    missing = [c for c in by if c not in df.columns]
-    if missing:
-        raise ValueError(f"summarize_over_scenes: grouping columns {missing} are not in the frame")
-    measures = [m for m in measures if m in df.columns]
-    plan = load_analysis_plan()
-    method = plan.interval if method is None else method
-    confidence = plan.confidence if confidence is None else confidence
-    rows = []
-    for key, g in df.groupby(by, sort=False, dropna=False):
-        row = dict(zip(by, key if isinstance(key, tuple) else (key,)))
-        row["scenes"] = int(g["scene"].nunique()) if "scene" in g.columns else len(g)
-        strata = [scene_kind(s) for s in g["scene"]] if "scene" in g.columns else None
-        for m in measures:
-            vals = g[m].to_numpy(dtype=np.float64)
-            if np.isnan(vals).all():
-                row[m] = row[f"{m}_lo"] = row[f"{m}_hi"] = np.nan
-            else:
-                row[m], row[f"{m}_lo"], row[f"{m}_hi"] = interval(vals, strata, method=method, confidence=confidence,
-                                                                 seed=seed)
-        rows.append(row)
-    cols = [*by, "scenes", *(c for m in measures for c in (m, f"{m}_lo", f"{m}_hi"))]
-    return pd.DataFrame(rows, columns=cols)
-
-
-def format_with_intervals(summary: pd.DataFrame, measures: Sequence[str] = MEASURES, *,
-                          digits: int = 3) -> pd.DataFrame:
-    """Each measure of a :func:`summarize_over_scenes` frame as ``"mean [lo, hi]"`` text.
-
-    Parameters
-    ----------
-    summary : DataFrame
-        Output of :func:`summarize_over_scenes`.
-    measures : sequence of str, optional
-        Measures to format (those without ``_lo``/``_hi`` columns are left out).
-    digits : int, optional
-        Decimals shown.
-
-    Returns
-    -------
-    DataFrame
-        The other columns unchanged, each measure as a string like ``0.913 [0.905, 0.921]``
-        (``-`` where NaN), ready for ``to_markdown``.
-    """
-    measures = [m for m in measures if {m, f"{m}_lo", f"{m}_hi"} <= set(summary.columns)]
-    out = summary.drop(columns=[c for m in measures for c in (f"{m}_lo", f"{m}_hi")])
-    for m in measures:
-        out[m] = [
-            "-" if np.isnan(v) else f"{v:.{digits}f} [{lo:.{digits}f}, {hi:.{digits}f}]"
-            for v, lo, hi in zip(summary[m], summary[f"{m}_lo"], summary[f"{m}_hi"])
-        ]
-    return out
-
-
-# ------------------------------------------------------------------------------------------------
-# claims
 
 
 def _level_name(level: str | float) -> str:
@@ -769,8 +494,6 @@ def judge_figures(figures_dir: str | Path, out_dir: str | Path | None = None, *,
     FileNotFoundError
         If ``figures_dir`` holds none of the per-scene tables.
     """
-    from .tables import save_table
-
     plan = load_analysis_plan() if plan is None else plan
     figures_dir = Path(figures_dir)
     out_dir = figures_dir if out_dir is None else Path(out_dir)
@@ -806,79 +529,3 @@ def judge_figures(figures_dir: str | Path, out_dir: str | Path | None = None, *,
 
     atomic_write_text(out_dir / "findings_all.md", claims_markdown(comps, plan=plan))
     return table
-
-
-def support_regression(table2: pd.DataFrame, support: pd.DataFrame, *, plan: AnalysisPlan | None = None,
-                       measure: str = "mean_acc") -> pd.DataFrame:
-    """Secondary analysis S1: each method's per-scene gain over ``lower`` against the map's support.
-
-    Parameters
-    ----------
-    table2 : DataFrame
-        Per-scene Table 2 rows (``scene, model, method``, the measure; optional ``reference`` /
-        ``route``: the plan's primary reference and route are used).
-    support : DataFrame
-        ``scene``, ``support`` (share of the robot's pixels the person's map supports) and
-        optionally ``route``.
-    plan : AnalysisPlan, optional
-        Default the committed plan.
-    measure : str, optional
-        The measure of the gain.
-
-    Returns
-    -------
-    DataFrame
-        ``model, method, scenes, slope, slope_lo, slope_hi, intercept``: least-squares slope of
-        the gain on support (gain per unit of support share) with its 95 % t interval (n - 2 df).
-    """
-    from scipy import stats as st
-
-    plan = load_analysis_plan() if plan is None else plan
-    t = table2
-    if "reference" in t.columns:
-        t = t[t["reference"] == plan.primary_reference]
-    if "route" in t.columns:
-        t = t[t["route"] == plan.route]
-    s = support[support["route"] == plan.route] if "route" in support.columns else support
-    s = s.set_index("scene")["support"]
-    rows = []
-    for model, g in t.groupby("model", sort=False):
-        wide = g.pivot(index="scene", columns="method", values=measure)
-        if "lower" not in wide.columns:
-            continue
-        for m in (c for c in wide.columns if c not in ("lower", "upper")):
-            d = pd.DataFrame({"gain": wide[m] - wide["lower"], "support": s.reindex(wide.index)}).dropna()
-            if len(d) < 3 or d["support"].nunique() < 2:
-                continue
-            fit = st.linregress(d["support"], d["gain"])
-            half = float(st.t.ppf(0.5 + plan.confidence / 2, len(d) - 2)) * fit.stderr
-            rows.append(dict(model=model, method=m, scenes=len(d), slope=fit.slope, slope_lo=fit.slope - half,
-                             slope_hi=fit.slope + half, intercept=fit.intercept))
-    return pd.DataFrame(rows, columns=["model", "method", "scenes", "slope", "slope_lo", "slope_hi", "intercept"])
-
-
-def per_kind_means(per_scene: pd.DataFrame, measures: Sequence[str] = MEASURES,
-                   by: Sequence[str] = ("model", "method")) -> pd.DataFrame:
-    """Secondary analysis S3: the mean of each measure per scene kind (no verdicts).
-
-    Parameters
-    ----------
-    per_scene : DataFrame
-        Per-scene rows with a ``scene`` column (kinds from the scene names) and the ``by`` columns.
-    measures : sequence of str, optional
-        Measures averaged (those present).
-    by : sequence of str, optional
-        Grouping columns besides the kind (plus ``reference`` / ``route`` when present).
-
-    Returns
-    -------
-    DataFrame
-        The grouping columns, ``kind``, ``scenes`` and the measures' means.
-    """
-    df = per_scene.assign(kind=[scene_kind(s) for s in per_scene["scene"]])
-    keys = [c for c in (*by, *_SPLITS) if c in df.columns] + ["kind"]
-    measures = [m for m in measures if m in df.columns]
-    g = df.groupby(keys, sort=False)
-    out = g[measures].mean()
-    out.insert(0, "scenes", g["scene"].nunique())
-    return out.reset_index()

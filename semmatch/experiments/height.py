@@ -54,7 +54,7 @@ def height_study(
         (see :func:`semmatch.segment.viewpoint.viewpoint_gap_sequences`).
     """
     from ..segment.viewpoint import viewpoint_gap_sequences
-    from .claims import summarize_over_scenes
+    from .summaries import summarize_over_scenes
 
     layout = Layout(data_root)
     models = {net: layout.load_network(net) for net in networks}

@@ -230,7 +230,7 @@ def _panoptic_task(data_root, methods, networks, kw: dict, sid: str) -> list[dic
 
 def panoptic_summary(per_scene: pd.DataFrame, *, seed: int = 0) -> pd.DataFrame:
     """Mean over scenes with the analysis plan's 95 % intervals per (source, method)."""
-    from .claims import summarize_over_scenes
+    from .summaries import summarize_over_scenes
 
     return summarize_over_scenes(per_scene, PANOPTIC_MEASURES, by=("source", "method"), seed=seed)
 

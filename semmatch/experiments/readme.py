@@ -176,7 +176,7 @@ def confirmatory_run(figures_root: str | Path, plan=None) -> Path | None:
     figures_root : path
         The repository's ``figures/`` folder.
     plan : AnalysisPlan or dict, optional
-        The analysis plan (default :func:`semmatch.experiments.claims.load_analysis_plan`; a dict
+        The analysis plan (default :func:`semmatch.experiments.analysis_plan.load_analysis_plan`; a dict
         is its YAML form).
 
     Returns
@@ -186,7 +186,7 @@ def confirmatory_run(figures_root: str | Path, plan=None) -> Path | None:
         used the shipped networks; None when there is none.
     """
     if plan is None:
-        from .claims import load_analysis_plan
+        from .analysis_plan import load_analysis_plan
 
         plan = load_analysis_plan()
     raw = plan if isinstance(plan, dict) else plan.raw

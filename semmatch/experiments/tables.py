@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 
 from ..evaluate.metrics import MEASURES
@@ -16,6 +18,7 @@ __all__ = [
     "Finding",
     "save_table",
     "save_interval_table",
+    "format_with_intervals",
     "spread_over_training_seeds",
     "with_paper_columns",
     "speed_table",
@@ -73,6 +76,35 @@ def markdown_table(df: pd.DataFrame, *, floatfmt: str = ".3f") -> str:
     return shown.to_markdown(index=False, disable_numparse=True, colalign=align)
 
 
+def format_with_intervals(summary: pd.DataFrame, measures: Sequence[str] = MEASURES, *,
+                          digits: int = 3) -> pd.DataFrame:
+    """Each measure of a summary over scenes as ``"mean [lo, hi]"`` text.
+
+    Parameters
+    ----------
+    summary : DataFrame
+        Output of :func:`semmatch.experiments.summaries.summarize_over_scenes`.
+    measures : sequence of str, optional
+        Measures to format (those without ``_lo``/``_hi`` columns are left out).
+    digits : int, optional
+        Decimals shown.
+
+    Returns
+    -------
+    DataFrame
+        The other columns unchanged, each measure as a string like ``0.913 [0.905, 0.921]``
+        (``-`` where NaN), ready for ``to_markdown``.
+    """
+    measures = [m for m in measures if {m, f"{m}_lo", f"{m}_hi"} <= set(summary.columns)]
+    out = summary.drop(columns=[c for m in measures for c in (f"{m}_lo", f"{m}_hi")])
+    for m in measures:
+        out[m] = [
+            "-" if np.isnan(v) else f"{v:.{digits}f} [{lo:.{digits}f}, {hi:.{digits}f}]"
+            for v, lo, hi in zip(summary[m], summary[f"{m}_lo"], summary[f"{m}_hi"])
+        ]
+    return out
+
+
 def save_interval_table(summary: pd.DataFrame, figures_dir: str | Path, name: str, *,
                         measures: tuple[str, ...] = MEASURES, keep: tuple[str, ...] = ()) -> tuple[Path, Path]:
     """Write a table of means with 95 % intervals: ``<name>.csv`` numeric (``m``, ``m_lo``,
@@ -81,7 +113,7 @@ def save_interval_table(summary: pd.DataFrame, figures_dir: str | Path, name: st
     Parameters
     ----------
     summary : DataFrame
-        From :func:`semmatch.experiments.claims.summarize_over_scenes`, optionally with
+        From :func:`semmatch.experiments.summaries.summarize_over_scenes`, optionally with
         ``paper_<measure>`` columns (:func:`with_paper_columns`).
     figures_dir : path
     name : str
@@ -91,8 +123,6 @@ def save_interval_table(summary: pd.DataFrame, figures_dir: str | Path, name: st
         Further columns shown with three decimals, a missing value blank (``paper_*`` columns
         always are).
     """
-    from .claims import format_with_intervals
-
     figures_dir = Path(figures_dir)
     figures_dir.mkdir(parents=True, exist_ok=True)
     summary = summary.drop(columns=[c for c in ("paper_model",) if c in summary.columns])
@@ -115,7 +145,7 @@ def spread_over_training_seeds(summary: pd.DataFrame, measure: str = "mean_acc",
     ----------
     summary : DataFrame
         Rows per network (column ``model``) and ``by`` with the measure averaged over scenes
-        (e.g. :func:`semmatch.experiments.claims.summarize_over_scenes`).
+        (e.g. :func:`semmatch.experiments.summaries.summarize_over_scenes`).
     measure : str
     by : tuple of str
         Further grouping columns (``method`` for Table 2, ``height`` for Fig. 3).

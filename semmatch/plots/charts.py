@@ -52,7 +52,7 @@ def plot_height_study(summary: pd.DataFrame, path: str | Path, *, metrics: Seque
     ----------
     summary : DataFrame
         Columns ``model``, ``height`` and each of ``metrics`` (one row per model and height, e.g.
-        :func:`semmatch.experiments.claims.summarize_over_scenes`), optionally ``<metric>_lo`` and
+        :func:`semmatch.experiments.summaries.summarize_over_scenes`), optionally ``<metric>_lo`` and
         ``<metric>_hi`` (drawn as a band).
     path : path
         Figure file, written atomically.
