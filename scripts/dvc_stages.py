@@ -131,7 +131,7 @@ def with_overrides(params):
 
 
 #: data files a module reads at run time: a stage that runs the module depends on them too
-MODULE_DATA = {"semmatch/experiments/claims.py": ["semmatch/experiments/analysis_plan.yaml"]}
+MODULE_DATA = {"semmatch/experiments/analysis_plan.py": ["semmatch/experiments/analysis_plan.yaml"]}
 
 out = {"stages": {}}
 for name, st in stages.items():
