@@ -37,6 +37,7 @@ from __future__ import annotations
 import atexit
 import logging
 import os
+import sys
 import time
 import warnings
 from collections.abc import Callable, Iterable
@@ -146,7 +147,7 @@ def _local_client(jobs: int, most: int | None = None):
                            silence_logs=logging.ERROR, preload=["semmatch.engine"])
     client = Client(cluster, set_as_default=False)  # no default client left behind for other code
     if dashboard:
-        print(f"[semmatch] Dask dashboard: {client.dashboard_link}")
+        print(f"[semmatch] Dask dashboard: {client.dashboard_link}", file=sys.stderr)  # stdout: results only
     _LOCAL.update(client=client, cluster=cluster, workers=jobs, pid=os.getpid())
     return client
 
