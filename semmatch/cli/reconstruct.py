@@ -241,4 +241,6 @@ def _summary(info: dict) -> str:
     if "ate_rmse" in info:
         text += (f"; estimated poses against the ground truth: ATE RMSE {info['ate_rmse']:.3f} m, RPE "
                  f"{info['rpe_trans']:.3f} m / {info['rpe_rot_deg']:.2f} deg over {info['n_frames']} frames")
+        if info.get("gt_first_frame"):
+            text += f" (ground truth from frame {info['gt_first_frame']})"
     return text
