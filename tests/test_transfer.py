@@ -16,6 +16,7 @@ from semmatch.sim import render_frames
 from semmatch.transfer import (
     METHODS,
     MapIndex,
+    as_map_index,
     fuse,
     fuse_with_probabilities,
     prepare,
@@ -162,11 +163,19 @@ def test_point_map(frames, gt_map):
 
 
 def test_map_is_indexed_once(frames, gt_map):
-    assert prepare(gt_map, **FAST) is prepare(gt_map, **FAST)
-    idx = prepare(gt_map, **FAST)
-    assert prepare(idx) is idx
+    assert as_map_index(gt_map, **FAST) is as_map_index(gt_map, **FAST)
+    idx = as_map_index(gt_map, **FAST)
+    assert as_map_index(idx) is idx
     with pytest.raises(ValueError, match="max_distance"):
-        prepare(idx, max_distance=0.3)
+        as_map_index(idx, max_distance=0.3)
+
+
+def test_prepare_is_a_deprecated_name_of_as_map_index(gt_map):
+    idx = as_map_index(gt_map, **FAST)
+    with pytest.warns(DeprecationWarning, match="as_map_index"):
+        assert prepare(gt_map, **FAST) is idx
+    with pytest.warns(DeprecationWarning):
+        assert prepare(idx) is idx
 
 
 # ----------------------------------------------------------------------------- bad input
@@ -454,6 +463,12 @@ def test_bench_transfer_json(capsys):
     assert m["fps"] > 0 and m["ms_median"] > 0 and out["reference"]["fps"] > 0
     assert m["agreement_with_reference"] > 0.95 and out["size"] == [640, 480]
     assert out["methods"]["fused"]["wall_fps"] > 0 and out["methods"]["fused"]["coverage"] == 1.0
+    # both maps by default: the scene's mesh (the top-level keys) and the person's fused map of it,
+    # a reconstruction with more vertices, on which the same frames are not all supported
+    assert out["map"] == "mesh" and out["methods"] == out["maps"]["mesh"]["methods"]
+    fused = out["maps"]["fused"]
+    assert fused["vertices"] > out["maps"]["mesh"]["vertices"] and fused["faces"] > 0
+    assert fused["methods"]["3d-neighborhood"]["fps"] > 0 and 0 < fused["methods"]["3d-neighborhood"]["coverage"] < 1
 
 
 def test_time_methods_reports_cpu_and_wall_rates_on_one_thread(frames, index):
@@ -644,7 +659,7 @@ def test_register_method_is_the_one_way_to_add_a_method(tmp_path, capsys):
         lab = transfer("all-wall", frames[0], m, label=5)
         assert set(np.unique(lab)) <= {0, 5} and (lab == 5).any()
         # the benchmark times it (no paper number: NaN, not a KeyError)
-        out = time_methods(frames, prepare(m), ["all-wall"], exact_variant=False)
+        out = time_methods(frames, as_map_index(m), ["all-wall"], exact_variant=False)
         assert np.isnan(out["methods"]["all-wall"]["paper_fps"])
         # the command line offers it
         root = tmp_path
@@ -674,10 +689,10 @@ def test_the_index_cache_gives_the_same_lookups_and_survives_bad_files(gt_map, t
 
     path = tmp_path / "maps" / "upper.ply"
     write_map(path, gt_map)
-    built = load_index(path, voxel_size=0.04)
+    built = load_index(path, voxel_size=0.04, cache_dir="beside")
     caches = list(path.parent.glob(".upper.ply.index-*.npz"))
     assert len(caches) == 1
-    cached = load_index(path, voxel_size=0.04)  # from the cache: no grid build
+    cached = load_index(path, voxel_size=0.04, cache_dir="beside")  # from the cache: no grid build
     lo, hi = gt_map.points.min(axis=0), gt_map.points.max(axis=0)
     pts = rng.uniform(lo - 0.2, hi + 0.2, (20000, 3)).astype(np.float32)
     for exact in (False, True):
@@ -685,21 +700,21 @@ def test_the_index_cache_gives_the_same_lookups_and_survives_bad_files(gt_map, t
     assert (cached.grid == built.grid).all() and cached.voxel_size == built.voxel_size
     cloud = tmp_path / "maps" / "cloud.ply"  # a point map: its KD-tree comes back too
     write_map(cloud, SemanticMap(gt_map.points, gt_map.labels))
-    a, b = load_index(cloud, voxel_size=0.04), load_index(cloud, voxel_size=0.04)
+    a, b = load_index(cloud, voxel_size=0.04, cache_dir="beside"), load_index(cloud, voxel_size=0.04, cache_dir="beside")
     assert (a.lookup(pts, exact=True) == b.lookup(pts, exact=True)).all()
     # other parameters or another map: another key
-    load_index(path, voxel_size=0.05)
+    load_index(path, voxel_size=0.05, cache_dir="beside")
     assert len(list(path.parent.glob(".upper.ply.index-*.npz"))) == 2
     # a damaged cache is rebuilt with one warning
     caches[0].write_bytes(b"not an npz")
     with pytest.warns(UserWarning, match="unreadable index cache"):
-        again = load_index(path, voxel_size=0.04)
+        again = load_index(path, voxel_size=0.04, cache_dir="beside")
     assert (again.lookup(pts) == built.lookup(pts)).all()
     # switched off: nothing read or written; a read-only folder: no cache, no error
     for c in path.parent.glob(".upper.ply.index-*.npz"):
         c.unlink()
     monkeypatch.setenv("SEMMATCH_NO_INDEX_CACHE", "1")
-    load_index(path, voxel_size=0.04)
+    load_index(path, voxel_size=0.04, cache_dir="beside")
     assert not list(path.parent.glob(".upper.ply.index-*.npz"))
     monkeypatch.delenv("SEMMATCH_NO_INDEX_CACHE")
     if os.geteuid() != 0:  # root writes into read-only folders anyway
@@ -707,6 +722,6 @@ def test_the_index_cache_gives_the_same_lookups_and_survives_bad_files(gt_map, t
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("error")
-                load_index(path, voxel_size=0.04)
+                load_index(path, voxel_size=0.04, cache_dir="beside")
         finally:
             path.parent.chmod(0o755)
