@@ -1,4 +1,5 @@
-"""Camera geometry: intrinsics, poses, back-projection, projection and voxel keys.
+"""Camera geometry (intrinsics, poses, back-projection, projection, voxel keys) and the sampling of
+labelled triangle meshes (a barycentric grid, uniform random points, per-triangle labels).
 
 Conventions (docs/data.md): world in metres with z up; camera frame OpenCV (x right, y down,
 z forward); a pose is ``T_world_camera`` (4x4, camera to world).
@@ -26,6 +27,13 @@ __all__ = [
     "voxel_keys",
     "pack_keys",
     "unpack_keys",
+    "MAX_MESH_SAMPLES",
+    "triangle_labels",
+    "longest_edges",
+    "mesh_sample_count",
+    "mesh_sample_pieces",
+    "sample_mesh",
+    "sample_mesh_at_random",
 ]
 
 
@@ -330,3 +338,256 @@ def unpack_keys(packed: np.ndarray) -> np.ndarray:
     p = np.asarray(packed, dtype=np.int64)
     mask = (1 << 21) - 1
     return np.stack([(p >> 42) & mask, (p >> 21) & mask, p & mask], axis=1) - (1 << 20)
+
+
+# ------------------------------------------------------------------ labelled triangle meshes
+# One barycentric-grid sampler (the map index, the measures' densifying of coarse meshes, the
+# point map of a mesh), one random surface sampler (the observed reference, the obstacles of a
+# trajectory) and one triangle-label rule, shared by every part that samples a mesh.
+
+#: most samples :func:`sample_mesh` makes by default (held in memory at once; a map in millimetres
+#: would ask for billions). Callers that reduce the samples piece by piece (the map index) pass
+#: their own limit.
+MAX_MESH_SAMPLES = 60_000_000
+
+_TIES = ("smallest", "first")
+_LABEL_RULES = ("vertex", "triangle")
+_FORMS = ("weights", "edges")
+
+
+def triangle_labels(faces: np.ndarray, vertex_labels: np.ndarray, *, ties: str = "smallest") -> np.ndarray:
+    """Per-triangle labels of a vertex-labelled mesh: the majority of the three vertex labels.
+
+    Parameters
+    ----------
+    faces : int (T,3)
+        Vertex indices of the triangles.
+    vertex_labels : uint8 (V,)
+        Label of each vertex.
+    ties : {"smallest", "first"}
+        The label of a triangle whose three labels all differ: the smallest id (the rule of the
+        measures and the observed reference) or the first vertex's (the simulator's PLY scenes).
+
+    Returns
+    -------
+    uint8 (T,)
+    """
+    lab = np.asarray(vertex_labels)[np.asarray(faces)]
+    if ties == "smallest":
+        lab3 = np.sort(lab.astype(np.int64), axis=1)
+        # sorted (a, b, c): a majority exists iff a == b or b == c, and then it is b
+        return np.where(lab3[:, 1] == lab3[:, 2], lab3[:, 1], lab3[:, 0]).astype(np.uint8)
+    if ties == "first":
+        l0, l1, l2 = lab[:, 0], lab[:, 1], lab[:, 2]
+        return np.where((l0 == l1) | (l0 == l2), l0, np.where(l1 == l2, l1, l0)).astype(np.uint8)
+    raise ValueError(f"ties must be one of {_TIES}, got {ties!r}")
+
+
+def longest_edges(points: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Length of each triangle's longest edge (float64 (T,))."""
+    v = np.asarray(points, dtype=np.float64)[faces]
+    edges = np.stack([v[:, 1] - v[:, 0], v[:, 2] - v[:, 1], v[:, 0] - v[:, 2]], axis=1)
+    return np.linalg.norm(edges, axis=2).max(axis=1)
+
+
+def _subdivisions(points: np.ndarray, faces: np.ndarray, spacing: float) -> tuple[np.ndarray, np.ndarray]:
+    """``n = max(1, ceil(longest edge / spacing))`` of each triangle, and its longest edge."""
+    if not spacing > 0:
+        raise ValueError(f"spacing must be > 0, got {spacing}")
+    longest = longest_edges(points, faces)
+    return np.maximum(1, np.ceil(longest / spacing)).astype(np.int64), longest
+
+
+def mesh_sample_count(points: np.ndarray, faces: np.ndarray, spacing: float, *, limit: int = MAX_MESH_SAMPLES,
+                      source: str = "") -> int:
+    """Number of samples :func:`sample_mesh` makes, refused above ``limit`` before any is made.
+
+    Parameters
+    ----------
+    points : float (V,3)
+    faces : int (T,3)
+    spacing : float
+        As :func:`sample_mesh`.
+    limit : int
+        Most samples allowed.
+    source : str
+        The mesh's name, for the message.
+
+    Returns
+    -------
+    int
+
+    Raises
+    ------
+    ValueError
+        A non-positive spacing, or more than ``limit`` samples (a map in millimetres, a spacing
+        too small).
+    """
+    n_sub, longest = _subdivisions(points, faces, spacing)
+    total = int(((n_sub + 1) * (n_sub + 2) // 2).sum())
+    if total > limit:
+        raise ValueError(
+            f"{source + ': ' if source else ''}sampling the mesh every {spacing:g} m would make {total:,} points "
+            f"(limit {limit:,}); its longest edge is {longest.max():.3g}: is the map in metres (not "
+            "millimetres)? is the voxel size too small?")
+    return total
+
+
+def mesh_sample_pieces(
+    points: np.ndarray, faces: np.ndarray, labels: np.ndarray, spacing: float, *, label: str = "vertex",
+    form: str = "weights", chunk_samples: int = 4_000_000, limit: int = MAX_MESH_SAMPLES, source: str = "",
+) -> list:
+    """:func:`sample_mesh`'s samples as functions that each make one piece when called.
+
+    The pieces (at most about ``chunk_samples`` samples each) can be made one at a time or in
+    worker threads; concatenated in order they are :func:`sample_mesh`'s arrays. The sample count
+    is checked against ``limit`` at once, before any piece is made.
+
+    Parameters
+    ----------
+    points, faces, labels, spacing, label, form
+        As :func:`sample_mesh`.
+    chunk_samples : int
+        About the most samples of one piece.
+    limit, source
+        As :func:`mesh_sample_count`.
+
+    Returns
+    -------
+    list of callables
+        Each returns ``(samples float32 (S,3), sample_labels uint8 (S,))``.
+    """
+    if label not in _LABEL_RULES or form not in _FORMS:
+        raise ValueError(f"label must be one of {_LABEL_RULES} and form one of {_FORMS}, got {label!r}, {form!r}")
+    mesh_sample_count(points, faces, spacing, limit=limit, source=source)
+    v = np.asarray(points, dtype=np.float64)[faces]  # (T,3,3)
+    n_sub = _subdivisions(points, faces, spacing)[0]
+    flab = triangle_labels(faces, labels) if label == "triangle" else np.asarray(labels)[faces]
+    pieces = []
+    for n in np.unique(n_sub):
+        sel = np.nonzero(n_sub == n)[0]
+        i, j = np.mgrid[0 : n + 1, 0 : n + 1]
+        keep = i + j <= n
+        bary = np.stack([i[keep], j[keep], n - i[keep] - j[keep]], axis=1).astype(np.float64) / n
+        chunk = max(1, chunk_samples // len(bary))
+        for s in range(0, len(sel), chunk):
+            pieces.append(_GridPiece(v, flab, bary, sel[s : s + chunk], label, form))
+    return pieces
+
+
+class _GridPiece:
+    """One piece of :func:`mesh_sample_pieces`: the grid nodes ``bary`` on the triangles ``f``."""
+
+    def __init__(self, v, flab, bary, f, label, form) -> None:
+        self.v, self.flab, self.bary, self.f, self.label, self.form = v, flab, bary, f, label, form
+
+    def __call__(self) -> tuple[np.ndarray, np.ndarray]:
+        v, bary, f = self.v, self.bary, self.f
+        if self.form == "weights":  # node weights (i, j, n-i-j) / n on the corners (v0, v1, v2)
+            pts = np.einsum("kc,fcd->fkd", bary, v[f])
+        else:  # v0 + i/n (v1 - v0) + j/n (v2 - v0)
+            w = bary[:, :2]
+            pts = (v[f, 0][:, None] + w[None, :, :1] * (v[f, 1] - v[f, 0])[:, None]
+                   + w[None, :, 1:] * (v[f, 2] - v[f, 0])[:, None])
+        if self.label == "vertex":  # the corner of largest weight (the nearest vertex)
+            lab = self.flab[f][:, np.argmax(bary, axis=1)]
+        else:
+            lab = np.repeat(self.flab[f], len(bary))
+        return pts.reshape(-1, 3).astype(np.float32), lab.reshape(-1).astype(np.uint8)
+
+
+def sample_mesh(
+    points: np.ndarray, faces: np.ndarray, labels: np.ndarray, spacing: float, *, label: str = "vertex",
+    form: str = "weights", limit: int = MAX_MESH_SAMPLES, source: str = "",
+) -> tuple[np.ndarray, np.ndarray]:
+    """Sample a labelled triangle mesh on a barycentric grid.
+
+    Every triangle is split into ``n**2`` sub-triangles with ``n = ceil(longest edge / spacing)``
+    and sampled at the grid nodes, triangle by triangle, triangles grouped by ``n`` (ascending).
+
+    Parameters
+    ----------
+    points : float (V,3)
+    faces : int (T,3)
+    labels : uint8 (V,)
+        Per-vertex labels.
+    spacing : float
+        Largest distance between neighbouring samples along an edge (metres).
+    label : {"vertex", "triangle"}
+        A sample's label: that of the triangle vertex with the largest barycentric weight (the
+        nearest vertex), or the triangle's majority label (:func:`triangle_labels`).
+    form : {"weights", "edges"}
+        How a node's point is computed: ``i/n v0 + j/n v1 + (n-i-j)/n v2`` or
+        ``v0 + i/n (v1 - v0) + j/n (v2 - v0)``. The same grid, nodes in another order and other
+        rounding; each user keeps the form its results were computed with (bit-identical).
+    limit, source
+        As :func:`mesh_sample_count`.
+
+    Returns
+    -------
+    samples : float32 (S,3)
+    sample_labels : uint8 (S,)
+
+    Raises
+    ------
+    ValueError
+        A non-positive spacing, or more than ``limit`` samples.
+    """
+    made = [make() for make in mesh_sample_pieces(points, faces, labels, spacing, label=label, form=form,
+                                                  limit=limit, source=source)]
+    if not made:
+        return np.zeros((0, 3), np.float32), np.zeros(0, np.uint8)
+    return np.concatenate([p for p, _ in made]), np.concatenate([lab for _, lab in made])
+
+
+def sample_mesh_at_random(
+    points: np.ndarray, faces: np.ndarray, expected: np.ndarray, rng: np.random.Generator, *,
+    form: str = "edges", chunk: int | None = 1 << 21, dtype=np.float32,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Sample triangles uniformly on their surface, a given expected number of points each.
+
+    Triangle ``t`` receives ``floor(expected[t] + U)`` points (``U`` uniform in [0, 1): the
+    expected count is exact, with less spread than drawing triangles at random), placed with
+    barycentric weights ``(1 - sqrt(r1), sqrt(r1) (1 - r2), sqrt(r1) r2)``. Random numbers are
+    drawn in this order: ``U`` for every triangle, then ``r1`` and ``r2`` for each chunk.
+
+    Parameters
+    ----------
+    points : float (V,3)
+    faces : int (T,3)
+    expected : float (T,)
+        Expected number of points of each triangle (e.g. its area / spacing**2).
+    rng : numpy.random.Generator
+    form : {"edges", "weights"}
+        ``v0 + w1 (v1 - v0) + w2 (v2 - v0)`` or ``w0 v0 + w1 v1 + w2 v2`` (as :func:`sample_mesh`).
+    chunk : int or None
+        Points made (and random numbers drawn) at a time; None: all at once.
+    dtype : numpy dtype
+        Of the points returned.
+
+    Returns
+    -------
+    points : (N,3) of ``dtype``
+    triangle : int32 (N,)
+        The triangle each point lies on.
+    """
+    if form not in _FORMS:
+        raise ValueError(f"form must be one of {_FORMS}, got {form!r}")
+    v = np.asarray(points, dtype=np.float64)[faces]  # (T,3,3)
+    counts = np.floor(expected + rng.random(len(v))).astype(np.int64)
+    n = int(counts.sum())
+    tri = np.repeat(np.arange(len(v), dtype=np.int32 if len(v) < 2**31 else np.int64), counts)
+    out = np.empty((n, 3), dtype)
+    step = max(1, n if chunk is None else int(chunk))
+    for s in range(0, n, step):
+        t = tri[s : s + step]
+        sq = np.sqrt(rng.random(len(t)))
+        r2 = rng.random(len(t))
+        c = v[t]
+        if form == "edges":
+            out[s : s + step] = c[:, 0] + (sq * (1.0 - r2))[:, None] * (c[:, 1] - c[:, 0]) \
+                + (sq * r2)[:, None] * (c[:, 2] - c[:, 0])
+        else:
+            out[s : s + step] = (1 - sq)[:, None] * c[:, 0] + (sq * (1 - r2))[:, None] * c[:, 1] \
+                + (sq * r2)[:, None] * c[:, 2]
+    return out, tri

@@ -37,7 +37,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..geometry import pack_keys, transform, voxel_keys
+from ..geometry import longest_edges, pack_keys, sample_mesh, transform, voxel_keys
 from ..io import SemanticMap, read_map
 from ..labels import EVAL_CLASSES, NAMES, NUM_CLASSES
 
@@ -153,40 +153,13 @@ def voxelize(
     return VoxelGrid(packed, labels, float(voxel_size), m.source)
 
 
-#: most surface samples :func:`voxelize` adds to a coarse mesh (about 40 bytes each while built)
-MAX_DENSIFY_SAMPLES = 60_000_000
-
-
 def _densify(m: SemanticMap, max_edge: float, spacing: float) -> tuple[np.ndarray, np.ndarray]:
-    """Surface samples (barycentric grid, ``spacing`` apart) of the triangles longer than ``max_edge``."""
-    f = m.faces
-    v = m.points[f].astype(np.float64)  # (T,3,3)
-    edge = np.linalg.norm(v - v[:, [1, 2, 0]], axis=2).max(axis=1)
-    big = np.flatnonzero(edge > max_edge)
+    """Surface samples (barycentric grid, ``spacing`` apart) of the triangles longer than ``max_edge``;
+    a sample takes its triangle's majority label (:func:`semmatch.geometry.sample_mesh`)."""
+    big = np.flatnonzero(longest_edges(m.points, m.faces) > max_edge)
     if big.size == 0:
         return np.zeros((0, 3), np.float32), np.zeros(0, np.uint8)
-    # triangle label: majority of its vertex labels (ties: smallest id)
-    lab3 = np.sort(m.labels[f[big]].astype(np.int64), axis=1)
-    tri_lab = np.where(lab3[:, 1] == lab3[:, 2], lab3[:, 1], lab3[:, 0])
-    k = np.ceil(edge[big] / spacing).astype(np.int64)
-    n_samples = int(((k + 1) * (k + 2) // 2).sum())
-    if n_samples > MAX_DENSIFY_SAMPLES:  # refuse before allocating (about 40 bytes a sample)
-        raise ValueError(
-            f"{m.source}: sampling its {big.size:,} large triangles every {spacing:g} m would make "
-            f"{n_samples:,} points (limit {MAX_DENSIFY_SAMPLES:,}, about {n_samples * 40 / 2**30:.0f} GiB); "
-            f"longest edge {edge.max():.3g}: is the map in metres (not millimetres)? is the voxel size "
-            f"({2 * spacing:g} m) too small?")
-    pts, labs = [], []
-    for kk in np.unique(k):
-        sel = big[k == kk]
-        i, j = np.meshgrid(np.arange(kk + 1), np.arange(kk + 1), indexing="ij")
-        keep = i + j <= kk
-        w = np.stack([i[keep], j[keep]], axis=1) / kk  # (B,2) barycentric (b1, b2)
-        a = v[sel, 0][:, None]
-        p = a + w[None, :, :1] * (v[sel, 1] - v[sel, 0])[:, None] + w[None, :, 1:] * (v[sel, 2] - v[sel, 0])[:, None]
-        pts.append(p.reshape(-1, 3))
-        labs.append(np.repeat(tri_lab[k == kk], len(w)))
-    return np.concatenate(pts).astype(np.float32), np.concatenate(labs).astype(np.uint8)
+    return sample_mesh(m.points, m.faces[big], m.labels, spacing, label="triangle", form="edges", source=m.source)
 
 
 def _majority(vk: np.ndarray, labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -36,7 +36,7 @@ from typing import TYPE_CHECKING, NamedTuple
 import numpy as np
 
 from ..fusion.reconstruction import _check_poses
-from ..geometry import Intrinsics, check_pose
+from ..geometry import Intrinsics, check_pose, sample_mesh_at_random, triangle_labels
 from ..io import Frame, SemanticMap, check_depth_units, read_map
 
 if TYPE_CHECKING:
@@ -78,30 +78,6 @@ class SurfaceSamples(NamedTuple):
     triangle: np.ndarray
     face_normals: np.ndarray
     source: str
-
-
-def triangle_labels(faces: np.ndarray, vertex_labels: np.ndarray) -> np.ndarray:
-    """Per-triangle labels of a vertex-labelled mesh: the majority of the three vertex labels.
-
-    Ties (three different labels) go to the smallest id, the rule of
-    :func:`semmatch.evaluate.metrics.voxelize` when it samples coarse triangles. A ``scene.ply``
-    written by :meth:`semmatch.sim.Scene.save` splits the vertices shared by triangles of
-    different categories, so there the three labels always agree.
-
-    Parameters
-    ----------
-    faces : int (T,3)
-        Vertex indices of the triangles.
-    vertex_labels : uint8 (V,)
-        Label of each vertex.
-
-    Returns
-    -------
-    uint8 (T,)
-    """
-    lab3 = np.sort(np.asarray(vertex_labels)[np.asarray(faces)].astype(np.int64), axis=1)
-    # sorted (a, b, c): a majority exists iff a == b or b == c, and then it is b
-    return np.where(lab3[:, 1] == lab3[:, 2], lab3[:, 1], lab3[:, 0]).astype(np.uint8)
 
 
 def _mesh_arrays(
@@ -148,7 +124,7 @@ def sample_surface(
     Each triangle receives ``floor(area / spacing**2 + U)`` points (``U`` uniform in [0, 1):
     the expected count is exactly proportional to its area, with less spread than drawing the
     triangles at random), placed uniformly with barycentric coordinates
-    ``(1 - sqrt(r1), sqrt(r1) (1 - r2), sqrt(r1) r2)``.
+    ``(1 - sqrt(r1), sqrt(r1) (1 - r2), sqrt(r1) r2)`` (:func:`semmatch.geometry.sample_mesh_at_random`).
 
     Parameters
     ----------
@@ -176,9 +152,7 @@ def sample_surface(
         raise ValueError(f"spacing must be > 0 (metres), got {spacing}")
     vertices, faces, tri_labels, source = _mesh_arrays(mesh)
     a = vertices[faces[:, 0]]
-    e1 = vertices[faces[:, 1]] - a
-    e2 = vertices[faces[:, 2]] - a
-    cross = np.cross(e1, e2)
+    cross = np.cross(vertices[faces[:, 1]] - a, vertices[faces[:, 2]] - a)
     double_area = np.linalg.norm(cross, axis=1)
     total = 0.5 * float(double_area.sum())
     expected = total / spacing**2
@@ -188,22 +162,12 @@ def sample_surface(
             f"points, more than the limit of {max_points:,}; use spacing >= "
             f"{np.sqrt(total / max_points):.3g} m"
         )
-    rng = np.random.default_rng(seed)
-    counts = np.floor(0.5 * double_area / spacing**2 + rng.random(len(faces))).astype(np.int64)
-    n = int(counts.sum())
-    if n == 0:
+    points, tri = sample_mesh_at_random(vertices, faces, 0.5 * double_area / spacing**2, np.random.default_rng(seed),
+                                        form="edges", chunk=_CHUNK, dtype=np.float32)
+    if len(points) == 0:
         raise ValueError(
             f"{source}: no surface sample ({total:.3g} m² of triangles at {spacing} m spacing); "
             "is the mesh degenerate or the spacing too large?"
-        )
-    tri = np.repeat(np.arange(len(faces), dtype=np.int32), counts)
-    points = np.empty((n, 3), np.float32)
-    for s in range(0, n, _CHUNK):
-        t = tri[s : s + _CHUNK]
-        sq = np.sqrt(rng.random(len(t)))
-        r2 = rng.random(len(t))
-        points[s : s + _CHUNK] = (
-            a[t] + (sq * (1.0 - r2))[:, None] * e1[t] + (sq * r2)[:, None] * e2[t]
         )
     normals = (cross / np.maximum(double_area, 1e-300)[:, None]).astype(np.float32)
     return SurfaceSamples(points, tri_labels[tri], tri, normals, source)

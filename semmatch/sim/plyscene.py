@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..geometry import triangle_labels as _triangle_labels
 from ..io import read_map
 from ..labels import NUM_CLASSES, STUFF_CLASSES, id_of
 from .materials import MATERIALS
@@ -29,10 +30,9 @@ _STUFF = STUFF_CLASSES
 
 
 def triangle_labels(faces: np.ndarray, vertex_labels: np.ndarray) -> np.ndarray:
-    """Majority label of each triangle's three vertices (first vertex when all differ)."""
-    lab = vertex_labels[faces]
-    l0, l1, l2 = lab[:, 0], lab[:, 1], lab[:, 2]
-    return np.where((l0 == l1) | (l0 == l2), l0, np.where(l1 == l2, l1, l0)).astype(np.uint8)
+    """Majority label of each triangle's three vertices (first vertex when all differ):
+    :func:`semmatch.geometry.triangle_labels` with ``ties="first"``, the rule of these scenes."""
+    return _triangle_labels(faces, vertex_labels, ties="first")
 
 
 def _face_normals(v: np.ndarray, f: np.ndarray) -> np.ndarray:

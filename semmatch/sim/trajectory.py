@@ -27,6 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..geometry import sample_mesh_at_random
 from ..labels import id_of
 from .scene import Scene
 
@@ -139,16 +140,13 @@ def scene_levels(scene: Scene) -> tuple[float, float]:
 
 def _sample_surface(scene: Scene, mask: np.ndarray, density: float, rng: np.random.Generator) -> np.ndarray:
     """Points on the triangles selected by ``mask``, about ``density`` per m² (at least the corners)."""
-    v = scene.vertices[scene.triangles[mask]].astype(np.float64)
+    faces = scene.triangles[mask]
+    v = scene.vertices[faces].astype(np.float64)
     if len(v) == 0:
         return np.zeros((0, 3))
     area = 0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
-    n = np.floor(area * density + rng.random(len(v))).astype(np.int64)
-    tri = np.repeat(np.arange(len(v)), n)
-    r1, r2 = rng.random(len(tri)), rng.random(len(tri))
-    s = np.sqrt(r1)
-    a, b, c = 1 - s, s * (1 - r2), s * r2
-    pts = a[:, None] * v[tri, 0] + b[:, None] * v[tri, 1] + c[:, None] * v[tri, 2]
+    pts, _ = sample_mesh_at_random(scene.vertices, faces, area * density, rng, form="weights", chunk=None,
+                                   dtype=np.float64)
     edges = np.concatenate([0.5 * (v[:, 0] + v[:, 1]), 0.5 * (v[:, 1] + v[:, 2]), 0.5 * (v[:, 0] + v[:, 2])])
     return np.concatenate([pts, v.reshape(-1, 3), edges])
 
