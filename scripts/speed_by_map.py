@@ -17,7 +17,7 @@ from semmatch.experiments.layout import Layout
 from semmatch.experiments.speed import GT, _frames_at
 from semmatch.io import read_map
 from semmatch.sim import generate_scene
-from semmatch.transfer import load_index, prepare
+from semmatch.transfer import as_map_index, load_index
 from semmatch.transfer.benchmark import time_methods
 
 METHODS = ["2d-slic", "3d-projected-sp", "3d-slic", "dbscan", "3d-neighborhood"]
@@ -32,8 +32,8 @@ def main(data_root: str, n_frames: int = 8) -> None:
     fused = read_map(path)
     mesh = generate_scene(meta["kind"], int(meta["seed"])).to_semantic_map()
     print(f"{sd.name}: fused map {len(fused.points)} points, mesh {len(mesh.points)} vertices, {len(frames)} frames")
-    for name, index in (("fused (index cache)", load_index(path)), ("fused (indexed here)", prepare(fused)),
-                        ("mesh", prepare(mesh))):
+    for name, index in (("fused (index cache)", load_index(path)), ("fused (indexed here)", as_map_index(fused)),
+                        ("mesh", as_map_index(mesh))):
         r = time_methods(frames, index, METHODS, exact_variant=False)["methods"]
         print(f"{name:22s}", "  ".join(f"{m} {r[m]['fps']:.1f} FPS cov {r[m]['coverage']:.2f}" for m in METHODS))
 

@@ -44,7 +44,7 @@ from .io import Frame, SemanticMap, read_map
 from .labels import NAMES, NUM_CLASSES, STUFF_CLASSES, THING_CLASSES
 from .transfer.dbscan import dbscan_labels
 from .transfer.frames import check_frame
-from .transfer.index import MapIndex, prepare
+from .transfer.index import MapIndex, as_map_index
 from .transfer.registry import transfer_frame
 
 __all__ = [
@@ -380,7 +380,7 @@ def transfer_panoptic(
         The map has no instance layer (and every error of ``transfer_frame``).
     """
     max_distance = params.pop("max_distance", None)
-    index = prepare(semantic_map, max_distance=max_distance)
+    index = as_map_index(semantic_map, max_distance=max_distance)
     require_instances(index.map, "panoptic transfer")
     r = transfer_frame(name, frame, index, **params)
     fd = check_frame(frame, need_rgb=False)

@@ -12,6 +12,15 @@ ROOT = Path(__file__).resolve().parents[1]
 SHARED = Path(os.environ.get("SEMMATCH_SHARED", ROOT.parent / "shared"))
 
 
+@pytest.fixture(scope="session", autouse=True)
+def _index_cache_in_a_temp_folder(tmp_path_factory):
+    """Map index caches (:func:`semmatch.transfer.load_index`) go to a session temp folder, never to
+    the user's cache folder; commands run in subprocesses inherit the variable."""
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("SEMMATCH_CACHE_DIR", str(tmp_path_factory.mktemp("semmatch-cache")))
+        yield
+
+
 @pytest.fixture(scope="session")
 def shared_dir() -> Path:
     """``../shared`` beside the project; tests using it skip when it is absent."""

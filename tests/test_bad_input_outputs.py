@@ -365,7 +365,10 @@ def _killed_at_frame_2(i: int):
 
 # ------------------------------------------------------------------------------------------ caches
 def _cache_of(map_path: Path) -> Path:
-    (cf,) = map_path.parent.glob(f".{map_path.name}.index-*.npz")
+    from semmatch.transfer.index import index_cache_path
+
+    cf = index_cache_path(map_path)
+    assert cf.is_file()
     return cf
 
 

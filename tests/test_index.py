@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import pickle
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -12,7 +13,14 @@ from scenes import furnished_room
 from semmatch.io import SemanticMap, write_map
 from semmatch.sim import render_frames
 from semmatch.transfer import MapIndex, load_index
-from semmatch.transfer.index import BLOCK, _dense_grid
+from semmatch.transfer.index import BLOCK, index_cache_dir, index_cache_path
+from semmatch.transfer.index.label_grid import dense_label_grid
+
+
+def _dense_grid(idx: MapIndex) -> np.ndarray:
+    """The naive reference grid (one EDT over the whole box) of an index's map and grid."""
+    return dense_label_grid(idx.map, origin=idx.origin, shape=idx.shape, voxel_size=idx.voxel_size,
+                            max_distance=idx.max_distance)
 
 
 @pytest.fixture(scope="module")
@@ -92,7 +100,7 @@ def test_a_point_map_in_millimetres_is_refused_before_allocating(mesh_map):
 def test_the_cache_is_reused_invalidated_and_survives_damage(mesh_map, tmp_path, rng, monkeypatch):
     path = tmp_path / "m" / "upper.ply"
     write_map(path, mesh_map)
-    built = load_index(path, voxel_size=0.04)
+    built = load_index(path, voxel_size=0.04, cache_dir="beside")
     (cache,) = path.parent.glob(".upper.ply.index-*.npz")
     pts = _points(mesh_map, rng, 5000)
 
@@ -101,14 +109,14 @@ def test_the_cache_is_reused_invalidated_and_survives_damage(mesh_map, tmp_path,
 
     with monkeypatch.context() as mp:  # reused: no build
         mp.setattr(MapIndex, "_build_grid", no_build)
-        cached = load_index(path, voxel_size=0.04)
+        cached = load_index(path, voxel_size=0.04, cache_dir="beside")
     assert (cached.grid == built.grid).all() and cached.n_blocks == built.n_blocks
     for exact in (False, True):
         assert (cached.lookup(pts, exact=exact) == built.lookup(pts, exact=exact)).all()
     # another map content: another key, the old file is not read
     m2 = SemanticMap(mesh_map.points + np.float32(0.5), mesh_map.labels, faces=mesh_map.faces)
     write_map(path, m2)
-    moved = load_index(path, voxel_size=0.04)
+    moved = load_index(path, voxel_size=0.04, cache_dir="beside")
     assert len(list(path.parent.glob(".upper.ply.index-*.npz"))) == 2
     assert not np.allclose(moved.origin, built.origin)
     # a stale file under the current key (wrong table) or a damaged one: rebuilt with a warning
@@ -121,7 +129,7 @@ def test_the_cache_is_reused_invalidated_and_survives_damage(mesh_map, tmp_path,
         if damage is not None:
             newest.write_bytes(damage)
         with pytest.warns(UserWarning, match="unreadable index cache"):
-            again = load_index(path, voxel_size=0.04)
+            again = load_index(path, voxel_size=0.04, cache_dir="beside")
         assert (again.grid == moved.grid).all()
     # switched off by the environment: nothing read
     monkeypatch.setenv("SEMMATCH_NO_INDEX_CACHE", "1")
@@ -129,7 +137,74 @@ def test_the_cache_is_reused_invalidated_and_survives_damage(mesh_map, tmp_path,
         c.write_bytes(b"junk")
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        load_index(path, voxel_size=0.04)
+        load_index(path, voxel_size=0.04, cache_dir="beside")
+
+
+def test_tests_never_write_to_the_users_cache():
+    import os
+
+    import platformdirs
+
+    assert os.environ.get("SEMMATCH_CACHE_DIR")  # set by conftest for the whole session
+    assert not index_cache_dir("m.ply").is_relative_to(platformdirs.user_cache_dir("semmatch"))
+
+
+def _no_build(*a, **k):
+    raise AssertionError("built instead of read from the cache")
+
+
+def test_the_cache_goes_to_the_user_cache_folder_by_default(mesh_map, tmp_path, monkeypatch):
+    import platformdirs
+
+    monkeypatch.delenv("SEMMATCH_CACHE_DIR", raising=False)
+    monkeypatch.setattr(platformdirs, "user_cache_dir", lambda appname=None, *a, **k: str(tmp_path / "user" / appname))
+    path = tmp_path / "maps" / "upper.ply"
+    write_map(path, mesh_map)
+    folder = tmp_path / "user" / "semmatch" / "index"
+    assert index_cache_dir(path) == index_cache_dir(path, "user") == folder
+    built = load_index(path, voxel_size=0.04)
+    (cf,) = folder.glob("upper.ply.index-*.npz")  # visible there, named after the map
+    assert cf == index_cache_path(path, voxel_size=0.04) and cf.parent == folder
+    assert [p.name for p in path.parent.iterdir()] == ["upper.ply"]  # nothing left beside the map
+    with monkeypatch.context() as mp:
+        mp.setattr(MapIndex, "_build_grid", _no_build)
+        assert (load_index(path, voxel_size=0.04).grid == built.grid).all()
+    # SEMMATCH_CACHE_DIR moves the user cache folder
+    monkeypatch.setenv("SEMMATCH_CACHE_DIR", str(tmp_path / "env"))
+    load_index(path, voxel_size=0.04)
+    assert len(list((tmp_path / "env" / "index").glob("upper.ply.index-*.npz"))) == 1
+
+
+def test_the_cache_beside_the_map_or_in_a_given_folder(mesh_map, tmp_path, monkeypatch):
+    monkeypatch.setenv("SEMMATCH_CACHE_DIR", str(tmp_path / "user"))
+    path = tmp_path / "maps" / "upper.ply"
+    write_map(path, mesh_map)
+    load_index(path, voxel_size=0.04, cache_dir="beside")
+    (cf,) = path.parent.glob(".upper.ply.index-*.npz")  # hidden beside the map, as before
+    assert cf == index_cache_path(path, voxel_size=0.04, cache_dir="beside")
+    for given in (tmp_path / "mine", str(tmp_path / "as-text")):
+        load_index(path, voxel_size=0.04, cache_dir=given)
+        assert len(list(Path(given).glob("upper.ply.index-*.npz"))) == 1
+    assert not index_cache_path(path, voxel_size=0.04).exists()  # the user folder was not written
+    with pytest.raises(ValueError, match="empty string"):
+        index_cache_dir(path, "")
+
+
+def test_maps_of_one_name_in_two_folders_keep_their_own_caches(mesh_map, tmp_path, monkeypatch):
+    monkeypatch.setenv("SEMMATCH_CACHE_DIR", str(tmp_path / "cache"))
+    a, b = tmp_path / "a" / "upper.ply", tmp_path / "b" / "upper.ply"
+    write_map(a, mesh_map)
+    write_map(b, SemanticMap(mesh_map.points + np.float32(0.5), mesh_map.labels, faces=mesh_map.faces))
+    built = {p: load_index(p, voxel_size=0.04) for p in (a, b)}
+    assert len(list((tmp_path / "cache" / "index").glob("upper.ply.index-*.npz"))) == 2
+    assert index_cache_path(a, voxel_size=0.04) != index_cache_path(b, voxel_size=0.04)
+    with warnings.catch_warnings(), monkeypatch.context() as mp:
+        warnings.simplefilter("error")  # neither reads the other's file (that would warn and rebuild)
+        mp.setattr(MapIndex, "_build_grid", _no_build)
+        for p in (b, a, b):
+            again = load_index(p, voxel_size=0.04)
+            assert (again.grid == built[p].grid).all() and np.allclose(again.origin, built[p].origin)
+    assert not np.allclose(built[a].origin, built[b].origin)
 
 
 def test_block_lookups_equal_dense_lookups(mesh_map, room, rng, monkeypatch):
@@ -137,7 +212,7 @@ def test_block_lookups_equal_dense_lookups(mesh_map, room, rng, monkeypatch):
     copy: same answers."""
     from scenes import orbit_poses
 
-    import semmatch.transfer.index as index_module
+    import semmatch.transfer.index.queries as index_module
 
     dense = MapIndex(mesh_map, voxel_size=0.04)
     monkeypatch.setattr(index_module, "DENSE_LOOKUP_VOXELS", 0)

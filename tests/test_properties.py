@@ -85,10 +85,10 @@ def test_point_order_and_whole_voxel_shifts_change_nothing(gt, seed, shift):
 @pytest.fixture(scope="module")
 def scene_and_index():
     from semmatch.sim import generate_scene
-    from semmatch.transfer import prepare
+    from semmatch.transfer import as_map_index
 
     scene = generate_scene("bedroom", 11)
-    return scene, prepare(scene.to_semantic_map())
+    return scene, as_map_index(scene.to_semantic_map())
 
 
 @settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])

@@ -2,8 +2,8 @@
 
 The paper's five projection methods (§3.2) behind one call::
 
-    from semmatch.transfer import transfer, transfer_frame, prepare, METHODS
-    index = prepare(semantic_map)                  # index the map once
+    from semmatch.transfer import transfer, transfer_frame, as_map_index, METHODS
+    index = as_map_index(semantic_map)             # index the map once
     lab = transfer("3d-neighborhood", frame, index)   # (H,W) uint8, 0 = no support
     r = transfer_frame("2d-slic", frame, index)       # r.labels, r.coverage, r.seconds, r.purity
 
@@ -13,7 +13,7 @@ a method (the CLI, the benchmark and the notebooks pick it up).
 """
 
 from .fused import fuse, fuse_labels, fuse_with_probabilities, write_fused_labels
-from .index import DEFAULT_MAX_DISTANCE, MapIndex, load_index, prepare
+from .index import DEFAULT_MAX_DISTANCE, MapIndex, as_map_index, index_cache_dir, load_index, prepare
 from .registry import (
     ALL_METHODS,
     METHODS,
@@ -42,6 +42,8 @@ __all__ = [
     "available_methods",
     "MapIndex",
     "load_index",
+    "index_cache_dir",
+    "as_map_index",
     "prepare",
     "DEFAULT_MAX_DISTANCE",
     "method_params",

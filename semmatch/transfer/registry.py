@@ -13,7 +13,7 @@ from ..io import Frame, SemanticMap
 from . import methods as _m
 from .frames import check_frame
 from .fused import fuse_with_probabilities
-from .index import MapIndex, prepare
+from .index import MapIndex, as_map_index
 
 __all__ = [
     "METHODS", "ALL_METHODS", "PAPER_FPS", "TransferResult", "transfer", "transfer_frame",
@@ -226,7 +226,7 @@ def transfer_frame(
     frame : Frame
         RGB (not needed by ``dbscan``/``3d-neighborhood``), metric depth, pose, intrinsics.
     semantic_map : SemanticMap or MapIndex
-        The upper map, or its prebuilt :class:`MapIndex` (``prepare(map)``) to index it once
+        The upper map, or its prebuilt :class:`MapIndex` (``as_map_index(map)``) to index it once
         for a whole sequence.
     max_distance : float, optional
         Distance threshold (metres) beyond which a pixel's 3D point has no support (label 0);
@@ -249,7 +249,7 @@ def transfer_frame(
     if name != "fused":
         _check_name(name)
     check_params(name, {"max_distance": max_distance, **params})
-    index = prepare(semantic_map, max_distance=max_distance)
+    index = as_map_index(semantic_map, max_distance=max_distance)
     t1 = time.perf_counter()
     if name == "fused":
         probs = params.pop("probs", None)

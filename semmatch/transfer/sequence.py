@@ -21,7 +21,7 @@ from ..io import (
 )
 from ..progress import tqdm
 from ..workers import process_pool
-from .index import MapIndex, prepare
+from .index import MapIndex, as_map_index
 from .registry import available_methods, check_params, transfer_frame
 
 __all__ = ["transfer_sequence", "LOW_SUPPORT", "LowSupportWarning"]
@@ -159,7 +159,7 @@ def transfer_sequence(
         poses = np.asarray(poses, dtype=np.float64)
         if poses.shape != (n, 4, 4):
             raise ValueError(f"{seq_path or 'sequence'}: poses must have shape ({n}, 4, 4), got {poses.shape}")
-    index = prepare(semantic_map, max_distance=max_distance)
+    index = as_map_index(semantic_map, max_distance=max_distance)
     cov = np.zeros(n)
     secs = np.zeros(n)
     dropouts = np.zeros(n, dtype=bool)
