@@ -370,13 +370,8 @@ def set_profile(profile: str, params_file: str | os.PathLike = ROOT / "params.ya
     atomic_write_text(params_file, "".join(lines))
 
 
-def main(argv: list[str] | None = None, extra_commands: Sequence[Callable] = ()) -> int:
-    """``python -m semmatch.experiments``.
-
-    ``extra_commands``: functions that each add a subcommand to the subparsers, setting a
-    ``handler(args) -> int`` default (the runner's ``__main__`` adds ``confirm`` and ``ship``,
-    kept out of this module so that editing them reruns no pipeline stage).
-    """
+def _parser(extra_commands: Sequence[Callable] = ()) -> argparse.ArgumentParser:
+    """The argument parser of :func:`main`."""
     ap = argparse.ArgumentParser(prog="python -m semmatch.experiments", description=__doc__.split("\n")[0])
     sub = ap.add_subparsers(dest="cmd", required=True)
     r = sub.add_parser("run", help="run one notebook")
@@ -408,7 +403,67 @@ def main(argv: list[str] | None = None, extra_commands: Sequence[Callable] = ())
     sn = sub.add_parser("snapshot", help="small copies of the executed notebooks for git (reports/snapshot/<profile>/)")
     sn.add_argument("--profile", help="profile whose executed notebooks to copy (default: params.yaml's)")
     sn.add_argument("--max-width", type=int, default=960, help="scale figures down to this width (pixels)")
-    args = ap.parse_args(argv)
+    return ap
+
+
+def _readme(args: argparse.Namespace) -> int:
+    """``readme``: README.md's results section from the profile's (or a confirmatory run's) figures."""
+    from .readme import confirmatory_run, update_readme
+
+    name = load_params(ROOT / "params.yaml", args.profile)["profile"]
+    if args.confirm is None:
+        confirm = confirmatory_run(ROOT / "figures")
+    elif args.confirm == "none":
+        confirm = None
+    else:
+        confirm = ROOT / "figures" / "confirm" / args.confirm
+        if not (confirm / "confirm.json").is_file():
+            raise FileNotFoundError(f"{confirm}: no confirm.json (run make confirm SEEDS=... NAME={args.confirm})")
+    update_readme(ROOT / "README.md", ROOT / "figures" / name, confirmatory_dir=confirm)
+    return 0
+
+
+def _snapshot(args: argparse.Namespace) -> int:
+    """``snapshot``: small copies of the profile's executed notebooks."""
+    from .snapshot import snapshot_reports
+
+    name = load_params(ROOT / "params.yaml", args.profile)["profile"]
+    for p in snapshot_reports(ROOT / "reports" / name, ROOT / "reports" / "snapshot" / name, profile=name,
+                              max_width=args.max_width, root=ROOT):
+        print(f"{p.relative_to(ROOT)}: {p.stat().st_size / 1024:.0f} KB")
+    return 0
+
+
+def _run_notebooks(args: argparse.Namespace) -> int:
+    """``run`` and ``all``: one notebook, or every one in order."""
+    kw = dict(params_file=args.params, reports_dir=args.reports_dir, data_root=args.data_root,
+              figures_dir=args.figures_dir, log_output=not args.quiet, scheduler=args.scheduler)
+    if args.train:  # notebook 02 trains every network (the only notebook with a `retrain` parameter)
+        kw["retrain"] = True
+    if not args.quiet:
+        import logging
+
+        # papermill logs the streamed cell output at INFO on its own logger
+        handler = logging.StreamHandler(sys.stderr)
+        handler.setFormatter(logging.Formatter("%(message)s"))
+        log = logging.getLogger("papermill")
+        log.addHandler(handler)
+        log.setLevel(logging.INFO)
+    if args.cmd == "run":
+        run_notebook(args.notebook, args.profile, **kw)
+    else:
+        run_all(args.profile, until=args.until, **kw)
+    return 0
+
+
+def main(argv: list[str] | None = None, extra_commands: Sequence[Callable] = ()) -> int:
+    """``python -m semmatch.experiments``.
+
+    ``extra_commands``: functions that each add a subcommand to the subparsers, setting a
+    ``handler(args) -> int`` default (the runner's ``__main__`` adds ``confirm`` and ``ship``,
+    kept out of this module so that editing them reruns no pipeline stage).
+    """
+    args = _parser(extra_commands).parse_args(argv)
     try:
         if args.cmd == "profiles":
             data = yaml.safe_load((ROOT / "params.yaml").read_text())
@@ -420,45 +475,10 @@ def main(argv: list[str] | None = None, extra_commands: Sequence[Callable] = ())
             set_profile(args.name)
             return 0
         if args.cmd == "readme":
-            from .readme import confirmatory_run, update_readme
-
-            name = load_params(ROOT / "params.yaml", args.profile)["profile"]
-            if args.confirm is None:
-                confirm = confirmatory_run(ROOT / "figures")
-            elif args.confirm == "none":
-                confirm = None
-            else:
-                confirm = ROOT / "figures" / "confirm" / args.confirm
-                if not (confirm / "confirm.json").is_file():
-                    raise FileNotFoundError(f"{confirm}: no confirm.json (run make confirm SEEDS=... NAME={args.confirm})")
-            update_readme(ROOT / "README.md", ROOT / "figures" / name, confirmatory_dir=confirm)
-            return 0
+            return _readme(args)
         if args.cmd == "snapshot":
-            from .snapshot import snapshot_reports
-
-            name = load_params(ROOT / "params.yaml", args.profile)["profile"]
-            for p in snapshot_reports(ROOT / "reports" / name, ROOT / "reports" / "snapshot" / name, profile=name,
-                                      max_width=args.max_width, root=ROOT):
-                print(f"{p.relative_to(ROOT)}: {p.stat().st_size / 1024:.0f} KB")
-            return 0
-        kw = dict(params_file=args.params, reports_dir=args.reports_dir, data_root=args.data_root,
-                  figures_dir=args.figures_dir, log_output=not args.quiet, scheduler=args.scheduler)
-        if args.train:  # notebook 02 trains every network (the only notebook with a `retrain` parameter)
-            kw["retrain"] = True
-        if not args.quiet:
-            import logging
-
-            # papermill logs the streamed cell output at INFO on its own logger
-            handler = logging.StreamHandler(sys.stderr)
-            handler.setFormatter(logging.Formatter("%(message)s"))
-            log = logging.getLogger("papermill")
-            log.addHandler(handler)
-            log.setLevel(logging.INFO)
-        if args.cmd == "run":
-            run_notebook(args.notebook, args.profile, **kw)
-        else:
-            run_all(args.profile, until=args.until, **kw)
+            return _snapshot(args)
+        return _run_notebooks(args)
     except (NotebookFailed, ValueError, FileNotFoundError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 1
-    return 0

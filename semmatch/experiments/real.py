@@ -222,32 +222,44 @@ def _real_like_scene(data_root: str, methods: tuple[str, ...], networks: tuple[s
 
 def _real_like_scene_chain(data_root: str, methods: tuple[str, ...], networks: tuple[str, ...],
                            sources: tuple[str, ...], o: dict, sid: str) -> tuple[list[dict], list[dict], dict]:
-    """:func:`_real_like_scene` under its thread limit."""
-    from ..evaluate.metrics import compare
-    from ..fusion import reconstruct_many
-    from ..poses.registration import register_maps
-    from ..poses.trajectory_metrics import trajectory_errors
-    from ..segment import predict_sequence
-    from ..transfer import prepare, transfer_sequence, write_fused_labels
-
+    """:func:`_real_like_scene` under its thread limit: poses, upper maps, registration, lower
+    labels, then the scores."""
     layout = Layout(data_root)
     models = {net: layout.load_network(net) for net in networks}
-    voxel_size, eval_voxel_size, tol, fused_base = o["voxel_size"], o["eval_voxel_size"], o["tol"], o["fused_base"]
-    registration_voxel, registration_seed = o["registration_voxel"], o["registration_seed"]
-    registration_restarts, jobs, progress = o["registration_restarts"], o["frame_jobs"], False
     sd = layout.scenes / "eval" / sid
-    rows, traj_rows = [], []
     for need in ("upper_noisy", "lower_noisy"):
         if not (sd / need).is_dir():
             raise FileNotFoundError(f"{sd / need}: no noisy sequence; run 01_simulate with noise on")
     work = layout.real_like / sid
     work.mkdir(parents=True, exist_ok=True)
-    seqs, est, true = {}, {}, {}
+    seqs, est, true, traj_rows = _posed_recordings(sd, work, sid, o["tol"])
+    upper_maps, upper_reference = _upper_maps(seqs["upper"], models, sources, work, o["voxel_size"])
+    # the lower reference (own frame); its geometry is registered onto the upper map
+    from ..fusion import reconstruct_many
+
+    (reference,) = reconstruct_many(seqs["lower"], [None], o["voxel_size"], outs=[work / "reference.ply"])
+    reg, reg_row = _registration(sd, work, sid, reference, upper_maps[0], est, true, o)
+    # the transfer works in the upper map's bounding-box frame U (a compact index grid): the
+    # map moved by U, the lower frames at U @ T_reg @ est_lower
+    U = _compact_frame(upper_maps[0])
+    lower = _lower_labels(seqs["lower"], models, methods, sources, upper_maps, U, U @ reg.transform @ est["lower"],
+                          work, o["fused_base"], o["frame_jobs"])
+    rows = _real_like_rows(data_root, sid, seqs["lower"], lower, reference, upper_maps, upper_reference, sources,
+                           o["voxel_size"], o["eval_voxel_size"])
+    return rows, traj_rows, reg_row
+
+
+def _posed_recordings(sd: Path, work: Path, sid: str, tol) -> tuple[dict, dict, dict, list[dict]]:
+    """The noisy upper and lower recordings of a scene at their estimated poses (read once, into
+    memory: predicted, transferred and fused from there): ``(seqs, est, true, traj_rows)``, the
+    trajectory rows scoring the recorded drifting poses and the estimated ones."""
+    from ..poses.trajectory_metrics import trajectory_errors
+
+    seqs, est, true, traj_rows = {}, {}, {}, []
     for name in ("upper", "lower"):
-        # read once: predicted, transferred and fused from memory
         noisy = read_sequence(sd / f"{name}_noisy").load()
         est[name], true[name] = estimate_or_load_poses(sd / f"{name}_noisy", work / pose_cache_name(name, tol),
-                                                       seq=noisy, prior_tolerance=tol, progress=progress)
+                                                       seq=noisy, prior_tolerance=tol, progress=False)
         for what, poses in (("recorded (drifting prior)", noisy.poses), ("estimated (RGB-D odometry)", est[name])):
             ok = finite_frames(poses, true[name])
             first = int(np.flatnonzero(ok)[0])
@@ -257,28 +269,41 @@ def _real_like_scene_chain(data_root: str, methods: tuple[str, ...], networks: t
             traj_rows.append(dict(scene=sid, sequence=name, poses=what, **{
                 k: float(v) for k, v in err.items() if np.isscalar(v)}))
         seqs[name] = PosedSequence(noisy, est[name])
-    # upper maps: one fusion of the upper frames (own frame), labelled by ground truth and each network
+    return seqs, est, true, traj_rows
+
+
+def _upper_maps(upper: PosedSequence, models: dict, sources: tuple[str, ...], work: Path,
+                voxel_size: float) -> tuple[list, object]:
+    """One fusion of the upper frames (own frame), labelled by ground truth and each network:
+    the upper map of every source, and the upper reference (the noisy upper frames fused with
+    ground-truth labels, which scores each network's own upper map: the ``upper`` rows)."""
+    from ..fusion import reconstruct_many
+    from ..segment import predict_sequence
+
     upper_labels = {GT: None}
-    for net in networks:
+    for net in models:
         upper_labels[net] = work / f"upper_labels_{net}"
-        predict_sequence(models[net], seqs["upper"], upper_labels[net], progress=False)
-    # (plus, last, the upper reference: the noisy upper frames fused with ground-truth labels, which
-    # scores each network's own upper map, the `upper` rows; one fusion for every labeling)
+        predict_sequence(models[net], upper, upper_labels[net], progress=False)
     upper_sources = [*sources, *([] if GT in sources else [GT])]
-    upper_maps = reconstruct_many(seqs["upper"], [upper_labels[s] for s in upper_sources], voxel_size,
+    upper_maps = reconstruct_many(upper, [upper_labels[s] for s in upper_sources], voxel_size,
                                   outs=[work / f"upper_{s}.ply" for s in upper_sources])
-    upper_reference, upper_maps = upper_maps[upper_sources.index(GT)], upper_maps[:len(sources)]
-    # the lower reference (own frame); its geometry is registered onto the upper map
-    (reference,) = reconstruct_many(seqs["lower"], [None], voxel_size, outs=[work / "reference.ply"])
-    reg = register_maps(reference, upper_maps[0], voxel_size=registration_voxel, seed=registration_seed,
-                        restarts=registration_restarts)
-    # the report (ground truth): each recording placed in the world by its trajectory alignment,
-    # and by its map fitted onto the scene mesh
+    return upper_maps[:len(sources)], upper_maps[upper_sources.index(GT)]
+
+
+def _registration(sd: Path, work: Path, sid: str, reference, upper_map, est: dict, true: dict, o: dict):
+    """The lower reference registered onto the upper map, and its row (``registration.json``):
+    the errors against ground truth, each recording placed in the world by its trajectory
+    alignment and (with the scene mesh) by its map fitted onto the mesh."""
+    from ..poses.registration import register_maps
+
+    tol, registration_voxel, registration_seed = o["tol"], o["registration_voxel"], o["registration_seed"]
+    reg = register_maps(reference, upper_map, voxel_size=registration_voxel, seed=registration_seed,
+                        restarts=o["registration_restarts"])
     mesh = read_map(sd / "scene.ply") if (sd / "scene.ply").is_file() else None
     placed = {("traj", n): world_alignment(est[n], true[n]) for n in ("upper", "lower")}
     if mesh is not None:
         placed |= {("mesh", n): world_alignment(est[n], true[n], reconstruction=m, scene_mesh=mesh)
-                   for n, m in (("upper", upper_maps[0]), ("lower", reference))}
+                   for n, m in (("upper", upper_map), ("lower", reference))}
     best = "mesh" if mesh is not None else "traj"
     e_best = registration_errors(reg.transform, placed[best, "upper"], placed[best, "lower"], est["lower"], true["lower"])
     e_traj = registration_errors(reg.transform, placed["traj", "upper"], placed["traj", "lower"], est["lower"],
@@ -296,44 +321,61 @@ def _real_like_scene_chain(data_root: str, methods: tuple[str, ...], networks: t
     } | {"prior_tolerance": None if tol is None else list(tol), "registration_voxel": registration_voxel,
          "registration_seed": registration_seed, "candidates": [
              {k: (_matrix(v) if isinstance(v, np.ndarray) else v) for k, v in c.items()} for c in reg.candidates]})
-    # the transfer works in the upper map's bounding-box frame U (a compact index grid): the
-    # map moved by U, the lower frames at U @ T_reg @ est_lower
-    U = _compact_frame(upper_maps[0])
-    lower_in_upper = U @ reg.transform @ est["lower"]
-    # lower labels: each network on the lower frames, each method from each upper map
-    lower = []  # (source, method, labels folder)
+    return reg, reg_row
+
+
+def _lower_labels(lower_seq: PosedSequence, models: dict, methods: tuple[str, ...], sources: tuple[str, ...],
+                  upper_maps: list, U: np.ndarray, lower_in_upper: np.ndarray, work: Path, fused_base: str | None,
+                  jobs: int) -> list[tuple[str, str, Path]]:
+    """Labels of the lower frames: each network on them, each method from each upper map (in the
+    frame ``U``, the lower frames at ``lower_in_upper``), and ``fused``; ``(source, method,
+    labels folder)`` each."""
+    from ..segment import predict_sequence
+    from ..transfer import prepare, transfer_sequence, write_fused_labels
+
+    lower = []
     for source, upper_map in zip(sources, upper_maps, strict=True):
         if source != GT:
             low_dir = work / f"lower_labels_{source}" / "lower"
-            predict_sequence(models[source], seqs["lower"], low_dir, progress=False)
+            predict_sequence(models[source], lower_seq, low_dir, progress=False)
             lower.append((source, "lower", low_dir))
         index = prepare(_moved(upper_map, U))
         for method in methods:
             lab_dir = work / f"lower_labels_{source}" / method
-            transfer_sequence(method, seqs["lower"].seq, index, lab_dir, poses=lower_in_upper,
-                              jobs=jobs, progress=False)
+            transfer_sequence(method, lower_seq.seq, index, lab_dir, poses=lower_in_upper, jobs=jobs, progress=False)
             lower.append((source, method, lab_dir))
         if source != GT and fused_base is not None:
             fused = write_fused_labels(work / f"lower_labels_{source}" / fused_base, low_dir,
-                                  work / f"lower_labels_{source}" / "fused")
+                                       work / f"lower_labels_{source}" / "fused")
             lower.append((source, "fused", fused))
-    # one fusion of the lower frames (own frame) for every labeling
-    maps = reconstruct_many(seqs["lower"], [d for *_, d in lower], voxel_size,
+    return lower
+
+
+def _real_like_rows(data_root: str, sid: str, lower_seq: PosedSequence, lower: list, reference, upper_maps: list,
+                    upper_reference, sources: tuple[str, ...], voxel_size: float,
+                    eval_voxel_size: float) -> list[dict]:
+    """The score rows of a scene: one fusion of the lower frames (own frame) for every labeling,
+    each against the lower reference; then the ``upper`` rows (claim C16): each network's upper
+    map against the upper reference, in the person's own frame (the human perspective of the
+    real-like chain)."""
+    from ..evaluate.metrics import compare
+    from ..fusion import reconstruct_many
+
+    maps = reconstruct_many(lower_seq, [d for *_, d in lower], voxel_size,
                             outs=[real_like_lower_map(data_root, sid, s, m) for s, m, _ in lower])
     reference_voxels = reference_grid(reference, eval_voxel_size)  # voxelised once for every labeling
+    rows = []
     for (source, method, _), pred in zip(lower, maps, strict=True):
         s = compare(reference_voxels, pred, voxel_size=eval_voxel_size, grid_origin=eval_grid_origin(eval_voxel_size))
         rows.append(dict(scene=sid, model=model_name(source), method=method,
                          **{k: float(s[k]) for k in MEASURES}))
-    # `upper` rows (claim C16): each network's upper map against the upper reference, in the
-    # person's own frame (the human perspective of the real-like chain)
     upper_voxels = reference_grid(upper_reference, eval_voxel_size)
     for source, upper_map in zip(sources, upper_maps, strict=True):
         if source != GT:
             s = compare(upper_voxels, upper_map, voxel_size=eval_voxel_size, grid_origin=eval_grid_origin(eval_voxel_size))
             rows.append(dict(scene=sid, model=model_name(source), method="upper",
                              **{k: float(s[k]) for k in MEASURES}))
-    return rows, traj_rows, reg_row
+    return rows
 
 
 def score_real_like_against_mesh(
