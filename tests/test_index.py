@@ -227,3 +227,50 @@ def test_block_lookups_equal_dense_lookups(mesh_map, room, rng, monkeypatch):
                     == dense.lookup_depth(f.depth, f.pose, f.intrinsics, exact=exact)).all()
         assert (blocks.support_depth(f.depth, f.pose, f.intrinsics)
                 == dense.support_depth(f.depth, f.pose, f.intrinsics)).all()
+
+
+def test_the_vertex_cover_radius_bounds_every_point_of_every_triangle(rng):
+    """The bound behind the vertex shortcut of the support test: no point of a triangle is farther
+    than it from that triangle's nearest vertex; tight for an equilateral triangle (L / sqrt 3)."""
+    from semmatch.transfer.index.queries import _vertex_cover_radius
+
+    eq = np.array([[0, 0, 0], [1, 0, 0], [0.5, np.sqrt(3) / 2, 0]], np.float32)
+    assert _vertex_cover_radius(eq, np.array([[0, 1, 2]])) == pytest.approx(1 / np.sqrt(3), rel=1e-6)
+    pts = rng.normal(size=(300, 3)).astype(np.float32)
+    pts[:30, 2] = 0  # flat, obtuse and near-degenerate triangles among them
+    faces = rng.integers(0, len(pts), size=(200, 3))
+    faces = faces[(faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 0] != faces[:, 2])]
+    radius = _vertex_cover_radius(pts, faces)
+    w = rng.dirichlet(np.ones(3), size=(len(faces), 50))  # points inside every triangle
+    v = pts[faces].astype(np.float64)
+    x = np.einsum("fsk,fkd->fsd", w, v)
+    worst = np.linalg.norm(x[:, :, None, :] - v[:, None, :, :], axis=3).min(axis=2).max()
+    assert worst <= radius + 1e-9
+
+
+def test_support_with_the_vertex_shortcut_equals_exact_queries(room, rng):
+    """``support_depth`` answers shell pixels from the nearest vertex where that settles them; the
+    answer must equal the exact closest-point test on every pixel, here for a fused
+    reconstruction (many small triangles) and frames whose depth is stretched by up to 8 %, so
+    that many points lie about ``max_distance`` from the surface."""
+    from scenes import orbit_poses
+
+    from semmatch.fusion import reconstruct
+    from semmatch.transfer.index.queries import LABEL_BITS, SHELL
+
+    frames = render_frames(room, orbit_poses(room, 4, 0.3))
+    fused = reconstruct(frames, [f.labels for f in frames], 0.04)
+    index = MapIndex(fused, max_distance=0.1)
+    shell_pixels = 0
+    for f in frames:
+        depth = (f.depth * (1 + 0.08 * rng.random(f.depth.shape))).astype(np.float32)
+        got = index.support_depth(depth, f.pose, f.intrinsics)
+        out, world = index._gather_depth(depth, f.pose, f.intrinsics)
+        want = (out & np.uint8(LABEL_BITS)) > 0
+        shell = (out & np.uint8(SHELL)) > 0
+        if shell.any():
+            sel = np.nonzero(shell)
+            want[sel] = np.isfinite(index.nearest(world(sel), index.max_distance)[1])
+            shell_pixels += int(shell.sum())
+        np.testing.assert_array_equal(got, want)
+    assert shell_pixels > 100  # the shortcut and the exact queries both ran
