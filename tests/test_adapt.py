@@ -198,7 +198,7 @@ def test_recipe_rule_on_hand_made_tables():
 def test_distillation_term_is_zero_at_the_teacher_and_changes_the_weights(tiny_network, robot, tmp_path):
     import torch
 
-    from semmatch.adapt import _distillation
+    from semmatch.adapt.finetune import _distillation
 
     teacher = load_model(tiny_network, flip=False).net.eval()
     cin = next(m for m in teacher.modules() if isinstance(m, torch.nn.Conv2d)).in_channels

@@ -130,7 +130,7 @@ def _reuse_checkpoint(path: Path, target: Path, source_net: Path, source: str, r
     """Copy an adapted checkpoint to ``target`` after checking that its provenance is the request's."""
     import shutil
 
-    from ..adapt import _file_digest
+    from ..adapt.finetune import _file_digest
     from ..io.files import atomic_path
     from ..segment.models import read_checkpoint
 
