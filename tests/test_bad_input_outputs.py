@@ -612,3 +612,25 @@ def test_fuzzed_list_entries_stay_inside_the_folder(tmp_path):
         assert os.path.abspath(p).startswith(str(tmp_path))
 
     check()
+
+
+def test_the_index_cache_goes_where_the_cli_says(base, tmp_path, monkeypatch):
+    """``transfer --index-cache``: the user cache folder by default, 'beside' the map, or a
+    given folder; ``--no-index-cache`` writes none."""
+    monkeypatch.setenv("SEMMATCH_CACHE_DIR", str(tmp_path / "usercache"))
+    m = tmp_path / "maps" / "map.ply"
+    m.parent.mkdir()
+    shutil.copy(base / "map.ply", m)
+
+    def run(*extra: str, out: str) -> None:
+        assert main(["transfer", str(base / "low"), "--map", str(m), "--method", "3d-neighborhood",
+                     "--out", str(tmp_path / out), "--quiet", *extra]) == 0
+
+    run("--no-index-cache", out="o0")
+    assert not (tmp_path / "usercache").exists() and sorted(p.name for p in m.parent.iterdir()) == ["map.ply"]
+    run(out="o1")
+    assert [p.name for p in (tmp_path / "usercache" / "index").iterdir()][0].startswith("map.ply.index-")
+    run("--index-cache", "beside", out="o2")
+    assert any(p.name.startswith(".map.ply.index-") for p in m.parent.iterdir())
+    run("--index-cache", str(tmp_path / "mine"), out="o3")
+    assert [p.name for p in (tmp_path / "mine").iterdir()][0].startswith("map.ply.index-")

@@ -27,7 +27,7 @@ from typing import Any, NamedTuple
 __all__ = ["LONG_VERBS", "ImageSize", "HelpFormatter", "RawDescriptionHelpFormatter", "Parser", "DeprecatedAlias",
            "add_alias", "add_image_size", "add_camera_height", "add_scene_kind", "add_scene_kinds", "add_json",
            "add_quiet", "add_output_flags", "add_sequence", "sequence_arg", "number", "image_size", "emit", "emit_table",
-           "british", "accept_british_spellings", "walk_parsers"]
+           "british", "accept_british_spellings", "walk_parsers", "add_index_cache", "index_cache_options"]
 
 #: the verbs that run long enough to want a progress display (on stderr) and ``--quiet`` to hide it;
 #: the benchmarks are left out (they time their work, and print nothing until the numbers)
@@ -334,6 +334,26 @@ def add_quiet(parser, what: str = "the progress bars") -> None:
     """
     parser.add_argument("--quiet", action="store_true", help=f"hide {what}")
     add_alias(parser, "--no-progress", canonical="--quiet", dest="quiet", nargs=0, const=True)
+
+
+def add_index_cache(parser) -> None:
+    """``--index-cache WHERE`` and ``--no-index-cache``: where the map's index cache goes.
+
+    Parameters
+    ----------
+    parser : argparse.ArgumentParser
+    """
+    parser.add_argument("--index-cache", default="user", metavar="WHERE",
+                        help="where the map's index cache goes: 'user' (the user cache folder, "
+                             "$SEMMATCH_CACHE_DIR/index when that is set), 'beside' (a hidden .MAP.index-KEY.npz "
+                             "beside the map) or a folder (default: user)")
+    parser.add_argument("--no-index-cache", action="store_true",
+                        help="neither read nor write the map's index cache (also off with SEMMATCH_NO_INDEX_CACHE)")
+
+
+def index_cache_options(args: argparse.Namespace) -> dict:
+    """The keywords of :func:`semmatch.transfer.load_index` that :func:`add_index_cache` set."""
+    return {"cache": not args.no_index_cache, "cache_dir": args.index_cache}
 
 
 def add_output_flags(parser, *, json_what: str = "the result", quiet: str | None = None) -> None:

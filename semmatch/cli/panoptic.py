@@ -17,7 +17,7 @@ from pathlib import Path
 
 def register(sub) -> None:
     """Add the ``panoptic`` verb and its sub-commands."""
-    from semmatch.cli.common import add_output_flags, add_sequence, number
+    from semmatch.cli.common import add_index_cache, add_output_flags, add_sequence, number
     from semmatch.io.outputs import declare_paths
     from semmatch.transfer import DEFAULT_MAX_DISTANCE, available_methods
 
@@ -57,9 +57,7 @@ def register(sub) -> None:
                       description="Transfer the classes and instances of the upper panoptic map into "
                       "every frame of SEQ, fuse the classes (TSDF) and vote the instances onto the map.")
     tr.add_argument("--map", required=True, help="upper panoptic PLY (with an 'instance' property)")
-    tr.add_argument("--no-index-cache", action="store_true",
-                    help="neither read nor write the map's index cache (.MAP.index-KEY.npz beside the map; "
-                         "also off with SEMMATCH_NO_INDEX_CACHE)")
+    add_index_cache(tr)
     add_sequence(tr, "the robot's (lower) sequence folder")
     tr.add_argument("--method", required=True, choices=[m for m in available_methods() if m != "fused"],
                     help="transfer method")
@@ -142,7 +140,7 @@ def run_reference(args: argparse.Namespace) -> int:
 
 def run_transfer(args: argparse.Namespace) -> int:
     """Transfer classes and instances into a sequence and fuse its panoptic map."""
-    from semmatch.cli.common import sequence_arg
+    from semmatch.cli.common import index_cache_options, sequence_arg
     from semmatch.fusion import reconstruct
     from semmatch.io import read_map, read_sequence, write_map
     from semmatch.panoptic import PanopticFrame, fuse_instances, require_instances, transfer_panoptic
@@ -152,7 +150,7 @@ def run_transfer(args: argparse.Namespace) -> int:
 
     seq_path = sequence_arg(args)
     upper = require_instances(read_map(args.map), "panoptic transfer")
-    index = load_index(args.map, max_distance=args.max_distance, cache=not args.no_index_cache, semantic_map=upper)
+    index = load_index(args.map, max_distance=args.max_distance, **index_cache_options(args), semantic_map=upper)
     seq = read_sequence(seq_path)
     labels, evidence = [], []
     for i in tqdm(range(len(seq)), desc=f"panoptic {args.method}", disable=args.quiet):

@@ -7,7 +7,7 @@ import json
 
 def register(sub) -> None:
     """Add the ``transfer`` verb."""
-    from semmatch.cli.common import add_output_flags, add_sequence
+    from semmatch.cli.common import add_index_cache, add_output_flags, add_sequence
     from semmatch.io.outputs import declare_paths
     from semmatch.transfer import DEFAULT_MAX_DISTANCE, available_methods
 
@@ -35,9 +35,7 @@ def register(sub) -> None:
     add_output_flags(p, json_what="the statistics", quiet="the progress bar")
     p.add_argument("--strict", action="store_true",
                    help="exit with an error when the map supports (almost) no pixel (default: a warning)")
-    p.add_argument("--no-index-cache", action="store_true",
-                   help="neither read nor write the map's index cache (.MAP.index-KEY.npz beside the map; "
-                        "also off with SEMMATCH_NO_INDEX_CACHE)")
+    add_index_cache(p)
     declare_paths(p, inputs=("sequence", "sequence_flag", "map", "probs"), outputs=("out",))
     p.set_defaults(func=run)
 
@@ -57,7 +55,7 @@ def _parse_params(items: list[str]) -> dict:
 
 def run(args) -> int:
     """Run ``semmatch transfer``."""
-    from semmatch.cli.common import emit, sequence_arg
+    from semmatch.cli.common import emit, index_cache_options, sequence_arg
     from semmatch.io import check_output_dir, read_sequence
     from semmatch.transfer import load_index, transfer_sequence
     from semmatch.transfer.registry import check_params
@@ -77,7 +75,7 @@ def run(args) -> int:
         raise ValueError(f"--jobs must be >= 1, got {args.jobs}")
     seq = read_sequence(seq_path)
     index = load_index(args.map, max_distance=args.max_distance, voxel_size=args.voxel_size,
-                       cache=not args.no_index_cache)
+                       **index_cache_options(args))
     import warnings
 
     from semmatch.transfer.sequence import LOW_SUPPORT, LowSupportWarning

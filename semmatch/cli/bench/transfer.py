@@ -70,11 +70,11 @@ def run(args) -> int:
 
 def _time_map(semantic_map, frames, methods) -> dict:
     """Index one map and time every method against it (:func:`semmatch.transfer.benchmark.time_methods`)."""
-    from semmatch.transfer import prepare
+    from semmatch.transfer import as_map_index
     from semmatch.transfer.benchmark import time_methods
 
     t, c = time.perf_counter(), time.process_time()
-    index = prepare(semantic_map)
+    index = as_map_index(semantic_map)
     build_s, build_cpu_s = time.perf_counter() - t, time.process_time() - c
     out = time_methods(frames, index, methods)
     out.update(vertices=len(semantic_map.points), faces=0 if semantic_map.faces is None else len(semantic_map.faces),
