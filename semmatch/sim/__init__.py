@@ -15,11 +15,10 @@ from .procedural import SCENE_KINDS, box_room, generate_scene
 from .raster import RasterRenderer, gl_available, make_renderer, render_frames
 from .render import Renderer, RenderResult
 from .scene import Scene
-from .sequence import (
+from .sequence import check_seed_splits, generate_dataset
+from .simulate import (
     DEFAULT_SWEEP,
     carrier_poses,
-    check_seed_splits,
-    generate_dataset,
     simulate_pair,
     simulate_sequence,
     simulate_sequences,
