@@ -28,7 +28,8 @@ A plain folder: ``rgb/`` (or ``color/``) and ``depth/`` images paired by sorted 
 Colour and depth images are associated by timestamp as TUM's ``associate.py`` does (greedy,
 closest pairs first, each image used once, ``|dt| <= max_difference``); ground-truth poses are
 interpolated at the colour timestamps (linear translation, slerp rotation) when the frame lies
-between two ground-truth samples at most ``max_gt_gap`` apart.
+between two ground-truth samples at most ``max_gt_gap`` apart (:mod:`semmatch.io.timestamps`:
+the list files, the association and the interpolation, importable from here too).
 """
 
 from __future__ import annotations
@@ -44,6 +45,7 @@ import numpy as np
 from ..geometry import Intrinsics
 from .images import check_depth_units, read_image, read_label_image, read_rgb
 from .sequences import Frame, frame_index, listed_file, read_intrinsics, read_tum
+from .timestamps import associate, interpolate_poses, read_file_list
 
 __all__ = [
     "TUM_INTRINSICS",
@@ -175,109 +177,6 @@ def is_tum_rgbd(path: PathLike) -> bool:
     """True when ``path`` is a folder with ``rgb.txt`` and ``depth.txt``."""
     p = Path(path)
     return (p / "rgb.txt").is_file() and (p / "depth.txt").is_file()
-
-
-def read_file_list(path: PathLike) -> tuple[np.ndarray, list[str]]:
-    """Read a TUM list file (``timestamp filename ...``): timestamps (N,) and file names.
-
-    Raises
-    ------
-    ValueError
-        A line without two fields or with a timestamp that is not a number, or duplicate
-        timestamps (the message gives the file and line).
-    """
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: no such file")
-    stamps, names = [], []
-    for lineno, line in enumerate(path.read_text().splitlines(), 1):
-        line = line.strip()
-        if not line or line.startswith("#"):
-            continue
-        parts = line.replace(",", " ").split()
-        if len(parts) < 2:
-            raise ValueError(f"{path}:{lineno}: expected 'timestamp filename', got {line!r}")
-        try:
-            t = float(parts[0])
-        except ValueError:
-            raise ValueError(f"{path}:{lineno}: timestamp {parts[0]!r} is not a number") from None
-        stamps.append(t)
-        names.append(parts[1])
-    t = np.asarray(stamps, dtype=np.float64)
-    if len(np.unique(t)) != len(t):
-        raise ValueError(f"{path}: duplicate timestamps")
-    return t, names
-
-
-def associate(a: np.ndarray, b: np.ndarray, max_difference: float = 0.02) -> np.ndarray:
-    """Match two timestamp lists as TUM's ``associate.py`` (closest pairs first, one-to-one).
-
-    Returns
-    -------
-    ndarray of int, shape (M, 2)
-        Index pairs ``(i, j)`` with ``|a[i] - b[j]| <= max_difference``, sorted by ``i``.
-    """
-    a = np.asarray(a, dtype=np.float64)
-    b = np.asarray(b, dtype=np.float64)
-    if len(a) == 0 or len(b) == 0:
-        return np.zeros((0, 2), dtype=np.int64)
-    order = np.argsort(b)
-    bs = b[order]
-    # candidates: for every a, the b neighbours within the window
-    lo = np.searchsorted(bs, a - max_difference, side="left")
-    hi = np.searchsorted(bs, a + max_difference, side="right")
-    ii = np.repeat(np.arange(len(a)), hi - lo)
-    jj = np.concatenate([np.arange(s, e) for s, e in zip(lo, hi)]) if len(ii) else np.zeros(0, int)
-    jj = jj.astype(np.int64)
-    diff = np.abs(a[ii] - bs[jj])
-    used_a = np.zeros(len(a), dtype=bool)
-    used_b = np.zeros(len(b), dtype=bool)
-    pairs = []
-    for k in np.argsort(diff, kind="stable"):
-        i, j = ii[k], jj[k]
-        if not used_a[i] and not used_b[j]:
-            used_a[i] = used_b[j] = True
-            pairs.append((i, order[j]))
-    out = np.asarray(sorted(pairs), dtype=np.int64).reshape(-1, 2)
-    return out
-
-
-def interpolate_poses(
-    stamps: np.ndarray, gt_stamps: np.ndarray, gt_poses: np.ndarray, max_gap: float = 0.1
-) -> np.ndarray:
-    """Ground-truth poses at ``stamps`` (N,4,4); NaN where no ground truth brackets the time.
-
-    Translation is interpolated linearly, rotation by slerp, between the two ground-truth samples
-    around each time, when they are at most ``max_gap`` seconds apart (an exact hit always counts).
-    """
-    from scipy.spatial.transform import Rotation
-
-    stamps = np.asarray(stamps, dtype=np.float64)
-    out = np.full((len(stamps), 4, 4), np.nan)
-    if len(gt_stamps) == 0:
-        return out
-    order = np.argsort(gt_stamps)
-    ts, Ps = np.asarray(gt_stamps)[order], np.asarray(gt_poses)[order]
-    j = np.searchsorted(ts, stamps, side="right")
-    exact = (j > 0) & (ts[np.clip(j - 1, 0, len(ts) - 1)] == stamps)
-    j0 = np.clip(j - 1, 0, len(ts) - 1)
-    j1 = np.clip(j, 0, len(ts) - 1)
-    inside = (j > 0) & (j < len(ts)) & (ts[j1] - ts[j0] <= max_gap)
-    ok = inside | exact
-    if not ok.any():
-        return out
-    idx = np.flatnonzero(ok)
-    a, b = j0[idx], np.where(exact[idx], j0[idx], j1[idx])
-    span = ts[b] - ts[a]
-    w = np.where(span > 0, (stamps[idx] - ts[a]) / np.where(span > 0, span, 1), 0.0)
-    ra = Rotation.from_matrix(Ps[a, :3, :3])
-    rb = Rotation.from_matrix(Ps[b, :3, :3])
-    delta = (ra.inv() * rb).as_rotvec()
-    R = (ra * Rotation.from_rotvec(delta * w[:, None])).as_matrix()
-    out[idx] = np.eye(4)
-    out[idx, :3, :3] = R
-    out[idx, :3, 3] = Ps[a, :3, 3] * (1 - w[:, None]) + Ps[b, :3, 3] * w[:, None]
-    return out
 
 
 def _span(t: np.ndarray) -> str:
