@@ -16,8 +16,10 @@ one kind visits, and ``make_trajectory(..., waypoints=...)`` flies them at anoth
 robot follows the person's route through the room, so that the upper map covers what the
 lower camera sees).
 
-One module (over 500 lines): free space, route planning, coverage and the camera paths are one
-planner working on the same free-space grid.
+Size: one module of about 640 lines, on purpose. Free space, route planning, coverage and the
+camera paths are one planner working on one free-space grid (:class:`FreeSpace`), and one
+version number (:data:`TRAJECTORY_VERSION`, which the caches of rendered training views key on)
+covers all of it: a change in any part changes the tours, so the parts stay where that is seen.
 """
 
 from __future__ import annotations
