@@ -331,7 +331,7 @@ def _lower_labels(lower_seq: PosedSequence, models: dict, methods: tuple[str, ..
     frame ``U``, the lower frames at ``lower_in_upper``), and ``fused``; ``(source, method,
     labels folder)`` each."""
     from ..segment import predict_sequence
-    from ..transfer import prepare, transfer_sequence, write_fused_labels
+    from ..transfer import as_map_index, transfer_sequence, write_fused_labels
 
     lower = []
     for source, upper_map in zip(sources, upper_maps, strict=True):
@@ -339,7 +339,7 @@ def _lower_labels(lower_seq: PosedSequence, models: dict, methods: tuple[str, ..
             low_dir = work / f"lower_labels_{source}" / "lower"
             predict_sequence(models[source], lower_seq, low_dir, progress=False)
             lower.append((source, "lower", low_dir))
-        index = prepare(_moved(upper_map, U))
+        index = as_map_index(_moved(upper_map, U))
         for method in methods:
             lab_dir = work / f"lower_labels_{source}" / method
             transfer_sequence(method, lower_seq.seq, index, lab_dir, poses=lower_in_upper, jobs=jobs, progress=False)
