@@ -256,16 +256,6 @@ def test_old_import_paths_warn_and_give_the_new_module():
 MAX_MODULE_LINES = 600
 #: a function's code lines: its body without the docstring, blank lines and comment-only lines
 MAX_FUNCTION_LINES = 80
-#: (module, function) pairs over MAX_FUNCTION_LINES that are being split by others as this check
-#: lands (issue 39); the lead empties this set once they are in. Listed: a function of that name
-#: in that module may be longer; any other function may not. Only ever shrinks.
-SIZE_ALLOWED = {
-    ("semmatch.transfer.index", "_build_grid"),  # MapIndex._build_grid (now in transfer/index/queries.py)
-    ("semmatch.transfer.dbscan", "_kernel"),  # the compiled DBSCAN kernel
-    ("semmatch.cli.bench.render", "run"),  # semmatch bench render
-}
-
-
 def _code_lines(path: Path) -> tuple[ast.Module, set[int]]:
     """The module's AST and the numbers of its lines that hold code (not only a comment, not blank)."""
     import io
@@ -306,14 +296,9 @@ def function_sizes(path: Path) -> dict[str, int]:
     return out
 
 
-def _allowed(module: str, qualname: str) -> bool:
-    name = qualname.rpartition(".")[2]
-    return any((module == m or module.startswith(m + ".")) and name == f for m, f in SIZE_ALLOWED)
-
-
 def test_no_function_over_80_lines_of_code():
     long = [f"{m}.{q}: {n} lines" for m, (f, _) in MODULES.items() for q, n in function_sizes(f).items()
-            if n > MAX_FUNCTION_LINES and not _allowed(m, q)]
+            if n > MAX_FUNCTION_LINES]
     assert not long, f"functions over {MAX_FUNCTION_LINES} lines of code (split them):\n" + "\n".join(long)
 
 
@@ -334,6 +319,3 @@ def test_the_size_counts(tmp_path):
                  '    s = """a\n\n    b"""\n    return y\n\n\nclass C:\n    def g(self):\n        def h():\n'
                  '            return 1\n        return h\n')
     assert function_sizes(f) == {"f": 6, "C.g": 3, "C.g.h": 1}
-    assert _allowed("semmatch.transfer.index.queries", "MapIndex._build_grid")
-    assert not _allowed("semmatch.transfer.index.queries", "MapIndex.query")
-    assert not _allowed("semmatch.transfer.dbscan_extra", "_kernel")

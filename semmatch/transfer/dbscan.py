@@ -117,8 +117,8 @@ def _cells_kernel():
 
 
 @functools.cache
-def _kernel():
-    """The compiled kernel (numba, compiled on first use and cached on disk)."""
+def _union_find():
+    """The compiled helpers of the kernel: union-find's root search and the distance test."""
     from numba import njit
 
     @njit(cache=True, nogil=True)
@@ -139,20 +139,22 @@ def _kernel():
         dz = ps[s, 2] - ps[t, 2]
         return dx * dx + dy * dy + dz * dz < eps2
 
+    return find, near
+
+
+@functools.cache
+def _core_passes():
+    """The compiled passes over core points: which points are core (pass 1), and which core
+    points join (pass 2, union-find over core-core neighbour pairs)."""
+    from numba import njit
+
+    find, near = _union_find()
+
     @njit(cache=True, nogil=True)
-    def kernel(p, order, bounds, nbc, eps2, min_points):
-        n = p.shape[0]
-        m = nbc.shape[0]
-        # points in cell order (contiguous per cell); s indexes this order, order[s] the input;
-        # nbc: the (up to) 27 occupied cells around every occupied cell (-1: empty)
-        ps = np.empty((n, 3), np.float64)
-        for s in range(n):
-            ps[s, 0] = p[order[s], 0]
-            ps[s, 1] = p[order[s], 1]
-            ps[s, 2] = p[order[s], 2]
-        # pass 1: core points (a point is its own neighbour; counting stops at min_points)
-        core = np.zeros(n, np.bool_)
-        for a in range(m):
+    def core_points(ps, bounds, nbc, eps2, min_points):
+        # a point is its own neighbour; counting stops at min_points
+        core = np.zeros(ps.shape[0], np.bool_)
+        for a in range(nbc.shape[0]):
             for s in range(bounds[a], bounds[a + 1]):
                 cnt = 0
                 for o in range(27):
@@ -165,9 +167,12 @@ def _kernel():
                     if cnt >= min_points:
                         break
                 core[s] = cnt >= min_points
-        # pass 2: union-find over core-core neighbour pairs
-        parent = np.arange(n)
-        for a in range(m):
+        return core
+
+    @njit(cache=True, nogil=True)
+    def join_cores(ps, bounds, nbc, core, eps2):
+        parent = np.arange(ps.shape[0])
+        for a in range(nbc.shape[0]):
             for s in range(bounds[a], bounds[a + 1]):
                 if not core[s]:
                     continue
@@ -176,14 +181,28 @@ def _kernel():
                     if b < 0:
                         continue
                     for t in range(max(bounds[b], s + 1), bounds[b + 1]):
-                        if not core[t]:
-                            continue
-                        if near(ps, s, t, eps2):
+                        if core[t] and near(ps, s, t, eps2):
                             rs = find(parent, s)
                             rt = find(parent, t)
                             if rs != rt:
                                 parent[max(rs, rt)] = min(rs, rt)
-        # clusters numbered by their lowest input index
+        return parent
+
+    return core_points, join_cores
+
+
+@functools.cache
+def _label_passes():
+    """The compiled passes that name the clusters: core points numbered by their cluster's lowest
+    input index, then each border point given the lowest-numbered cluster among its core
+    neighbours (pass 3)."""
+    from numba import njit
+
+    find, near = _union_find()
+
+    @njit(cache=True, nogil=True)
+    def number_clusters(order, core, parent):
+        n = order.shape[0]
         pos = np.empty(n, np.int64)
         for s in range(n):
             pos[order[s]] = s
@@ -198,8 +217,11 @@ def _kernel():
                     rank[r] = k
                     k += 1
                 labels[s] = rank[r]
-        # pass 3: a border point joins the lowest-numbered cluster among its core neighbours
-        for a in range(m):
+        return labels
+
+    @njit(cache=True, nogil=True)
+    def attach_borders(ps, bounds, nbc, core, labels, eps2):
+        for a in range(nbc.shape[0]):
             for s in range(bounds[a], bounds[a + 1]):
                 if core[s]:
                     continue
@@ -209,12 +231,35 @@ def _kernel():
                     if b < 0:
                         continue
                     for t in range(bounds[b], bounds[b + 1]):
-                        if not core[t]:
-                            continue
-                        if near(ps, s, t, eps2):
-                            if best < 0 or labels[t] < best:
-                                best = labels[t]
+                        if core[t] and near(ps, s, t, eps2) and (best < 0 or labels[t] < best):
+                            best = labels[t]
                 labels[s] = best
+
+    return number_clusters, attach_borders
+
+
+@functools.cache
+def _kernel():
+    """The compiled kernel (numba, compiled on first use and cached on disk)."""
+    from numba import njit
+
+    core_points, join_cores = _core_passes()
+    number_clusters, attach_borders = _label_passes()
+
+    @njit(cache=True, nogil=True)
+    def kernel(p, order, bounds, nbc, eps2, min_points):
+        # points in cell order (contiguous per cell); s indexes this order, order[s] the input;
+        # nbc: the (up to) 27 occupied cells around every occupied cell (-1: empty)
+        n = p.shape[0]
+        ps = np.empty((n, 3), np.float64)
+        for s in range(n):
+            ps[s, 0] = p[order[s], 0]
+            ps[s, 1] = p[order[s], 1]
+            ps[s, 2] = p[order[s], 2]
+        core = core_points(ps, bounds, nbc, eps2, min_points)
+        parent = join_cores(ps, bounds, nbc, core, eps2)
+        labels = number_clusters(order, core, parent)
+        attach_borders(ps, bounds, nbc, core, labels, eps2)
         out = np.empty(n, np.int64)
         for s in range(n):
             out[order[s]] = labels[s]
