@@ -87,7 +87,9 @@ stages = {
     params=["profile", *common("methods"), f"profiles.{P}.qualitative"],
     outs=[], figs=["fig4_qualitative.png"]),
  "adapt_robot_view": dict(
-    nb="09_adapt_robot_view", deps=[f"data/{P}/scenes", f"data/{P}/models", f"data/{P}/lower_maps"],
+    # models: the shipped adapted networks (models/<profile>/adapted, every profile; notebook 09 uses them when they
+    # answer its request)
+    nb="09_adapt_robot_view", deps=[f"data/{P}/scenes", f"data/{P}/models", f"data/{P}/lower_maps", "models"],
     params=["profile", *common("kinds", "train_seeds", "voxel_size", "eval_voxel_size", "fused_base", "seed"),
             f"profiles.{P}.adapt_robot_view"],
     outs=[f"data/{P}/adapted"],

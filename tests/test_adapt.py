@@ -302,3 +302,59 @@ def test_adapt_recipe_is_the_one_source_of_the_fine_tuning_defaults():
             AdaptRecipe(**bad)
     with pytest.raises(ValueError, match="distill"):
         AdaptRecipe(upper_share=0.0, distill=1.0)
+
+
+def test_a_shipped_adaptation_is_used_only_for_its_own_request(tiny_network, robot, tmp_path):
+    """``ship-adapted`` copies a run's adapted checkpoints and recipe choice with a manifest of the
+    request they answer; notebook 09 (``provide_adaptation``) copies them instead of fine-tuning
+    when its request is the same, and names what differs (or what was damaged) otherwise."""
+    import shutil
+
+    import pandas as pd
+
+    from semmatch.experiments.adapt import adapt_networks
+    from semmatch.experiments.layout import Layout
+    from semmatch.experiments.shipped_adaptation import (
+        adaptation_request,
+        provide_adaptation,
+        ship_adaptation,
+    )
+    from semmatch.experiments.shipped_adaptation import shipped_adaptation as find_shipped
+
+    sources = ["3d-neighborhood", "ground-truth"]
+    params = dict(sources=sources, recipe_grid={"lr": [1e-3]}, recipe_source="3d-neighborhood", steps=2,
+                  batch_size=4, max_forgetting=0.02, seed=0)
+    roots = [tmp_path / "run", tmp_path / "repro"]
+    for root in roots:
+        Layout(root).model("compact").parent.mkdir(parents=True)
+        shutil.copyfile(tiny_network, Layout(root).model("compact"))
+    made = adapt_networks(roots[0], "compact", robot, sources, steps=2, batch_size=4, lr=1e-3, seed=0, progress=False)
+    table = tmp_path / "validation_adapt_recipe.csv"
+    pd.DataFrame({"candidate": [0], "lr": ["0.001"], "gain_low": [0.1], "change_high": [0.0],
+                  "chosen": [True]}).to_csv(table, index=False)
+    shipped = tmp_path / "models" / "adapted"
+    ship_adaptation(roots[0], "compact", shipped, parameters=params, recipe_table=table, code_version="test")
+
+    kw = dict(recipe_grid=params["recipe_grid"], recipe_source="3d-neighborhood", defaults={"steps": 2, "batch_size": 4},
+              max_forgetting=0.02, seed=0)
+    recipe, got_table, checkpoints, how = provide_adaptation(roots[1], "compact", robot, sources, shipped_dir=shipped,
+                                                             progress=False, **kw)
+    assert how.startswith("shipped") and recipe["steps"] == 2 and recipe["lr"] == 1e-3
+    assert got_table["chosen"].tolist() == [True]
+    for name, p in made.items():
+        assert checkpoints[name].read_bytes() == p.read_bytes()  # copied, not fine-tuned again
+        assert checkpoints[name].parent == roots[1] / "adapted"
+
+    from semmatch.adapt.finetune import _file_digest
+
+    request = adaptation_request(network_sha256=_file_digest(Layout(roots[1]).model("compact")), scenes=robot.scenes,
+                                 frames=len(robot.views), sources=sources, **kw)
+    assert find_shipped(shipped, request)[0] is not None
+    found, why = find_shipped(shipped, {**request, "max_forgetting": 0.05})
+    assert found is None and "max_forgetting" in why
+    found, why = find_shipped(shipped, {**request, "network_sha256": "0" * 16})
+    assert found is None and "network_sha256" in why
+    (shipped / "compact~ground-truth.pt").write_bytes(b"damaged")
+    found, why = find_shipped(shipped, request)
+    assert found is None and "'ground-truth'" in why
+    assert find_shipped(tmp_path / "nowhere", request) == (None, f"no shipped adaptation in {tmp_path / 'nowhere'}")

@@ -38,7 +38,7 @@ from .pipeline import NOTEBOOKS, ROOT, notebook_parameters, run_notebook
 from .protocol import check_confirm_seeds, check_protocol
 
 __all__ = ["SKIPPED", "confirm_name", "write_confirm_params", "unshipped_networks", "run_confirm",
-           "code_version", "add_confirm_parser", "add_ship_parser"]
+           "code_version", "add_confirm_parser", "add_ship_parser", "add_ship_adapted_parser"]
 
 #: notebooks a confirmatory run leaves out, and why (printed when skipped)
 SKIPPED: dict[str, str] = {
@@ -270,5 +270,32 @@ def _ship_main(args) -> int:
         raise FileNotFoundError(f"{src}: no checkpoint for {', '.join(missing)}")
     for p in ship_networks({n: src / f"{n}.pt" for n in args.networks}, args.to, recipe=src / "recipe.json",
                            code_version=args.code_version or code_version(), note=args.note):
+        print(p)
+    return 0
+
+
+def add_ship_adapted_parser(sub) -> None:
+    """The ``ship-adapted`` subcommand: copy stage 09's adapted networks into ``models/<profile>/adapted/``."""
+    s = sub.add_parser("ship-adapted", help="copy a run's adapted networks and recipe choice into a shipped folder "
+                                            "(models/<profile>/adapted/) with a manifest")
+    s.add_argument("--profile", help="profile whose notebook 09 parameters the run used (default: params.yaml's)")
+    s.add_argument("--data-root", help="the run's data root (default data/<profile>)")
+    s.add_argument("--figures-dir", help="the run's figures (default figures/<profile>): its validation_adapt_recipe.csv")
+    s.add_argument("--to", help="the shipped folder (default models/<profile>/adapted)")
+    s.add_argument("--code-version", help="the commit the run fine-tuned with (default: git describe of this checkout)")
+    s.add_argument("--note", help="free text recorded in the manifest")
+    s.set_defaults(handler=_ship_adapted_main)
+
+
+def _ship_adapted_main(args) -> int:
+    from .shipped_adaptation import RECIPE_TABLE, ship_adaptation
+
+    params = notebook_parameters("09_adapt_robot_view", args.profile)
+    name = params["profile"]
+    figures = Path(args.figures_dir or ROOT / "figures" / name)
+    for p in ship_adaptation(args.data_root or ROOT / "data" / name, params["network"],
+                             args.to or ROOT / "models" / name / "adapted", parameters=params,
+                             recipe_table=figures / RECIPE_TABLE, code_version=args.code_version or code_version(),
+                             note=args.note):
         print(p)
     return 0
