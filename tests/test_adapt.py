@@ -358,3 +358,37 @@ def test_a_shipped_adaptation_is_used_only_for_its_own_request(tiny_network, rob
     found, why = find_shipped(shipped, request)
     assert found is None and "'ground-truth'" in why
     assert find_shipped(tmp_path / "nowhere", request) == (None, f"no shipped adaptation in {tmp_path / 'nowhere'}")
+
+
+def test_gap_bounds_and_the_per_scene_change_figure(tmp_path):
+    """One-sided bounds on a hand-made sweep: a source that closes 70 % +- a little of every
+    scene's gap clears 60 %, one that closes 60 % on average with a wide spread does not; the
+    change at 1.6 m is reported per scene (losers counted) and drawn one dot per scene."""
+    import pandas as pd
+
+    from semmatch.experiments.adapt import gap_bounds, gap_table, per_scene_changes
+    from semmatch.plots import plot_per_scene_change
+
+    rng = np.random.default_rng(0)
+    rows = []
+    for i in range(12):
+        lo, hi = 0.4 + 0.02 * i, 0.75 + 0.01 * i
+        gap = hi - lo
+        for model, share, loss in (("net", 0.0, 0.0), ("net~tight", 0.7 + rng.normal(0, 0.02), -0.01 * (i % 2)),
+                                   ("net~wide", 0.6 + rng.normal(0, 0.4), -0.05 * (i < 3))):
+            rows += [dict(model=model, scene=f"s{i}", height=0.2, miou=lo + share * gap),
+                     dict(model=model, scene=f"s{i}", height=1.6, miou=hi + loss)]
+    per_scene = pd.DataFrame(rows)
+    b = gap_bounds(per_scene, "net", target=0.6, forgetting=0.02).set_index("source")
+    assert list(b.index) == ["tight", "wide"] and (b["scenes"] == 12).all()
+    t = gap_table(per_scene, "net").set_index("source")
+    assert b.loc["tight", "gap_closed"] == pytest.approx(t.loc["tight", "gap_closed"])
+    assert 0.6 < b.loc["tight", "gap_closed_lower"] < b.loc["tight", "gap_closed"] and b.loc["tight", "clears_target"]
+    assert b.loc["wide", "gap_closed_lower"] < 0.6 and not b.loc["wide", "clears_target"]
+    assert b.loc["wide", "scenes_losing"] == 3 and b.loc["tight", "scenes_losing"] == 0
+    assert b.loc["wide", "change_high_min"] == pytest.approx(-0.05)
+    assert b.loc["wide", "change_high_lower"] < b.loc["wide", "change_high"]
+    changes = per_scene_changes(per_scene, "net")
+    assert len(changes) == 24 and set(changes["source"]) == {"tight", "wide"}
+    out = plot_per_scene_change(changes, tmp_path / "change.png", threshold=0.02)
+    assert out.stat().st_size > 1000
