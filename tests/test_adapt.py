@@ -392,3 +392,42 @@ def test_gap_bounds_and_the_per_scene_change_figure(tmp_path):
     assert len(changes) == 24 and set(changes["source"]) == {"tight", "wide"}
     out = plot_per_scene_change(changes, tmp_path / "change.png", threshold=0.02)
     assert out.stat().st_size > 1000
+
+
+def test_ship_adapted_command_writes_the_shipped_folder(tmp_path, capsys):
+    """``python -m semmatch.experiments ship-adapted`` reads notebook 09's parameters of a profile
+    and the run's checkpoints and recipe table, and writes the shipped folder with its manifest;
+    a run with a source missing is refused by name."""
+    import json
+
+    import pandas as pd
+    import torch
+
+    from semmatch.adapt import AdaptRecipe
+    from semmatch.experiments.confirm import add_ship_adapted_parser
+    from semmatch.experiments.pipeline import main, notebook_parameters
+
+    params = notebook_parameters("09_adapt_robot_view", "smoke")
+    data, figures, dest = tmp_path / "data", tmp_path / "figures", tmp_path / "models" / "adapted"
+    (data / "adapted").mkdir(parents=True)
+    figures.mkdir()
+    pd.DataFrame({"candidate": [0, 1], "chosen": [False, True]}).to_csv(figures / "validation_adapt_recipe.csv",
+                                                                         index=False)
+    recipe = AdaptRecipe(steps=params["steps"], batch_size=params["batch_size"]).as_dict()
+    for s in params["sources"][1:]:
+        torch.save({"adapted": {"from_sha256": "ab" * 8, "scenes": ["living_room_0001"], "frames": 8,
+                                "label_source": s, **recipe}}, data / "adapted" / f"compact~{s}.pt")
+    argv = ["ship-adapted", "--profile", "smoke", "--data-root", str(data), "--figures-dir", str(figures),
+            "--to", str(dest), "--code-version", "test"]
+    assert main(argv, extra_commands=(add_ship_adapted_parser,)) == 1
+    assert f"compact~{params['sources'][0]}.pt" in capsys.readouterr().err and not dest.exists()
+    s = params["sources"][0]
+    torch.save({"adapted": {"from_sha256": "ab" * 8, "scenes": ["living_room_0001"], "frames": 8, "label_source": s,
+                            **recipe}}, data / "adapted" / f"compact~{s}.pt")
+    assert main(argv, extra_commands=(add_ship_adapted_parser,)) == 0
+    m = json.loads((dest / "adaptation.json").read_text())
+    assert m["request"]["sources"] == params["sources"] and m["request"]["recipe_grid"] == params["recipe_grid"]
+    assert m["request"]["defaults"] == {"steps": params["steps"], "batch_size": params["batch_size"]}
+    assert m["recipe"]["steps"] == params["steps"] and m["code_version"] == "test"
+    assert sorted(p.name for p in dest.iterdir()) == sorted(
+        ["adaptation.json", "validation_adapt_recipe.csv", *(f"compact~{s}.pt" for s in params["sources"])])
