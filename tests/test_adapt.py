@@ -358,6 +358,13 @@ def test_a_shipped_adaptation_is_used_only_for_its_own_request(tiny_network, rob
     found, why = find_shipped(shipped, request)
     assert found is None and "'ground-truth'" in why
     assert find_shipped(tmp_path / "nowhere", request) == (None, f"no shipped adaptation in {tmp_path / 'nowhere'}")
+    # a confirmatory run never fine-tunes: without a shipped adaptation for its request it stops, saying why
+    with pytest.raises(ValueError, match="required here.*'ground-truth'"):
+        provide_adaptation(roots[1], "compact", robot, sources, shipped_dir=shipped, require_shipped=True,
+                           progress=False, **kw)
+    with pytest.raises(ValueError, match="exclude each other"):
+        provide_adaptation(roots[1], "compact", robot, sources, shipped_dir=shipped, require_shipped=True,
+                           retrain=True, progress=False, **kw)
 
 
 def test_gap_bounds_and_the_per_scene_change_figure(tmp_path):

@@ -202,6 +202,7 @@ def provide_adaptation(
     seed: int = 0,
     shipped_dir: str | os.PathLike | None = None,
     retrain: bool = False,
+    require_shipped: bool = False,
     jobs: int = 1,
     progress: bool = True,
 ) -> tuple[dict, pd.DataFrame, dict[str, Path], str]:
@@ -219,6 +220,9 @@ def provide_adaptation(
         The shipped adaptation folder (``models/<profile>/adapted``; None: none).
     retrain : bool
         Fine-tune even when a shipped adaptation answers the request (``make repro TRAIN=1``).
+    require_shipped : bool
+        Never fine-tune: without a shipped adaptation that answers the request, raise (a
+        confirmatory run scores what was shipped and trains nothing).
     progress : bool
 
     Returns
@@ -231,6 +235,12 @@ def provide_adaptation(
         ``{adapted name: checkpoint path}`` under ``data_root/adapted``.
     how : str
         Where they came from, for the notebook to print.
+
+    Raises
+    ------
+    ValueError
+        ``require_shipped`` and no shipped adaptation answers the request (naming why), or
+        ``retrain`` with ``require_shipped``.
     """
     from ..adapt.finetune import _file_digest
 
@@ -238,6 +248,8 @@ def provide_adaptation(
         network_sha256=_file_digest(Layout(data_root).model(network)), scenes=robot.scenes, frames=len(robot.views),
         sources=sources, recipe_grid=recipe_grid, recipe_source=recipe_source, defaults=defaults,
         max_forgetting=max_forgetting, seed=seed)
+    if retrain and require_shipped:
+        raise ValueError("retrain and require_shipped exclude each other")
     why = "make repro TRAIN=1 asks for it"
     if not retrain:
         shipped, why = shipped_adaptation(shipped_dir, request) if shipped_dir else (None, "no shipped folder given")
@@ -246,6 +258,9 @@ def provide_adaptation(
             checkpoints = adapt_networks(data_root, network, robot, sources, seed=seed, reuse=paths,
                                          progress=progress, **recipe)
             return recipe, table, checkpoints, f"shipped ({shipped_dir}): nothing fine-tuned here"
+        if require_shipped:
+            raise ValueError(f"the shipped adapted networks are required here (a confirmatory run fine-tunes nothing), "
+                             f"but {why}")
     recipe, table = choose_adaptation_recipe(
         data_root, network, robot, recipe_candidates(dict(recipe_grid)), source=recipe_source,
         defaults=dict(defaults), max_forgetting=max_forgetting, seed=seed, jobs=jobs, progress=progress)
