@@ -46,20 +46,18 @@ SKIPPED: dict[str, str] = {
     "09_adapt_robot_view": "skipped: it would fine-tune networks, and models/<profile>/adapted/ holds no shipped "
                            "adaptation (a confirmatory run trains nothing)",
 }
-#: the notebook that scores the shipped adapted networks (run when they are shipped, or with allow_training)
+#: the notebook that scores the shipped adapted networks (run only when they are shipped)
 ADAPT_NOTEBOOK = "09_adapt_robot_view"
 
 
-def adapted_networks_source(shipped_dir: str | os.PathLike, allow_training: bool) -> str | None:
+def adapted_networks_source(shipped_dir: str | os.PathLike) -> str | None:
     """Where a confirmatory run's adapted networks come from: ``"shipped"`` (``shipped_dir/adapted``
-    holds a shipped adaptation; notebook 09 then uses it or fails, never fine-tuning),
-    ``"trained here"`` (none shipped, ``allow_training``) or None (none shipped: notebook 09 is
-    skipped)."""
+    holds a shipped adaptation; notebook 09 then uses it or fails, never fine-tuning) or None
+    (none shipped: notebook 09 is skipped, also with ``allow_training``: the smoke-sized networks
+    a test trains in a few steps are too weak to label the robot's frames for adaptation)."""
     from .shipped_adaptation import MANIFEST
 
-    if (Path(shipped_dir) / "adapted" / MANIFEST).is_file():
-        return "shipped"
-    return "trained here" if allow_training else None
+    return "shipped" if (Path(shipped_dir) / "adapted" / MANIFEST).is_file() else None
 
 
 def confirm_name(seeds: Sequence[int]) -> str:
@@ -212,7 +210,7 @@ def run_confirm(seeds: Sequence[int], *, name: str | None = None, base_profile: 
         file=sys.stderr)
     t0, walls = time.perf_counter(), {}
     started = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
-    adapted_from = adapted_networks_source(ROOT / shipped_dir, allow_training)
+    adapted_from = adapted_networks_source(ROOT / shipped_dir)
     skipped = {} if adapted_from else dict(SKIPPED)
     for nb in NOTEBOOKS:
         if nb in skipped:
