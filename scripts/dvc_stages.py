@@ -87,12 +87,15 @@ stages = {
     params=["profile", *common("methods"), f"profiles.{P}.qualitative"],
     outs=[], figs=["fig4_qualitative.png"]),
  "adapt_robot_view": dict(
-    nb="09_adapt_robot_view", deps=[f"data/{P}/scenes", f"data/{P}/models", f"data/{P}/lower_maps"],
+    # models: the shipped adapted networks (models/<profile>/adapted, every profile; notebook 09 uses them when they
+    # answer its request)
+    nb="09_adapt_robot_view", deps=[f"data/{P}/scenes", f"data/{P}/models", f"data/{P}/lower_maps", "models"],
     params=["profile", *common("kinds", "train_seeds", "voxel_size", "eval_voxel_size", "fused_base", "seed"),
             f"profiles.{P}.adapt_robot_view"],
     outs=[f"data/{P}/adapted"],
     figs=[*tbl("adapt_label_quality", "validation_adapt_recipe", "adapt_height_per_scene", "adapt_height", "adapt_gap",
-               "table2_adapted_per_scene", "table2_adapted", "table2_adapted_vs_transfer"), "adapt_height.png"]),
+               "adapt_gap_bounds", "table2_adapted_per_scene", "table2_adapted", "table2_adapted_vs_transfer"),
+          "adapt_height.png", "adapt_change_high.png"]),
  "panoptic": dict(
     nb="10_panoptic", deps=[f"data/{P}/scenes", f"data/{P}/upper", f"data/{P}/lower_maps"],
     params=["profile", *common("methods", "voxel_size", "eval_voxel_size"), f"profiles.{P}.panoptic"],

@@ -302,3 +302,139 @@ def test_adapt_recipe_is_the_one_source_of_the_fine_tuning_defaults():
             AdaptRecipe(**bad)
     with pytest.raises(ValueError, match="distill"):
         AdaptRecipe(upper_share=0.0, distill=1.0)
+
+
+def test_a_shipped_adaptation_is_used_only_for_its_own_request(tiny_network, robot, tmp_path):
+    """``ship-adapted`` copies a run's adapted checkpoints and recipe choice with a manifest of the
+    request they answer; notebook 09 (``provide_adaptation``) copies them instead of fine-tuning
+    when its request is the same, and names what differs (or what was damaged) otherwise."""
+    import shutil
+
+    import pandas as pd
+
+    from semmatch.experiments.adapt import adapt_networks
+    from semmatch.experiments.layout import Layout
+    from semmatch.experiments.shipped_adaptation import (
+        adaptation_request,
+        provide_adaptation,
+        ship_adaptation,
+    )
+    from semmatch.experiments.shipped_adaptation import shipped_adaptation as find_shipped
+
+    sources = ["3d-neighborhood", "ground-truth"]
+    params = dict(sources=sources, recipe_grid={"lr": [1e-3]}, recipe_source="3d-neighborhood", steps=2,
+                  batch_size=4, max_forgetting=0.02, seed=0)
+    roots = [tmp_path / "run", tmp_path / "repro"]
+    for root in roots:
+        Layout(root).model("compact").parent.mkdir(parents=True)
+        shutil.copyfile(tiny_network, Layout(root).model("compact"))
+    made = adapt_networks(roots[0], "compact", robot, sources, steps=2, batch_size=4, lr=1e-3, seed=0, progress=False)
+    table = tmp_path / "validation_adapt_recipe.csv"
+    pd.DataFrame({"candidate": [0], "lr": ["0.001"], "gain_low": [0.1], "change_high": [0.0],
+                  "chosen": [True]}).to_csv(table, index=False)
+    shipped = tmp_path / "models" / "adapted"
+    ship_adaptation(roots[0], "compact", shipped, parameters=params, recipe_table=table, code_version="test")
+
+    kw = dict(recipe_grid=params["recipe_grid"], recipe_source="3d-neighborhood", defaults={"steps": 2, "batch_size": 4},
+              max_forgetting=0.02, seed=0)
+    recipe, got_table, checkpoints, how = provide_adaptation(roots[1], "compact", robot, sources, shipped_dir=shipped,
+                                                             progress=False, **kw)
+    assert how.startswith("shipped") and recipe["steps"] == 2 and recipe["lr"] == 1e-3
+    assert got_table["chosen"].tolist() == [True]
+    for name, p in made.items():
+        assert checkpoints[name].read_bytes() == p.read_bytes()  # copied, not fine-tuned again
+        assert checkpoints[name].parent == roots[1] / "adapted"
+
+    from semmatch.adapt.finetune import _file_digest
+
+    request = adaptation_request(network_sha256=_file_digest(Layout(roots[1]).model("compact")), scenes=robot.scenes,
+                                 frames=len(robot.views), sources=sources, **kw)
+    assert find_shipped(shipped, request)[0] is not None
+    found, why = find_shipped(shipped, {**request, "max_forgetting": 0.05})
+    assert found is None and "max_forgetting" in why
+    found, why = find_shipped(shipped, {**request, "network_sha256": "0" * 16})
+    assert found is None and "network_sha256" in why
+    (shipped / "compact~ground-truth.pt").write_bytes(b"damaged")
+    found, why = find_shipped(shipped, request)
+    assert found is None and "'ground-truth'" in why
+    assert find_shipped(tmp_path / "nowhere", request) == (None, f"no shipped adaptation in {tmp_path / 'nowhere'}")
+    # a confirmatory run never fine-tunes: without a shipped adaptation for its request it stops, saying why
+    with pytest.raises(ValueError, match="required here.*'ground-truth'"):
+        provide_adaptation(roots[1], "compact", robot, sources, shipped_dir=shipped, require_shipped=True,
+                           progress=False, **kw)
+    with pytest.raises(ValueError, match="exclude each other"):
+        provide_adaptation(roots[1], "compact", robot, sources, shipped_dir=shipped, require_shipped=True,
+                           retrain=True, progress=False, **kw)
+
+
+def test_gap_bounds_and_the_per_scene_change_figure(tmp_path):
+    """One-sided bounds on a hand-made sweep: a source that closes 70 % +- a little of every
+    scene's gap clears 60 %, one that closes 60 % on average with a wide spread does not; the
+    change at 1.6 m is reported per scene (losers counted) and drawn one dot per scene."""
+    import pandas as pd
+
+    from semmatch.experiments.adapt import gap_bounds, gap_table, per_scene_changes
+    from semmatch.plots import plot_per_scene_change
+
+    rng = np.random.default_rng(0)
+    rows = []
+    for i in range(12):
+        lo, hi = 0.4 + 0.02 * i, 0.75 + 0.01 * i
+        gap = hi - lo
+        for model, share, loss in (("net", 0.0, 0.0), ("net~tight", 0.7 + rng.normal(0, 0.02), -0.01 * (i % 2)),
+                                   ("net~wide", 0.6 + rng.normal(0, 0.4), -0.05 * (i < 3))):
+            rows += [dict(model=model, scene=f"s{i}", height=0.2, miou=lo + share * gap),
+                     dict(model=model, scene=f"s{i}", height=1.6, miou=hi + loss)]
+    per_scene = pd.DataFrame(rows)
+    b = gap_bounds(per_scene, "net", target=0.6, forgetting=0.02).set_index("source")
+    assert list(b.index) == ["tight", "wide"] and (b["scenes"] == 12).all()
+    t = gap_table(per_scene, "net").set_index("source")
+    assert b.loc["tight", "gap_closed"] == pytest.approx(t.loc["tight", "gap_closed"])
+    assert 0.6 < b.loc["tight", "gap_closed_lower"] < b.loc["tight", "gap_closed"] and b.loc["tight", "clears_target"]
+    assert b.loc["wide", "gap_closed_lower"] < 0.6 and not b.loc["wide", "clears_target"]
+    assert b.loc["wide", "scenes_losing"] == 3 and b.loc["tight", "scenes_losing"] == 0
+    assert b.loc["wide", "change_high_min"] == pytest.approx(-0.05)
+    assert b.loc["wide", "change_high_lower"] < b.loc["wide", "change_high"]
+    changes = per_scene_changes(per_scene, "net")
+    assert len(changes) == 24 and set(changes["source"]) == {"tight", "wide"}
+    out = plot_per_scene_change(changes, tmp_path / "change.png", threshold=0.02)
+    assert out.stat().st_size > 1000
+
+
+def test_ship_adapted_command_writes_the_shipped_folder(tmp_path, capsys):
+    """``python -m semmatch.experiments ship-adapted`` reads notebook 09's parameters of a profile
+    and the run's checkpoints and recipe table, and writes the shipped folder with its manifest;
+    a run with a source missing is refused by name."""
+    import json
+
+    import pandas as pd
+    import torch
+
+    from semmatch.adapt import AdaptRecipe
+    from semmatch.experiments.confirm import add_ship_adapted_parser
+    from semmatch.experiments.pipeline import main, notebook_parameters
+
+    params = notebook_parameters("09_adapt_robot_view", "smoke")
+    data, figures, dest = tmp_path / "data", tmp_path / "figures", tmp_path / "models" / "adapted"
+    (data / "adapted").mkdir(parents=True)
+    figures.mkdir()
+    pd.DataFrame({"candidate": [0, 1], "chosen": [False, True]}).to_csv(figures / "validation_adapt_recipe.csv",
+                                                                         index=False)
+    recipe = AdaptRecipe(steps=params["steps"], batch_size=params["batch_size"]).as_dict()
+    for s in params["sources"][1:]:
+        torch.save({"adapted": {"from_sha256": "ab" * 8, "scenes": ["living_room_0001"], "frames": 8,
+                                "label_source": s, **recipe}}, data / "adapted" / f"compact~{s}.pt")
+    argv = ["ship-adapted", "--profile", "smoke", "--data-root", str(data), "--figures-dir", str(figures),
+            "--to", str(dest), "--code-version", "test"]
+    assert main(argv, extra_commands=(add_ship_adapted_parser,)) == 1
+    assert f"compact~{params['sources'][0]}.pt" in capsys.readouterr().err and not dest.exists()
+    s = params["sources"][0]
+    torch.save({"adapted": {"from_sha256": "ab" * 8, "scenes": ["living_room_0001"], "frames": 8, "label_source": s,
+                            **recipe}}, data / "adapted" / f"compact~{s}.pt")
+    assert main(argv, extra_commands=(add_ship_adapted_parser,)) == 0
+    m = json.loads((dest / "adaptation.json").read_text())
+    assert m["request"]["sources"] == params["sources"] and m["request"]["recipe_grid"] == params["recipe_grid"]
+    assert m["request"]["defaults"] == {"steps": params["steps"], "batch_size": params["batch_size"]}
+    assert m["recipe"]["steps"] == params["steps"] and m["code_version"] == "test"
+    assert sorted(p.name for p in dest.iterdir()) == sorted(
+        ["adaptation.json", "validation_adapt_recipe.csv", *(f"compact~{s}.pt" for s in params["sources"])])

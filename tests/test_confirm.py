@@ -101,9 +101,11 @@ def test_a_smoke_sized_confirm_run_writes_every_table(tmp_path):
     data = tmp_path / "data" / "confirm" / "smoke"
     assert json.loads((figures / "confirm.json").read_text()) == rec
     assert rec["seeds"] == [9101] and rec["networks_from"] == "trained here"
-    assert "09_adapt_robot_view" in rec["skipped"] and "09_adapt_robot_view" not in rec["wall_seconds"]
+    # smoke ships no adaptation: with allow_training notebook 09 fine-tunes and scores, like the networks
+    assert rec["skipped"] == {} and rec["adapted_networks_from"] == "trained here"
+    assert "09_adapt_robot_view" in rec["wall_seconds"] and (figures / "adapt_gap_bounds.csv").is_file()
     assert (figures / "verdicts.md").is_file()
-    assert sorted(p.stem for p in reports.glob("*.ipynb")) == [n for n in pipeline.NOTEBOOKS if n not in confirm.SKIPPED]
+    assert sorted(p.stem for p in reports.glob("*.ipynb")) == list(pipeline.NOTEBOOKS)
     assert yaml.safe_load((data / "params.yaml").read_text())["profiles"]["smoke"]["common"]["eval_seeds"] == [9101]
     for table in ("table2_per_scene", "table2_synthetic", "table3_per_scene", "table3_real", "fig3_height_per_scene",
                   "claims_synthetic", "claims_real", "claims_height", "table_panoptic_per_scene", "verdicts",
@@ -117,3 +119,14 @@ def _scene_column(path):
     import pandas as pd
 
     return pd.read_csv(path)["scene"].astype(str)
+
+
+def test_where_a_confirmatory_run_takes_its_adapted_networks(tmp_path):
+    """Shipped (notebook 09 then uses them or fails), trained here (allow_training), or skipped."""
+    (tmp_path / "full").mkdir()
+    assert confirm.adapted_networks_source(tmp_path / "full", False) is None
+    assert confirm.adapted_networks_source(tmp_path / "full", True) == "trained here"
+    (tmp_path / "full" / "adapted").mkdir()
+    (tmp_path / "full" / "adapted" / "adaptation.json").write_text("{}")
+    assert confirm.adapted_networks_source(tmp_path / "full", False) == "shipped"
+    assert "09_adapt_robot_view" in confirm.SKIPPED and confirm.ADAPT_NOTEBOOK == "09_adapt_robot_view"

@@ -194,3 +194,26 @@ def test_every_interval_method_brackets_the_mean(method):
 def test_interval_refuses_unknown_methods():
     with pytest.raises(ValueError, match="method"):
         interval([1.0, 2.0], method="wald")
+
+
+def test_ratio_lower_bound_is_fiellers_one_sided_t_bound():
+    """The bound solves "one-sided t test of num - r * den at 5 % just rejects", is the ratio itself
+    without noise, -inf when the denominator is not clearly positive, and covers 95 % of the time."""
+    from semmatch.evaluate.stats import ratio_lower_bound
+
+    den = np.array([0.20, 0.25, 0.18, 0.22, 0.30, 0.15])
+    assert ratio_lower_bound(0.6 * den, den) == pytest.approx(0.6)
+    rng = np.random.default_rng(3)
+    num = 0.6 * den + rng.normal(0, 0.03, den.size)
+    low = ratio_lower_bound(num, den)
+    d = num - low * den
+    assert d.mean() / (d.std(ddof=1) / np.sqrt(d.size)) == pytest.approx(st.t.ppf(0.95, d.size - 1), rel=1e-6)
+    assert low < num.mean() / den.mean()
+    assert ratio_lower_bound(num, rng.normal(0.0, 0.2, den.size) - 0.5) == float("-inf")
+    hits = 0
+    for _ in range(2000):  # 12 scenes, true ratio of means 0.6
+        g = rng.normal(0.2, 0.06, 12)
+        hits += ratio_lower_bound(0.6 * g + rng.normal(0, 0.05, 12), g) <= 0.6
+    assert 0.93 <= hits / 2000 <= 0.97
+    with pytest.raises(ValueError, match="at least 2"):
+        ratio_lower_bound([0.1], [0.2])

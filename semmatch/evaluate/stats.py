@@ -12,7 +12,8 @@ Two families of intervals of a mean over scenes (or of a paired mean difference)
 * **Percentile bootstrap** (:func:`bootstrap_ci`, :func:`paired_difference_ci`,
   :func:`ratio_of_means_ci`), by :func:`scipy.stats.bootstrap` with a seeded generator. With 12
   scenes it covers less than its nominal level (``docs/analysis_plan.md``, "Coverage"); the
-  ratio interval (share of a gap closed) has no t analogue here and keeps it.
+  ratio interval (share of a gap closed) keeps it; :func:`ratio_lower_bound` is its one-sided
+  t analogue (Fieller's bound).
 
 :func:`interval` dispatches between these and BCa / stratified percentile variants (used by the
 coverage study, :mod:`semmatch.experiments.coverage`). Degenerate samples (one value, or all
@@ -42,6 +43,7 @@ __all__ = [
     "bootstrap_ci",
     "paired_difference_ci",
     "ratio_of_means_ci",
+    "ratio_lower_bound",
 ]
 
 
@@ -480,3 +482,52 @@ def interval(
                                        np.random.default_rng(seed))
     lo, hi = np.quantile(means, [(1.0 - confidence) / 2, (1.0 + confidence) / 2])
     return mean, float(lo), float(hi)
+
+
+def ratio_lower_bound(num: ArrayLike, den: ArrayLike, *, confidence: float = 0.95) -> float:
+    """One-sided lower confidence bound of ``mean(num) / mean(den)`` over paired units (Fieller).
+
+    The bound is the smallest ratio ``r`` that the one-sided one-sample t test of the paired
+    differences ``num - r * den`` (the analysis plan's t over scenes) does not reject at level
+    ``1 - confidence``: "the share of the gap closed is at least ``r``" holds with that
+    confidence. It solves ``mean(d_r) = t * sd(d_r) / sqrt(n)`` for ``d_r = num - r * den``, a
+    quadratic in ``r``. When the denominator's own mean is not clearly positive (its t test
+    does not reject ``mean(den) <= 0``), every ratio is compatible with the data and the bound is
+    ``-inf``.
+
+    Parameters
+    ----------
+    num, den : array_like
+        Paired values (e.g. per-scene gain and per-scene gap); a pair with a NaN is dropped.
+    confidence : float, optional
+        In (0, 1).
+
+    Returns
+    -------
+    float
+        The lower bound (``mean(num) / mean(den)`` itself when every ``num - r * den`` is exact,
+        i.e. zero variance at the estimate).
+
+    Raises
+    ------
+    ValueError
+        Fewer than two complete pairs, or ``confidence`` not in (0, 1).
+    """
+    if not 0.0 < confidence < 1.0:
+        raise ValueError(f"ratio_lower_bound: confidence must be in (0, 1), got {confidence}")
+    a, b = _complete_pairs(num, den, "ratio_lower_bound", ("num", "den"))
+    n = len(a)
+    if n < 2:
+        raise ValueError(f"ratio_lower_bound: need at least 2 complete pairs, got {n}")
+    t2 = float(_st.t.ppf(confidence, n - 1)) ** 2 / n
+    ma, mb = float(a.mean()), float(b.mean())
+    cov = np.cov(np.stack([a, b]), ddof=1)
+    saa, sab, sbb = float(cov[0, 0]), float(cov[0, 1]), float(cov[1, 1])
+    qa = mb * mb - t2 * sbb  # (ma - r mb)^2 = t2 (saa - 2 r sab + r^2 sbb), as qa r^2 - 2 qb r + qc = 0
+    if mb <= 0 or qa <= 0:
+        return float("-inf")
+    qb = ma * mb - t2 * sab
+    qc = ma * ma - t2 * saa
+    disc = max(qb * qb - qa * qc, 0.0)
+    return float((qb - np.sqrt(disc)) / qa)
+

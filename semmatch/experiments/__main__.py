@@ -2,7 +2,7 @@
 
 import sys
 
-from semmatch.experiments.confirm import add_confirm_parser, add_ship_parser
+from semmatch.experiments.confirm import add_confirm_parser, add_ship_adapted_parser, add_ship_parser
 from semmatch.experiments.pipeline import main
 
-sys.exit(main(extra_commands=(add_confirm_parser, add_ship_parser)))
+sys.exit(main(extra_commands=(add_confirm_parser, add_ship_parser, add_ship_adapted_parser)))

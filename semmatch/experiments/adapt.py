@@ -19,14 +19,14 @@ import pandas as pd
 
 from ..adapt import AdaptRecipe, RobotViews, adapted_name, fine_tune, robot_training_views
 from ..evaluate.metrics import MEASURES, compare
-from ..evaluate.stats import bootstrap_ci, paired_difference_ci, ratio_of_means_ci
+from ..evaluate.stats import bootstrap_ci, paired_difference_ci, ratio_lower_bound, ratio_of_means_ci
 from ..io import read_sequence
 from .layout import Layout
 from .synthetic import eval_grid_origin, reference_grid
 
 __all__ = ["robot_views", "adapt_networks", "recipe_candidates", "choose_adaptation_recipe", "pick_recipe",
            "chosen_recipe_checkpoint", "load_adapted", "adapted_height_study", "gap_table", "adapted_lower_maps",
-           "robot_map_comparison"]
+           "robot_map_comparison", "gap_bounds", "per_scene_changes"]
 
 
 def _adapt_dir(data_root: str | Path) -> Path:
@@ -393,6 +393,60 @@ def gap_table(per_scene: pd.DataFrame, network: str, *, low: float = 0.2, high: 
                     "change_high": c[0], "change_high_lo": c[1], "change_high_hi": c[2],
                     "gap_closed": r[0], "gap_closed_lo": r[1], "gap_closed_hi": r[2]})
         rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def per_scene_changes(per_scene: pd.DataFrame, network: str, *, low: float = 0.2, high: float = 1.6,
+                      measure: str = "miou") -> pd.DataFrame:
+    """Per adapted model and scene: the unadapted network's gap (``high`` minus ``low``), the
+    adapted network's gain at ``low`` and its change at ``high`` (paired with the unadapted
+    network on the same scene)."""
+    def at(model: str, h: float) -> pd.Series:
+        sel = per_scene[(per_scene["model"] == model) & np.isclose(per_scene["height"], h)]
+        return sel.set_index("scene")[measure]
+
+    base_lo, base_hi = at(network, low), at(network, high)
+    rows = []
+    for model in dict.fromkeys(per_scene["model"]):
+        if model == network:
+            continue
+        lo, hi = at(model, low).reindex(base_lo.index), at(model, high).reindex(base_hi.index)
+        for sc in base_lo.index:
+            rows.append({"model": model, "source": model.split("~", 1)[-1], "scene": sc,
+                         "gap": float(base_hi[sc] - base_lo[sc]), "gain_low": float(lo[sc] - base_lo[sc]),
+                         "change_high": float(hi[sc] - base_hi[sc])})
+    return pd.DataFrame(rows, columns=["model", "source", "scene", "gap", "gain_low", "change_high"])
+
+
+def gap_bounds(per_scene: pd.DataFrame, network: str, *, low: float = 0.2, high: float = 1.6, measure: str = "miou",
+               target: float = 0.6, forgetting: float = 0.02, confidence: float = 0.95) -> pd.DataFrame:
+    """One-sided bounds on what each adapted network achieved, per scene and over scenes.
+
+    Per adapted model: ``gap_closed`` (mean gain at ``low`` over mean gap, as :func:`gap_table`)
+    and its one-sided ``confidence`` lower bound (:func:`semmatch.evaluate.stats.ratio_lower_bound`:
+    Fieller's bound from the one-sample t over scenes, the analysis plan's method), whether that
+    bound clears ``target``; the change at ``high`` per scene (median, smallest, largest), the
+    number of scenes that lose more than ``forgetting`` there, and the one-sided lower bound of
+    the mean change (t over scenes).
+    """
+    from scipy import stats as st
+
+    d = per_scene_changes(per_scene, network, low=low, high=high, measure=measure)
+    rows = []
+    for model, g in d.groupby("model", sort=False):
+        g = g.dropna()
+        n = len(g)
+        ch = g["change_high"].to_numpy()
+        se = float(ch.std(ddof=1) / np.sqrt(n)) if n > 1 else float("nan")
+        lb = ratio_lower_bound(g["gain_low"], g["gap"], confidence=confidence) if n > 1 else float("nan")
+        rows.append({"model": model, "source": g["source"].iloc[0], "scenes": n,
+                     "gap_closed": float(g["gain_low"].mean() / g["gap"].mean()),
+                     "gap_closed_lower": lb, "clears_target": bool(lb >= target), "target": target,
+                     "change_high": float(ch.mean()),
+                     "change_high_lower": float(ch.mean() - st.t.ppf(confidence, n - 1) * se) if n > 1 else float("nan"),
+                     "change_high_median": float(np.median(ch)), "change_high_min": float(ch.min()),
+                     "change_high_max": float(ch.max()), "scenes_losing": int((ch < -forgetting).sum()),
+                     "confidence": confidence})
     return pd.DataFrame(rows)
 
 

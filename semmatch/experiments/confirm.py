@@ -38,13 +38,28 @@ from .pipeline import NOTEBOOKS, ROOT, notebook_parameters, run_notebook
 from .protocol import check_confirm_seeds, check_protocol
 
 __all__ = ["SKIPPED", "confirm_name", "write_confirm_params", "unshipped_networks", "run_confirm",
-           "code_version", "add_confirm_parser", "add_ship_parser"]
+           "code_version", "add_confirm_parser", "add_ship_parser", "add_ship_adapted_parser", "ADAPT_NOTEBOOK",
+           "adapted_networks_source"]
 
 #: notebooks a confirmatory run leaves out, and why (printed when skipped)
 SKIPPED: dict[str, str] = {
-    "09_adapt_robot_view": "skipped: it fine-tunes networks, and no adapted networks are shipped yet "
-                           "(a confirmatory run trains nothing)",
+    "09_adapt_robot_view": "skipped: it would fine-tune networks, and models/<profile>/adapted/ holds no shipped "
+                           "adaptation (a confirmatory run trains nothing)",
 }
+#: the notebook that scores the shipped adapted networks (run when they are shipped, or with allow_training)
+ADAPT_NOTEBOOK = "09_adapt_robot_view"
+
+
+def adapted_networks_source(shipped_dir: str | os.PathLike, allow_training: bool) -> str | None:
+    """Where a confirmatory run's adapted networks come from: ``"shipped"`` (``shipped_dir/adapted``
+    holds a shipped adaptation; notebook 09 then uses it or fails, never fine-tuning),
+    ``"trained here"`` (none shipped, ``allow_training``) or None (none shipped: notebook 09 is
+    skipped)."""
+    from .shipped_adaptation import MANIFEST
+
+    if (Path(shipped_dir) / "adapted" / MANIFEST).is_file():
+        return "shipped"
+    return "trained here" if allow_training else None
 
 
 def confirm_name(seeds: Sequence[int]) -> str:
@@ -197,14 +212,17 @@ def run_confirm(seeds: Sequence[int], *, name: str | None = None, base_profile: 
         file=sys.stderr)
     t0, walls = time.perf_counter(), {}
     started = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
+    adapted_from = adapted_networks_source(ROOT / shipped_dir, allow_training)
+    skipped = {} if adapted_from else dict(SKIPPED)
     for nb in NOTEBOOKS:
-        if nb in SKIPPED:
-            print(f"[confirm] {nb}: {SKIPPED[nb]}", file=sys.stderr)
+        if nb in skipped:
+            print(f"[confirm] {nb}: {skipped[nb]}", file=sys.stderr)
             continue
+        extra = {"require_shipped": adapted_from == "shipped"} if nb == ADAPT_NOTEBOOK else {}
         t = time.perf_counter()
         run_notebook(nb, base_profile, params_file=params, reports_dir=dirs["reports_dir"], cwd=ROOT,
                      data_root=dirs["data_root"], figures_dir=dirs["figures_dir"], log_output=log_output,
-                     scheduler=scheduler)
+                     scheduler=scheduler, **extra)
         walls[nb] = round(time.perf_counter() - t, 1)
     # every claim of the analysis plan judged on this run's per-scene tables (verdicts.csv/.md)
     from ..segment.shipping import file_sha256
@@ -220,7 +238,8 @@ def run_confirm(seeds: Sequence[int], *, name: str | None = None, base_profile: 
         "kinds": data["profiles"][base_profile]["common"]["kinds"],
         "networks": {p.stem: file_sha256(p) for p in sorted(models.glob("*.pt"))},
         "networks_from": "trained here" if missing else str(shipped_dir),
-        "skipped": SKIPPED, "code_version": code_version(), "started": started,
+        "adapted_networks_from": (f"{shipped_dir}/adapted" if adapted_from == "shipped" else adapted_from) or "skipped",
+        "skipped": skipped, "code_version": code_version(), "started": started,
         "wall_seconds": walls, "total_seconds": round(time.perf_counter() - t0, 1),
     }
     atomic_write_text(where["figures_dir"] / "confirm.json", json.dumps(record, indent=2) + "\n")
@@ -270,5 +289,32 @@ def _ship_main(args) -> int:
         raise FileNotFoundError(f"{src}: no checkpoint for {', '.join(missing)}")
     for p in ship_networks({n: src / f"{n}.pt" for n in args.networks}, args.to, recipe=src / "recipe.json",
                            code_version=args.code_version or code_version(), note=args.note):
+        print(p)
+    return 0
+
+
+def add_ship_adapted_parser(sub) -> None:
+    """The ``ship-adapted`` subcommand: copy stage 09's adapted networks into ``models/<profile>/adapted/``."""
+    s = sub.add_parser("ship-adapted", help="copy a run's adapted networks and recipe choice into a shipped folder "
+                                            "(models/<profile>/adapted/) with a manifest")
+    s.add_argument("--profile", help="profile whose notebook 09 parameters the run used (default: params.yaml's)")
+    s.add_argument("--data-root", help="the run's data root (default data/<profile>)")
+    s.add_argument("--figures-dir", help="the run's figures (default figures/<profile>): its validation_adapt_recipe.csv")
+    s.add_argument("--to", help="the shipped folder (default models/<profile>/adapted)")
+    s.add_argument("--code-version", help="the commit the run fine-tuned with (default: git describe of this checkout)")
+    s.add_argument("--note", help="free text recorded in the manifest")
+    s.set_defaults(handler=_ship_adapted_main)
+
+
+def _ship_adapted_main(args) -> int:
+    from .shipped_adaptation import RECIPE_TABLE, ship_adaptation
+
+    params = notebook_parameters("09_adapt_robot_view", args.profile)
+    name = params["profile"]
+    figures = Path(args.figures_dir or ROOT / "figures" / name)
+    for p in ship_adaptation(args.data_root or ROOT / "data" / name, params["network"],
+                             args.to or ROOT / "models" / name / "adapted", parameters=params,
+                             recipe_table=figures / RECIPE_TABLE, code_version=args.code_version or code_version(),
+                             note=args.note):
         print(p)
     return 0

@@ -16,6 +16,7 @@ from .charts import (
     plot_measure_bars,
     plot_misregistration,
     plot_panoptic,
+    plot_per_scene_change,
     plot_speed,
     plot_support,
     plot_table,
@@ -24,6 +25,6 @@ from .charts import (
 from .images import floor_plans_figure, frame_figure, image_grid
 
 __all__ = [
-    "confusion_figure", "plot_depth_noise", "plot_height_study", "plot_measure_bars", "plot_misregistration", "plot_panoptic", "plot_speed", "plot_support",
+    "confusion_figure", "plot_depth_noise", "plot_height_study", "plot_measure_bars", "plot_misregistration", "plot_panoptic", "plot_per_scene_change", "plot_speed", "plot_support",
     "plot_table", "plot_training_curves", "floor_plans_figure", "frame_figure", "image_grid",
 ]

@@ -12,7 +12,7 @@ import pandas as pd
 from ..io import save_figure
 
 __all__ = ["confusion_figure", "plot_height_study", "plot_misregistration", "plot_depth_noise", "plot_panoptic", "plot_speed",
-           "plot_support", "plot_table", "plot_training_curves", "plot_measure_bars"]
+           "plot_support", "plot_table", "plot_training_curves", "plot_measure_bars", "plot_per_scene_change"]
 
 
 def confusion_figure(results: dict[str, dict], path: str | Path) -> Path:
@@ -367,3 +367,41 @@ def plot_measure_bars(table: pd.DataFrame, path: str | os.PathLike, *, index: st
     ax.grid(axis="y", alpha=0.3)
     fig.tight_layout()
     return save_figure(fig, path)
+
+
+def plot_per_scene_change(changes: pd.DataFrame, path: str | os.PathLike, *, column: str = "change_high",
+                          by: str = "source", threshold: float | None = None, title: str = "") -> Path:
+    """Every scene's value of ``column`` per group (one dot per scene, the median as a bar), with
+    zero and an optional ``-threshold`` line: the per-scene spread behind a mean.
+
+    Parameters
+    ----------
+    changes : DataFrame
+        One row per (group, scene) with ``by``, ``scene`` and ``column``.
+    path : path
+    column, by : str
+    threshold : float, optional
+        Drawn at ``-threshold`` (e.g. the largest acceptable loss).
+    title : str
+    """
+    import matplotlib.pyplot as plt
+
+    _require_columns(changes, {by, "scene", column}, "plot_per_scene_change")
+    groups = list(dict.fromkeys(changes[by]))
+    fig, ax = plt.subplots(figsize=(1.6 + 1.4 * len(groups), 4.0))
+    rng = np.random.default_rng(0)  # horizontal jitter only
+    for i, name in enumerate(groups):
+        v = changes.loc[changes[by] == name, column].to_numpy(dtype=np.float64)
+        ax.scatter(i + rng.uniform(-0.15, 0.15, v.size), v, s=18, alpha=0.8, color="#0072B2", zorder=3)
+        if v.size:
+            ax.hlines(np.median(v), i - 0.3, i + 0.3, color="black", lw=2, zorder=4)
+    ax.axhline(0.0, color="grey", lw=1)
+    if threshold is not None:
+        ax.axhline(-threshold, color="#D55E00", lw=1, ls="--", label=f"-{threshold:g}")
+        ax.legend(loc="lower right", fontsize=8)
+    ax.set_xticks(range(len(groups)), groups, rotation=20, ha="right", fontsize=8)
+    ax.set_ylabel(column.replace("_", " "))
+    ax.set_title(title or f"{column} per scene (dots), median (bar)", fontsize=9)
+    fig.tight_layout()
+    return save_figure(fig, path)
+
