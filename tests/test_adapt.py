@@ -333,7 +333,14 @@ def test_a_shipped_adaptation_is_used_only_for_its_own_request(tiny_network, rob
     pd.DataFrame({"candidate": [0], "lr": ["0.001"], "gain_low": [0.1], "change_high": [0.0],
                   "chosen": [True]}).to_csv(table, index=False)
     shipped = tmp_path / "models" / "adapted"
+    shipped.mkdir(parents=True)
+    (shipped / "notes.txt").write_text("a folder of someone else's")
+    with pytest.raises(FileExistsError, match="not a shipped adaptation"):
+        ship_adaptation(roots[0], "compact", shipped, parameters=params, recipe_table=table)
+    assert (shipped / "notes.txt").is_file()  # left as it was
+    (shipped / "notes.txt").unlink()
     ship_adaptation(roots[0], "compact", shipped, parameters=params, recipe_table=table, code_version="test")
+    ship_adaptation(roots[0], "compact", shipped, parameters=params, recipe_table=table, code_version="test")  # again
 
     kw = dict(recipe_grid=params["recipe_grid"], recipe_source="3d-neighborhood", defaults={"steps": 2, "batch_size": 4},
               max_forgetting=0.02, seed=0)

@@ -82,7 +82,8 @@ def ship_adaptation(data_root: str | os.PathLike, network: str, dest: str | os.P
     network : str
         The adapted network's name.
     dest : path
-        The shipped folder (e.g. ``models/full/adapted``); replaced as a whole.
+        The shipped folder (e.g. ``models/full/adapted``); a former shipped adaptation there is
+        replaced as a whole, any other non-empty folder is refused.
     parameters : mapping
         Notebook 09's parameters of that run (``sources``, ``recipe_grid``, ``recipe_source``,
         ``steps``, ``batch_size``, ``max_forgetting``, ``seed``).
@@ -100,6 +101,8 @@ def ship_adaptation(data_root: str | os.PathLike, network: str, dest: str | os.P
     ------
     FileNotFoundError
         A source's checkpoint or the recipe table is missing.
+    FileExistsError
+        ``dest`` is a non-empty folder that holds no shipped adaptation.
     ValueError
         The checkpoints disagree on what they were adapted from, or the recipe table has no
         single chosen row.
@@ -129,6 +132,9 @@ def ship_adaptation(data_root: str | os.PathLike, network: str, dest: str | os.P
         max_forgetting=parameters["max_forgetting"], seed=parameters["seed"])
     dest = Path(dest)
     if dest.exists():
+        if not (dest / MANIFEST).is_file() and any(dest.iterdir()):  # replace only what this function wrote
+            raise FileExistsError(f"{dest}: not empty and not a shipped adaptation (no {MANIFEST}); "
+                                  "choose an empty or new folder")
         shutil.rmtree(dest)
     dest.mkdir(parents=True)
     written = []
