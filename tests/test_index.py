@@ -232,7 +232,7 @@ def test_block_lookups_equal_dense_lookups(mesh_map, room, rng, monkeypatch):
 def test_the_vertex_cover_radius_bounds_every_point_of_every_triangle(rng):
     """The bound behind the vertex shortcut of the support test: no point of a triangle is farther
     than it from that triangle's nearest vertex; tight for an equilateral triangle (L / sqrt 3)."""
-    from semmatch.transfer.index.queries import _vertex_cover_radius
+    from semmatch.transfer.index.reach import vertex_cover_radius as _vertex_cover_radius
 
     eq = np.array([[0, 0, 0], [1, 0, 0], [0.5, np.sqrt(3) / 2, 0]], np.float32)
     assert _vertex_cover_radius(eq, np.array([[0, 1, 2]])) == pytest.approx(1 / np.sqrt(3), rel=1e-6)
@@ -249,8 +249,9 @@ def test_the_vertex_cover_radius_bounds_every_point_of_every_triangle(rng):
 
 
 def test_support_with_the_vertex_shortcut_equals_exact_queries(room, rng):
-    """``support_depth`` answers shell pixels from the nearest vertex where that settles them; the
-    answer must equal the exact closest-point test on every pixel, here for a fused
+    """``support_depth`` answers shell pixels from the memoised voxel-centre distances and the
+    nearest vertex where those settle them; the answer must equal the exact closest-point test
+    on every pixel, with the memo empty (first pass) and filled (second pass), here for a fused
     reconstruction (many small triangles) and frames whose depth is stretched by up to 8 %, so
     that many points lie about ``max_distance`` from the surface."""
     from scenes import orbit_poses
@@ -262,8 +263,8 @@ def test_support_with_the_vertex_shortcut_equals_exact_queries(room, rng):
     fused = reconstruct(frames, [f.labels for f in frames], 0.04)
     index = MapIndex(fused, max_distance=0.1)
     shell_pixels = 0
-    for f in frames:
-        depth = (f.depth * (1 + 0.08 * rng.random(f.depth.shape))).astype(np.float32)
+    depths = [(f.depth * (1 + 0.08 * rng.random(f.depth.shape))).astype(np.float32) for f in frames]
+    for f, depth in [*zip(frames, depths), *zip(frames, depths)]:
         got = index.support_depth(depth, f.pose, f.intrinsics)
         out, world = index._gather_depth(depth, f.pose, f.intrinsics)
         want = (out & np.uint8(LABEL_BITS)) > 0
@@ -274,3 +275,31 @@ def test_support_with_the_vertex_shortcut_equals_exact_queries(room, rng):
             shell_pixels += int(shell.sum())
         np.testing.assert_array_equal(got, want)
     assert shell_pixels > 100  # the shortcut and the exact queries both ran
+    assert (index._reach.codes != -128).sum() > 10  # centre distances were memoised
+
+
+@pytest.mark.parametrize("kind", ["mesh", "points"])
+def test_centre_distance_bounds_settle_only_what_the_exact_distance_confirms(room, rng, kind):
+    """Points settled from their voxel's centre distance (``ReachTest.centre_bounds``) agree with the exact
+    distance; points on both sides of ``max_distance`` are settled, and a pickled index drops the
+    memo (rebuilt on use)."""
+
+    m = room.to_semantic_map()
+    if kind == "points":
+        m = SemanticMap(m.points, m.labels)
+    index = MapIndex(m, max_distance=0.1, voxel_size=0.05)
+    surf = m.points[rng.integers(0, len(m.points), 4000)]
+    p = (surf + rng.normal(size=surf.shape) * 0.08).astype(np.float32)
+    d = index.nearest(p, 1.0)[1]
+    index._within_reach(p[:1])  # makes the reach test
+    index._reach.codes[:] = -128  # an empty memo
+    near, unsure = index._reach.centre_bounds(p)
+    settled = np.ones(len(p), bool)
+    settled[unsure] = False
+    assert near[settled].sum() > 100 and (~near[settled]).sum() > 100
+    np.testing.assert_array_equal(near[settled], d[settled] <= 0.1)
+    assert not near[unsure].any()
+    again, unsure2 = index._reach.centre_bounds(p)  # from the memo
+    np.testing.assert_array_equal(again, near)
+    np.testing.assert_array_equal(unsure2, unsure)
+    assert pickle.loads(pickle.dumps(index))._reach is None

@@ -17,9 +17,11 @@ vote absorbs; ``exact=True`` resolves them with exact queries).
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 
-from ..geometry import pixel_rays
+from ..geometry import Intrinsics, pixel_rays
 from .dbscan import dbscan_labels
 from .frames import FrameData
 from .index import MapIndex
@@ -29,6 +31,18 @@ from .voting import paint, vote
 from .voxels import voxel_downsample
 
 __all__ = ["slic_2d", "projected_sp_3d", "slic_3d", "dbscan", "neighborhood_3d", "render_labels"]
+
+
+@lru_cache(maxsize=16)
+def _strided_rays(intr: Intrinsics, stride: int) -> tuple[np.ndarray, np.ndarray]:
+    """Ray directions (``z = 1``) of every ``stride``-th pixel, (h*w, 3), and their lengths
+    (h, w): read-only, cached per camera and stride."""
+    rays = pixel_rays(intr, stride)
+    length = np.linalg.norm(rays, axis=2)
+    rays = np.ascontiguousarray(rays.reshape(-1, 3))
+    rays.flags.writeable = False
+    length.flags.writeable = False
+    return rays, length
 
 
 def _mapped_points(fd: FrameData, index: MapIndex) -> tuple[np.ndarray, np.ndarray]:
@@ -79,12 +93,12 @@ def render_labels(
         Rendered z-depth (0 where nothing was hit).
     """
     intr, T = fd.intrinsics, fd.pose
-    rays = pixel_rays(intr, stride)
-    h, w = rays.shape[:2]
+    rays, length = _strided_rays(intr, int(stride))
+    h, w = length.shape
     if index.is_mesh:
         import open3d as o3d
 
-        d = rays.reshape(-1, 3) @ T[:3, :3].T.astype(np.float32)
+        d = rays @ T[:3, :3].T.astype(np.float32)
         o = np.broadcast_to(T[:3, 3].astype(np.float32), d.shape)
         ans = index.raycasting_scene.cast_rays(
             o3d.core.Tensor(np.ascontiguousarray(np.concatenate([o, d], axis=1))), nthreads=index.workers
@@ -165,7 +179,7 @@ def slic_2d(
         raise ValueError(f"render_stride must be >= 1, got {render_stride}")
     rl, rz = render_labels(index, fd, s)
     obs = fd.depth[::s, ::s]
-    ray_len = np.linalg.norm(pixel_rays(fd.intrinsics, s), axis=2)
+    ray_len = _strided_rays(fd.intrinsics, s)[1]
     gap = (rz - obs) * ray_len  # > 0: the map surface lies behind the observed point
     agree = np.abs(gap) <= index.max_distance
     if occlusion_votes is None:

@@ -21,8 +21,9 @@ path of ``3d-neighborhood``; a point within about one voxel of a class edge may 
 neighbouring class).
 
 The parts: :mod:`.label_grid` builds the grid, :mod:`.queries` holds :class:`MapIndex` and its
-lookups, :mod:`.cache` gives the index of a map file, built once and cached
-(:func:`load_index`). :func:`as_map_index` gives the index of an in-memory map (built once per
+lookups, :mod:`.reach` settles the support test of the ``max_distance`` shell (memoised
+voxel-centre distances, the nearest mesh vertex, then exact queries), :mod:`.cache` gives the
+index of a map file, built once and cached (:func:`load_index`). :func:`as_map_index` gives the index of an in-memory map (built once per
 map object).
 """
 

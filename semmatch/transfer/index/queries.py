@@ -17,6 +17,7 @@ from ...geometry import Intrinsics, check_pose, pixel_rays
 from ...io import SemanticMap
 from ...labels import NUM_CLASSES, THING_CLASSES
 from .label_grid import AMBIGUOUS, BLOCK, BSHIFT, LABEL_BITS, SHELL, LabelGrid, build_label_grid
+from .reach import ReachTest
 
 __all__ = ["MapIndex", "DEFAULT_MAX_DISTANCE", "DENSE_LOOKUP_VOXELS"]
 
@@ -108,7 +109,6 @@ class MapIndex:
         self.samples = None if self.is_mesh else semantic_map.points
         self.sample_labels = None if self.is_mesh else semantic_map.labels
         self._rc = None
-        self._vertex_reach: tuple | None = None  # KD-tree of the mesh's vertices, cover radius
         self._class_trees: dict | None = None  # per-class KD-trees of instance lookups
         self._rays: dict[Intrinsics, tuple[np.ndarray, np.ndarray]] = {}
 
@@ -124,6 +124,7 @@ class MapIndex:
         self._table = grid.table
         self._blocks = grid.blocks
         self.n_samples = int(grid.n_samples)
+        self._reach: ReachTest | None = None  # the shell's support test (memoised centre distances)
         self._set_tables()
 
     @property
@@ -135,7 +136,7 @@ class MapIndex:
     def __getstate__(self) -> dict:
         state = self.__dict__.copy()
         state["_rc"] = None  # Open3D scenes do not pickle; rebuilt on first use
-        state["_vertex_reach"] = None  # rebuilt on first use (smaller pickles)
+        state["_reach"] = None  # rebuilt on first use (smaller pickles)
         state["_dense"] = None  # the expanded grid is rebuilt from the blocks (smaller pickles)
         return state
 
@@ -156,8 +157,10 @@ class MapIndex:
 
     @property
     def nbytes(self) -> int:
-        """Bytes held by the label grid (block table, blocks and, for a small box, its dense copy)."""
-        return self._table.nbytes + self._blocks.nbytes + (0 if self._dense is None else self._dense.nbytes)
+        """Bytes held by the label grid (block table, blocks and, for a small box, its dense copy)
+        and, once support tests have run, the shell voxels' centre distances (one byte a voxel)."""
+        extra = (0 if self._dense is None else self._dense.nbytes) + (0 if self._reach is None else self._reach.nbytes)
+        return self._table.nbytes + self._blocks.nbytes + extra
 
     @property
     def grid(self) -> np.ndarray:
@@ -475,30 +478,11 @@ class MapIndex:
         return sup
 
     def _within_reach(self, points: np.ndarray) -> np.ndarray:
-        """Whether each point has a map surface within ``max_distance`` (as :meth:`nearest`).
-
-        On a mesh the nearest vertex settles most points without a closest-point query: the
-        surface is at most as far as the nearest vertex (so a vertex within reach is a surface
-        within reach), and at least that distance minus the largest distance from a point of a
-        triangle to that triangle's nearest vertex (:func:`_vertex_cover_radius`; so a point
-        farther than ``max_distance`` + that radius from every vertex is out of reach). Only the
-        points in between take the exact query. Same answers, about a third less time on fused
-        reconstructions, whose many small triangles put thousands of a frame's points near
-        ``max_distance`` (docs/speed.md, "Map density").
-        """
-        p = np.ascontiguousarray(points, dtype=np.float32).reshape(-1, 3)
-        if not self.is_mesh or len(p) == 0:
-            return np.isfinite(self.nearest(p, self.max_distance)[1])
-        if self._vertex_reach is None:
-            used = np.unique(self.map.faces)
-            self._vertex_reach = (cKDTree(self.map.points[used]), _vertex_cover_radius(self.map.points, self.map.faces))
-        tree, cover = self._vertex_reach
-        dv, _ = tree.query(p, distance_upper_bound=self.max_distance + cover, workers=self.workers)
-        near = dv <= self.max_distance
-        unsure = np.flatnonzero(~near & np.isfinite(dv))  # inf: beyond max_distance + cover
-        if len(unsure):
-            near[unsure] = np.isfinite(self.nearest(p[unsure], self.max_distance)[1])
-        return near
+        """Whether each point has a map surface within ``max_distance`` (as :meth:`nearest`):
+        :class:`~.reach.ReachTest`, made on first use and kept."""
+        if self._reach is None:
+            self._reach = ReachTest(self)
+        return self._reach.within(points)
 
     def _resolve(self, out: np.ndarray, points_of, exact: bool) -> np.ndarray:
         """Replace ambiguous grid answers by exact queries (or by the voxel-centre answer)."""
@@ -527,24 +511,3 @@ class MapIndex:
             f"MapIndex({self.source!r}, {kind}, {self.n_points} vertices, grid {self.shape} at "
             f"{self.voxel_size:.3f} m, max_distance={self.max_distance})"
         )
-
-
-def _vertex_cover_radius(points: np.ndarray, faces: np.ndarray) -> float:
-    """An upper bound on the distance from any point of a triangle to the triangle's nearest
-    vertex, over all triangles of a mesh.
-
-    For a triangle that is not obtuse the farthest such point is the circumcentre, at the
-    circumradius ``R = abc / (4 area)``; an obtuse (or degenerate) triangle lies inside the
-    circle on its longest edge ``L`` as diameter, where every point is within ``L / sqrt(2)``
-    of one of that edge's ends.
-    """
-    v = points.astype(np.float64)[faces]
-    e2 = np.stack([((v[:, (i + 1) % 3] - v[:, i]) ** 2).sum(axis=1) for i in range(3)], axis=1)
-    e2.sort(axis=1)
-    longest = np.sqrt(e2[:, 2])
-    obtuse = e2[:, 2] >= e2[:, 0] + e2[:, 1]  # right angles too (R = L / 2 there: both bounds hold)
-    area2 = np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)  # twice the area
-    with np.errstate(divide="ignore", invalid="ignore"):
-        circum = np.sqrt(e2.prod(axis=1)) / (2.0 * area2)
-    radius = np.where(obtuse | ~np.isfinite(circum), longest / np.sqrt(2.0), circum)
-    return float(radius.max()) if len(radius) else 0.0
