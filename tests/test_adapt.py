@@ -352,11 +352,25 @@ def test_a_shipped_adaptation_is_used_only_for_its_own_request(tiny_network, rob
         assert checkpoints[name].read_bytes() == p.read_bytes()  # copied, not fine-tuned again
         assert checkpoints[name].parent == roots[1] / "adapted"
 
-    from semmatch.adapt.finetune import _file_digest
+    from semmatch.adapt.finetune import file_digest
 
-    request = adaptation_request(network_sha256=_file_digest(Layout(roots[1]).model("compact")), scenes=robot.scenes,
+    request = adaptation_request(network_sha256=file_digest(Layout(roots[1]).model("compact")), scenes=robot.scenes,
                                  frames=len(robot.views), sources=sources, **kw)
     assert find_shipped(shipped, request)[0] is not None
+    table_bytes = (shipped / "validation_adapt_recipe.csv").read_bytes()
+    (shipped / "validation_adapt_recipe.csv").unlink()  # a damaged folder says what it lacks
+    assert find_shipped(shipped, request) == (None, f"{shipped}: the recipe table validation_adapt_recipe.csv is missing")
+    (shipped / "validation_adapt_recipe.csv").write_bytes(table_bytes)
+    import json
+
+    manifest = json.loads((shipped / "adaptation.json").read_text())
+    outside = {**manifest, "checkpoints": {**manifest["checkpoints"],
+                                           "3d-neighborhood": {**manifest["checkpoints"]["3d-neighborhood"],
+                                                               "file": "../run/adapted/x.pt"}}}
+    (shipped / "adaptation.json").write_text(json.dumps(outside))
+    found, why = find_shipped(shipped, request)  # the manifest names nothing outside its folder
+    assert found is None and "not a file of" in why
+    (shipped / "adaptation.json").write_text(json.dumps(manifest))
     found, why = find_shipped(shipped, {**request, "max_forgetting": 0.05})
     assert found is None and "max_forgetting" in why
     found, why = find_shipped(shipped, {**request, "network_sha256": "0" * 16})

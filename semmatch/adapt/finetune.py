@@ -8,7 +8,6 @@ human-height training views), :func:`adapt_in_home` does it in one home the pers
 from __future__ import annotations
 
 import copy
-import hashlib
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, fields, replace
@@ -20,7 +19,7 @@ import numpy as np
 from ..io import atomic_path
 from .views import MIN_COVERAGE, RobotViews, _check_sources, home_views
 
-__all__ = ["AdaptRecipe", "fine_tune", "adapt_in_home"]
+__all__ = ["AdaptRecipe", "fine_tune", "adapt_in_home", "file_digest"]
 
 
 @dataclass(frozen=True)
@@ -182,19 +181,19 @@ def adapt_in_home(
     extra = {
         "mode": "home",
         "home": {"sequence": str(sequence), "scene": sequence_scene(sequence), "frames": list(robot.frames)},
-        "map": {"path": str(person_map), "sha256": _file_digest(Path(person_map))},
+        "map": {"path": str(person_map), "sha256": file_digest(Path(person_map))},
         "min_purity": float(min_purity),
     }
     return fine_tune(checkpoint, robot, source, out, recipe, min_coverage=min_coverage, extra=extra,
                      cache_dir=cache_dir, progress=progress)
 
 
-def _file_digest(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for chunk in iter(lambda: fh.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()[:16]
+def file_digest(path: str | Path) -> str:
+    """The first 16 hex digits of a file's SHA-256 (:func:`semmatch.segment.shipping.file_sha256`): how
+    an adapted checkpoint's record names the network and the map it came from."""
+    from ..segment.shipping import file_sha256
+
+    return file_sha256(path)[:16]
 
 
 def fine_tune(
@@ -329,7 +328,7 @@ def fine_tune(
     ckpt = {k: copy.deepcopy(v) for k, v in info.items()}
     ckpt["state_dict"] = {k: v.detach().cpu() for k, v in net.state_dict().items()}
     ckpt["adapted"] = {
-        "from": str(checkpoint), "from_sha256": _file_digest(checkpoint), "label_source": source,
+        "from": str(checkpoint), "from_sha256": file_digest(checkpoint), "label_source": source,
         "scenes": list(robot.scenes), "frames": int(len(robot.views)), "label_coverage": robot.coverage.get(source),
         **recipe.as_dict(), "final_loss": float(np.mean(losses[-20:])), "seconds": time.perf_counter() - t0,
         **(extra or {}),

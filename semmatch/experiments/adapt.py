@@ -130,13 +130,13 @@ def _reuse_checkpoint(path: Path, target: Path, source_net: Path, source: str, r
     """Copy an adapted checkpoint to ``target`` after checking that its provenance is the request's."""
     import shutil
 
-    from ..adapt.finetune import _file_digest
+    from ..adapt.finetune import file_digest
     from ..io.files import atomic_path
     from ..segment.models import read_checkpoint
 
     ckpt = read_checkpoint(path)  # weights only: a checkpoint found in the data folder is data, never code
     got = (ckpt.get("adapted") if isinstance(ckpt, dict) else None) or {}
-    want = {**recipe.as_dict(), "label_source": source, "from_sha256": _file_digest(Path(source_net)),
+    want = {**recipe.as_dict(), "label_source": source, "from_sha256": file_digest(Path(source_net)),
             "scenes": list(robot.scenes), "frames": int(len(robot.views))}
     diff = {k: (got.get(k), v) for k, v in want.items() if got.get(k) != v}
     if diff:
@@ -362,6 +362,12 @@ def score_on_sweeps(data_root: str | Path, network: str, checkpoints: dict[str, 
                                    scheduler=scheduler, progress=progress)
 
 
+def _at_height(per_scene: pd.DataFrame, model: str, height: float, measure: str) -> pd.Series:
+    """``measure`` of ``model`` at camera ``height`` per scene (indexed by scene)."""
+    sel = per_scene[(per_scene["model"] == model) & np.isclose(per_scene["height"], height)]
+    return sel.set_index("scene")[measure]
+
+
 def gap_table(per_scene: pd.DataFrame, network: str, *, low: float = 0.2, high: float = 1.6,
               measure: str = "miou") -> pd.DataFrame:
     """The viewpoint gap closed by each adapted network, with 95 % intervals over scenes.
@@ -372,8 +378,7 @@ def gap_table(per_scene: pd.DataFrame, network: str, *, low: float = 0.2, high: 
     (mean gain over mean gap; its interval resamples the scenes with their gain and gap together,
     :func:`semmatch.evaluate.stats.ratio_of_means_ci`)."""
     def at(model: str, h: float) -> pd.Series:
-        sel = per_scene[(per_scene["model"] == model) & np.isclose(per_scene["height"], h)]
-        return sel.set_index("scene")[measure]
+        return _at_height(per_scene, model, h, measure)
 
     base_lo, base_hi = at(network, low), at(network, high)
     gap = float((base_hi - base_lo).mean())
@@ -402,8 +407,7 @@ def per_scene_changes(per_scene: pd.DataFrame, network: str, *, low: float = 0.2
     adapted network's gain at ``low`` and its change at ``high`` (paired with the unadapted
     network on the same scene)."""
     def at(model: str, h: float) -> pd.Series:
-        sel = per_scene[(per_scene["model"] == model) & np.isclose(per_scene["height"], h)]
-        return sel.set_index("scene")[measure]
+        return _at_height(per_scene, model, h, measure)
 
     base_lo, base_hi = at(network, low), at(network, high)
     rows = []

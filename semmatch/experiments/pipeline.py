@@ -438,7 +438,8 @@ def _run_notebooks(args: argparse.Namespace) -> int:
     """``run`` and ``all``: one notebook, or every one in order."""
     kw = dict(params_file=args.params, reports_dir=args.reports_dir, data_root=args.data_root,
               figures_dir=args.figures_dir, log_output=not args.quiet, scheduler=args.scheduler)
-    if args.train:  # notebook 02 trains every network (the only notebook with a `retrain` parameter)
+    if args.train:  # notebook 02 trains every network, notebook 09 fine-tunes the adapted ones (the notebooks with
+        # a `retrain` parameter)
         kw["retrain"] = True
     if not args.quiet:
         import logging

@@ -188,10 +188,15 @@ def shipped_adaptation(shipped_dir: str | os.PathLike, request: Mapping) -> tupl
     paths = {}
     for s in want["sources"]:
         entry = m.get("checkpoints", {}).get(s) or {}
-        p = folder / str(entry.get("file", ""))
+        name = str(entry.get("file", ""))
+        if not name or Path(name).name != name:  # a bare file name inside the folder, nothing else
+            return None, f"{man}: the checkpoint of {s!r} is named {name!r}, not a file of {folder}"
+        p = folder / name
         if not p.is_file() or file_sha256(p) != entry.get("sha256"):
             return None, f"{folder}: the checkpoint of {s!r} is missing or not the one the manifest names"
         paths[s] = p
+    if not (folder / RECIPE_TABLE).is_file():
+        return None, f"{folder}: the recipe table {RECIPE_TABLE} is missing"
     return (dict(m["recipe"]), pd.read_csv(folder / RECIPE_TABLE), paths), ""
 
 
@@ -248,10 +253,10 @@ def provide_adaptation(
         ``require_shipped`` and no shipped adaptation answers the request (naming why), or
         ``retrain`` with ``require_shipped``.
     """
-    from ..adapt.finetune import _file_digest
+    from ..adapt.finetune import file_digest
 
     request = adaptation_request(
-        network_sha256=_file_digest(Layout(data_root).model(network)), scenes=robot.scenes, frames=len(robot.views),
+        network_sha256=file_digest(Layout(data_root).model(network)), scenes=robot.scenes, frames=len(robot.views),
         sources=sources, recipe_grid=recipe_grid, recipe_source=recipe_source, defaults=defaults,
         max_forgetting=max_forgetting, seed=seed)
     if retrain and require_shipped:

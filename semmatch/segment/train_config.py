@@ -136,7 +136,7 @@ class TrainConfig:
                 raise ValueError(
                     f"views {self.width}x{self.height} on a {nw}x{nh} network are seen at scale {scale:g} "
                     f"({axis}) when predicting, outside the training zoom range {tuple(self.zoom)}: "
-                    f"set net_width/net_height (--net-width/--net-height) or zoom so that it lies inside"
+                    f"set net_width/net_height (--net-size WxH) or zoom (--zoom LO HI) so that it lies inside"
                 )
         if self.device not in ("auto", "cpu", "cuda"):
             raise ValueError(f"device must be auto, cpu or cuda, got {self.device!r}")
