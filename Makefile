@@ -6,7 +6,7 @@ TRAIN ?=
 SEEDS ?=
 NAME ?=
 
-.PHONY: setup test test-fast repro confirm smoke lint clean-data
+.PHONY: setup test test-fast repro confirm in-home smoke lint clean-data
 
 setup:
 	@bash scripts/setup.sh
@@ -35,6 +35,10 @@ endif
 confirm: setup
 	@if [ -z "$(SEEDS)" ]; then echo 'usage: make confirm SEEDS="9101 9102 9103" [NAME=mine]' >&2; exit 2; fi
 	PATH="$(CURDIR)/$(VENV)/bin:$$PATH" $(PY) -m semmatch.experiments confirm --seeds $(SEEDS) $(if $(NAME),--name $(NAME),)
+
+## the in-home adaptation study (its plan: semmatch/experiments/in_home_plan.yaml; docs/adapt.md)
+in-home: setup
+	$(PY) -m semmatch.experiments.in_home $(if $(JOBS),--jobs $(JOBS),)
 
 lint: setup
 	$(VENV)/bin/ruff check semmatch tests
