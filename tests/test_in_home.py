@@ -71,7 +71,13 @@ def test_every_home_scores_every_arm_on_the_second_tour(study):
     assert rec["home"]["sequence"].endswith("first") and rec["map"]["path"].endswith("person.ply")
     assert rec["steps"] == 2 and rec["label_source"] == "3d-neighborhood"
     inh = df[df["arm"] == "in home"].iloc[0]
-    assert 0 < inh["label_coverage"] <= 1 and inh["adapt_cpu_s"] > 0
+    assert 0 < inh["label_coverage"] <= 1 and inh["adapt_cpu_s"] > 0 and 0 < inh["finetune_s"] <= inh["adapt_s"]
+    again = ih.in_home_study(study["dir"] / "data", plan_path=study["dir"] / "plan.yaml", models=study["models"],
+                             views_cache=study["dir"] / "cache", homes=[("bedroom", 3)], jobs=1, progress=False)
+    reused = again[again["arm"] == "in home"].iloc[0]  # the checkpoint of the first run: scored, not adapted again
+    assert np.isnan(reused["adapt_s"]) and reused["finetune_s"] == inh["finetune_s"]
+    pd.testing.assert_frame_equal(again[["arm", "mean_acc", "miou"]].reset_index(drop=True),
+                                  df[df["home"] == "bedroom_0003"][["arm", "mean_acc", "miou"]].reset_index(drop=True))
 
 
 def test_comparisons_are_paired_per_home_and_judged_by_the_plan(study, tmp_path):

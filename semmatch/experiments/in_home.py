@@ -218,7 +218,9 @@ def run_home(data: str, plan_path: str, models: str, views_cache: str | None, ho
     list of dict
         One row per arm: ``home``, ``kind``, ``seed``, ``arm``, the map measures, ``miou``,
         ``pixel_acc``, ``labelled``; the ``in home`` row also ``label_coverage`` (the adaptation
-        labels' share of the first tour's pixels with depth) and ``adapt_s`` / ``adapt_cpu_s``.
+        labels' share of the first tour's pixels with depth), ``finetune_s`` (the fine-tuning's
+        wall seconds, from the checkpoint's record) and ``adapt_s`` / ``adapt_cpu_s`` (wall and CPU
+        seconds of the whole adaptation, labelling included; NaN for a checkpoint of an earlier run).
     """
     from ..adapt import adapt_in_home
     from ..segment import load_model
@@ -231,11 +233,12 @@ def run_home(data: str, plan_path: str, models: str, views_cache: str | None, ho
     net = load_model(net_path, device="cpu")
     person = person_map(tours["upper"], net, hdir / "person.ply", plan.voxel_size)
     adapted = hdir / "in_home.pt"
-    t, c = time.perf_counter(), time.process_time()
+    seconds = cpu = float("nan")  # a checkpoint of an earlier run: not timed here
     if not adapted.is_file():
+        t, c = time.perf_counter(), time.process_time()
         adapt_in_home(net_path, tours["first"], person, adapted, plan.recipe, source=plan.source,
                       cache_dir=views_cache or "checkpoint-if-present", progress=False)
-    seconds, cpu = time.perf_counter() - t, time.process_time() - c
+        seconds, cpu = time.perf_counter() - t, time.process_time() - c
     nets = {"unadapted": net, "across homes": load_model(Path(models) / "adapted" / f"{plan.across_homes}.pt",
                                                          device="cpu"),
             "in home": load_model(adapted, device="cpu")}
@@ -245,7 +248,8 @@ def run_home(data: str, plan_path: str, models: str, views_cache: str | None, ho
     for r in rows:
         r.update(home=f"{kind}_{seed:04d}", kind=kind, seed=seed)
         if r["arm"] == "in home":
-            r.update(label_coverage=float(record.get("label_coverage", float("nan"))), adapt_s=seconds, adapt_cpu_s=cpu)
+            r.update(label_coverage=float(record.get("label_coverage", float("nan"))),
+                     finetune_s=float(record.get("seconds", float("nan"))), adapt_s=seconds, adapt_cpu_s=cpu)
     return rows
 
 
@@ -270,7 +274,7 @@ def in_home_study(data: str | Path, *, plan_path: str | Path | None = None, mode
     rows = fn(todo[0]) + [r for rs in map_tasks(fn, todo[1:], jobs=jobs, scheduler=scheduler, desc="homes",
                                                 progress=progress) for r in rs] if todo else []
     cols = ["home", "kind", "seed", "arm", *_MAP_MEASURES, "miou", "pixel_acc", "labelled", "label_coverage",
-            "adapt_s", "adapt_cpu_s"]
+            "finetune_s", "adapt_s", "adapt_cpu_s"]
     return pd.DataFrame(rows).reindex(columns=cols)
 
 
