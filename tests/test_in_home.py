@@ -97,6 +97,22 @@ def test_comparisons_are_paired_per_home_and_judged_by_the_plan(study, tmp_path)
     assert (tmp_path / "fig" / "in_home.png").stat().st_size > 10_000
 
 
+def test_a_home_folder_made_with_other_settings_is_not_reused(study, tmp_path):
+    plan = yaml.safe_load((study["dir"] / "plan.yaml").read_text())
+    plan["adaptation"]["recipe"]["steps"] = 3
+    (tmp_path / "other.yaml").write_text(yaml.safe_dump(plan))
+    with pytest.raises(ValueError, match=r"bedroom_0003: made with other settings \(recipe differ\)"):
+        ih.in_home_study(study["dir"] / "data", plan_path=tmp_path / "other.yaml", models=study["models"],
+                         views_cache=study["dir"] / "cache", homes=[("bedroom", 3)], progress=False)
+    stray = study["dir"] / "data" / "homes" / "office_0003"
+    stray.mkdir()
+    (stray / "person.ply").write_text("not ours")
+    with pytest.raises(ValueError, match="office_0003: holds files but no settings.json"):
+        ih.in_home_study(study["dir"] / "data", plan_path=study["dir"] / "plan.yaml", models=study["models"],
+                         views_cache=study["dir"] / "cache", homes=[("office", 3)], progress=False)
+    assert (stray / "person.ply").read_text() == "not ours"
+
+
 def test_the_command_refuses_a_plan_whose_homes_were_used(tmp_path, capsys):
     plan = yaml.safe_load(ih.PLAN_PATH.read_text())
     plan["homes"]["seeds"] = [3]  # a training scene of every profile

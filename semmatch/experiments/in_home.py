@@ -210,6 +210,37 @@ def score_home(second: str | Path, person: str | Path, nets: Mapping, *, voxel_s
     return rows
 
 
+def _check_settings(hdir: Path, plan: InHomePlan, models: Path) -> None:
+    """A home folder is reused (tours, map, adapted checkpoint) only for the settings it was made
+    with: recorded in ``settings.json`` when the folder is made, compared on every later run.
+
+    Raises
+    ------
+    ValueError
+        The folder holds files but no settings record, or a record of other settings (named).
+    """
+    from ..adapt.finetune import file_digest
+    from ..io.files import atomic_path
+
+    want = {"simulation": plan.simulation, "voxel_size": plan.voxel_size, "network": plan.network,
+            "network_sha256": file_digest(models / f"{plan.network}.pt"), "source": plan.source,
+            "recipe": plan.recipe.as_dict()}
+    want = json.loads(json.dumps(want))  # the JSON form, as read back
+    record = hdir / "settings.json"
+    if record.is_file():
+        got = json.loads(record.read_text())
+        diff = sorted(k for k in set(want) | set(got) if want.get(k) != got.get(k))
+        if diff:
+            raise ValueError(f"{hdir}: made with other settings ({', '.join(diff)} differ); remove it or use "
+                             "another --data folder")
+        return
+    if hdir.is_dir() and any(hdir.iterdir()):
+        raise ValueError(f"{hdir}: holds files but no settings.json; remove it or use another --data folder")
+    hdir.mkdir(parents=True, exist_ok=True)
+    with atomic_path(record) as tmp:
+        Path(tmp).write_text(json.dumps(want, indent=1))
+
+
 def run_home(data: str, plan_path: str, models: str, views_cache: str | None, home: tuple[str, int]) -> list[dict]:
     """One home of the study (an engine task): simulate, map, adapt in the home, score every arm.
 
@@ -228,6 +259,7 @@ def run_home(data: str, plan_path: str, models: str, views_cache: str | None, ho
     plan = load_in_home_plan(plan_path)
     kind, seed = home
     hdir = Path(data) / "homes" / f"{kind}_{seed:04d}"
+    _check_settings(hdir, plan, Path(models))
     tours = simulate_home(kind, seed, hdir, plan.simulation)
     net_path = Path(models) / f"{plan.network}.pt"
     net = load_model(net_path, device="cpu")
