@@ -220,7 +220,7 @@ def _check_settings(hdir: Path, plan: InHomePlan, models: Path) -> None:
         The folder holds files but no settings record, or a record of other settings (named).
     """
     from ..adapt.finetune import file_digest
-    from ..io.files import atomic_path
+    from ..io import atomic_write_text
 
     want = {"simulation": plan.simulation, "voxel_size": plan.voxel_size, "network": plan.network,
             "network_sha256": file_digest(models / f"{plan.network}.pt"), "source": plan.source,
@@ -237,8 +237,7 @@ def _check_settings(hdir: Path, plan: InHomePlan, models: Path) -> None:
     if hdir.is_dir() and any(hdir.iterdir()):
         raise ValueError(f"{hdir}: holds files but no settings.json; remove it or use another --data folder")
     hdir.mkdir(parents=True, exist_ok=True)
-    with atomic_path(record) as tmp:
-        Path(tmp).write_text(json.dumps(want, indent=1))
+    atomic_write_text(record, json.dumps(want, indent=1))
 
 
 def run_home(data: str, plan_path: str, models: str, views_cache: str | None, home: tuple[str, int]) -> list[dict]:
@@ -390,22 +389,19 @@ def write_in_home_results(per_home: pd.DataFrame, comparisons: pd.DataFrame, pla
                           figures: str | Path, *, minutes: float) -> list[Path]:
     """Write the study's tables (CSV and Markdown), its figure and ``run.json`` into ``figures``
     (each file atomically); return the paths."""
-    from ..io.files import atomic_path
+    from ..io import atomic_write_text
 
     figures = Path(figures)
     figures.mkdir(parents=True, exist_ok=True)
     out = []
     for name, df in (("in_home_per_home", per_home), ("in_home_comparisons", comparisons)):
-        for ext, write in (("csv", lambda t, d=df: d.to_csv(t, index=False)),
-                           ("md", lambda t, d=df: Path(t).write_text(d.to_markdown(index=False, floatfmt=".3f") + "\n"))):
-            with atomic_path(figures / f"{name}.{ext}") as tmp:
-                write(tmp)
-            out.append(figures / f"{name}.{ext}")
+        atomic_write_text(figures / f"{name}.csv", df.to_csv(index=False))
+        atomic_write_text(figures / f"{name}.md", df.to_markdown(index=False, floatfmt=".3f") + "\n")
+        out += [figures / f"{name}.csv", figures / f"{name}.md"]
     out.append(plot_in_home(per_home, figures / "in_home.png", measure=plan.primary))
-    with atomic_path(figures / "run.json") as tmp:
-        Path(tmp).write_text(json.dumps({"plan_version": plan.raw.get("plan_version"), "homes": int(per_home["home"].nunique()),
-                                         "minutes": round(minutes, 1),
-                                         "finished": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}, indent=1))
+    atomic_write_text(figures / "run.json", json.dumps(
+        {"plan_version": plan.raw.get("plan_version"), "homes": int(per_home["home"].nunique()),
+         "minutes": round(minutes, 1), "finished": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}, indent=1))
     out.append(figures / "run.json")
     return out
 
