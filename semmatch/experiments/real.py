@@ -57,7 +57,8 @@ from .real_poses import (
 )
 from .synthetic import eval_grid_origin, reference_grid
 
-__all__ = ["real_like_lower_map", "evaluate_real_like", "score_real_like_against_mesh"]
+__all__ = ["real_like_lower_map", "evaluate_real_like", "chain_from_poses", "trajectory_row",
+           "score_real_like_against_mesh"]
 
 
 def _moved(m, T: np.ndarray):
@@ -91,7 +92,12 @@ def real_like_lower_map(data_root: str | Path, scene_id: str, source: str, metho
     ``source`` is ``gt`` (ground truth) or a network; ``method`` a transfer method, ``lower``
     (the network on the lower frames) or ``fused``. The reference is ``real_like/<scene>/reference.ply``.
     """
-    return Layout(data_root).real_like / scene_id / "lower_maps" / source_dir(source) / f"{method}.ply"
+    return _lower_map_path(Layout(data_root).real_like / scene_id, source, method)
+
+
+def _lower_map_path(work: Path, source: str, method: str) -> Path:
+    """``work/lower_maps/<source>/<method>.ply``: where the chain of one scene stores a lower map."""
+    return Path(work) / "lower_maps" / source_dir(source) / f"{method}.ply"
 
 
 def _matrix(T: np.ndarray) -> list:
@@ -222,8 +228,7 @@ def _real_like_scene(data_root: str, methods: tuple[str, ...], networks: tuple[s
 
 def _real_like_scene_chain(data_root: str, methods: tuple[str, ...], networks: tuple[str, ...],
                            sources: tuple[str, ...], o: dict, sid: str) -> tuple[list[dict], list[dict], dict]:
-    """:func:`_real_like_scene` under its thread limit: poses, upper maps, registration, lower
-    labels, then the scores."""
+    """:func:`_real_like_scene` under its thread limit: poses, then :func:`chain_from_poses`."""
     layout = Layout(data_root)
     models = {net: layout.load_network(net) for net in networks}
     sd = layout.scenes / "eval" / sid
@@ -233,43 +238,105 @@ def _real_like_scene_chain(data_root: str, methods: tuple[str, ...], networks: t
     work = layout.real_like / sid
     work.mkdir(parents=True, exist_ok=True)
     seqs, est, true, traj_rows = _posed_recordings(sd, work, sid, o["tol"])
-    upper_maps, upper_reference = _upper_maps(seqs["upper"], models, sources, work, o["voxel_size"])
-    # the lower reference (own frame); its geometry is registered onto the upper map
+    rows, reg_row = chain_from_poses(sd, work, seqs, est, true, models, methods, sources, o)
+    return rows, traj_rows, reg_row
+
+
+def chain_from_poses(sd: Path, work: Path, seqs: dict, est: dict, true: dict, models: dict,
+                     methods: Sequence[str], sources: Sequence[str], o: dict,
+                     transform: np.ndarray | None = None) -> tuple[list[dict], dict]:
+    """The real-like chain of one scene from posed recordings on: upper maps, registration, lower labels, scores.
+
+    :func:`evaluate_real_like` runs it on the noisy recordings at their estimated poses; the
+    diagnostic arms of :mod:`semmatch.experiments.real_diagnostics` on other frames and poses.
+
+    Parameters
+    ----------
+    sd : path
+        The scene folder (``scene.ply``, when present, places the maps in the world for the report).
+    work : path
+        Output folder: the upper maps, ``reference.ply``, ``registration.json``, the label
+        folders and ``lower_maps/<source>/<method>.ply``.
+    seqs : dict
+        ``upper`` and ``lower``: :class:`~semmatch.experiments.real_poses.PosedSequence` each.
+    est, true : dict
+        ``upper`` and ``lower``: the poses the frames carry and their true poses (N, 4, 4).
+    models : dict
+        Network name -> model.
+    methods, sources : sequences of str
+        Transfer methods; upper-map sources (``GT`` and network names).
+    o : dict
+        voxel_size, eval_voxel_size, tol, fused_base, registration_voxel, registration_seed,
+        registration_restarts, frame_jobs (as :func:`evaluate_real_like` builds it).
+    transform : ndarray (4, 4), optional
+        The lower frame -> upper frame transform to use instead of registering the maps (e.g.
+        the identity, for recordings both at their true poses).
+
+    Returns
+    -------
+    rows : list of dict
+        scene, model, method and the four measures (:func:`evaluate_real_like`'s table).
+    registration : dict
+        The registration row.
+    """
     from ..fusion import reconstruct_many
 
+    sid = sd.name
+    methods, sources = tuple(methods), tuple(sources)
+    upper_maps, upper_reference = _upper_maps(seqs["upper"], models, sources, work, o["voxel_size"])
+    # the lower reference (own frame); its geometry is registered onto the upper map
     (reference,) = reconstruct_many(seqs["lower"], [None], o["voxel_size"], outs=[work / "reference.ply"])
-    reg, reg_row = _registration(sd, work, sid, reference, upper_maps[0], est, true, o)
+    reg, reg_row = _registration(sd, work, sid, reference, upper_maps[0], est, true, o, transform=transform)
     # the transfer works in the upper map's bounding-box frame U (a compact index grid): the
     # map moved by U, the lower frames at U @ T_reg @ est_lower
     U = _compact_frame(upper_maps[0])
     lower = _lower_labels(seqs["lower"], models, methods, sources, upper_maps, U, U @ reg.transform @ est["lower"],
                           work, o["fused_base"], o["frame_jobs"])
-    rows = _real_like_rows(data_root, sid, seqs["lower"], lower, reference, upper_maps, upper_reference, sources,
+    rows = _real_like_rows(work, sid, seqs["lower"], lower, reference, upper_maps, upper_reference, sources,
                            o["voxel_size"], o["eval_voxel_size"])
-    return rows, traj_rows, reg_row
+    return rows, reg_row
 
 
 def _posed_recordings(sd: Path, work: Path, sid: str, tol) -> tuple[dict, dict, dict, list[dict]]:
     """The noisy upper and lower recordings of a scene at their estimated poses (read once, into
     memory: predicted, transferred and fused from there): ``(seqs, est, true, traj_rows)``, the
     trajectory rows scoring the recorded drifting poses and the estimated ones."""
-    from ..poses.trajectory_metrics import trajectory_errors
-
     seqs, est, true, traj_rows = {}, {}, {}, []
     for name in ("upper", "lower"):
         noisy = read_sequence(sd / f"{name}_noisy").load()
         est[name], true[name] = estimate_or_load_poses(sd / f"{name}_noisy", work / pose_cache_name(name, tol),
                                                        seq=noisy, prior_tolerance=tol, progress=False)
         for what, poses in (("recorded (drifting prior)", noisy.poses), ("estimated (RGB-D odometry)", est[name])):
-            ok = finite_frames(poses, true[name])
-            first = int(np.flatnonzero(ok)[0])
-            # placed at the true pose of the first frame: the unaligned errors are the drift
-            anchored = true[name][first] @ np.linalg.inv(poses[first]) @ poses
-            err = trajectory_errors(anchored, true[name])
-            traj_rows.append(dict(scene=sid, sequence=name, poses=what, **{
-                k: float(v) for k, v in err.items() if np.isscalar(v)}))
+            traj_rows.append(trajectory_row(sid, name, what, poses, true[name]))
         seqs[name] = PosedSequence(noisy, est[name])
     return seqs, est, true, traj_rows
+
+
+def trajectory_row(scene: str, sequence: str, poses_name: str, poses: np.ndarray, true: np.ndarray) -> dict:
+    """One row of :func:`evaluate_real_like`'s trajectory table: a recording's poses against its true ones.
+
+    The poses are placed at the true pose of their first finite frame, so that the unaligned
+    errors (``ate_rmse_unaligned``) are the drift from the start; ``ate_rmse`` is after rigid
+    alignment (:func:`semmatch.poses.trajectory_metrics.trajectory_errors`).
+
+    Parameters
+    ----------
+    scene, sequence, poses_name : str
+        The row's ``scene``, ``sequence`` (upper, lower) and ``poses`` (what the poses are).
+    poses, true : ndarray (N, 4, 4)
+
+    Returns
+    -------
+    dict
+    """
+    from ..poses.trajectory_metrics import trajectory_errors
+
+    ok = finite_frames(poses, true)
+    first = int(np.flatnonzero(ok)[0])
+    anchored = true[first] @ np.linalg.inv(poses[first]) @ poses
+    err = trajectory_errors(anchored, true)
+    return dict(scene=scene, sequence=sequence, poses=poses_name,
+                **{k: float(v) for k, v in err.items() if np.isscalar(v)})
 
 
 def _upper_maps(upper: PosedSequence, models: dict, sources: tuple[str, ...], work: Path,
@@ -290,15 +357,22 @@ def _upper_maps(upper: PosedSequence, models: dict, sources: tuple[str, ...], wo
     return upper_maps[:len(sources)], upper_maps[upper_sources.index(GT)]
 
 
-def _registration(sd: Path, work: Path, sid: str, reference, upper_map, est: dict, true: dict, o: dict):
-    """The lower reference registered onto the upper map, and its row (``registration.json``):
-    the errors against ground truth, each recording placed in the world by its trajectory
-    alignment and (with the scene mesh) by its map fitted onto the mesh."""
-    from ..poses.registration import register_maps
+def _registration(sd: Path, work: Path, sid: str, reference, upper_map, est: dict, true: dict, o: dict,
+                  transform: np.ndarray | None = None):
+    """The lower reference registered onto the upper map (or placed by the given ``transform``),
+    and its row (``registration.json``): the errors against ground truth, each recording placed
+    in the world by its trajectory alignment and (with the scene mesh) by its map fitted onto
+    the mesh."""
+    from ..poses.registration import Registration, register_maps
 
     tol, registration_voxel, registration_seed = o["tol"], o["registration_voxel"], o["registration_seed"]
-    reg = register_maps(reference, upper_map, voxel_size=registration_voxel, seed=registration_seed,
-                        restarts=o["registration_restarts"])
+    if transform is None:
+        reg = register_maps(reference, upper_map, voxel_size=registration_voxel, seed=registration_seed,
+                            restarts=o["registration_restarts"])
+    else:
+        T, nan = np.asarray(transform, dtype=np.float64), float("nan")
+        reg = Registration(transform=T, fitness=nan, inlier_rmse=nan, global_transform=T, global_fitness=nan,
+                           restarts=0, agreement=0, candidates=[], n_source=0, n_target=0, seconds=0.0)
     mesh = read_map(sd / "scene.ply") if (sd / "scene.ply").is_file() else None
     placed = {("traj", n): world_alignment(est[n], true[n]) for n in ("upper", "lower")}
     if mesh is not None:
@@ -351,7 +425,7 @@ def _lower_labels(lower_seq: PosedSequence, models: dict, methods: tuple[str, ..
     return lower
 
 
-def _real_like_rows(data_root: str, sid: str, lower_seq: PosedSequence, lower: list, reference, upper_maps: list,
+def _real_like_rows(work: Path, sid: str, lower_seq: PosedSequence, lower: list, reference, upper_maps: list,
                     upper_reference, sources: tuple[str, ...], voxel_size: float,
                     eval_voxel_size: float) -> list[dict]:
     """The score rows of a scene: one fusion of the lower frames (own frame) for every labeling,
@@ -362,7 +436,7 @@ def _real_like_rows(data_root: str, sid: str, lower_seq: PosedSequence, lower: l
     from ..fusion import reconstruct_many
 
     maps = reconstruct_many(lower_seq, [d for *_, d in lower], voxel_size,
-                            outs=[real_like_lower_map(data_root, sid, s, m) for s, m, _ in lower])
+                            outs=[_lower_map_path(work, s, m) for s, m, _ in lower])
     reference_voxels = reference_grid(reference, eval_voxel_size)  # voxelised once for every labeling
     rows = []
     for (source, method, _), pred in zip(lower, maps, strict=True):
