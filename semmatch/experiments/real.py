@@ -244,7 +244,8 @@ def _real_like_scene_chain(data_root: str, methods: tuple[str, ...], networks: t
 
 def chain_from_poses(sd: Path, work: Path, seqs: dict, est: dict, true: dict, models: dict,
                      methods: Sequence[str], sources: Sequence[str], o: dict,
-                     transform: np.ndarray | None = None) -> tuple[list[dict], dict]:
+                     transform: np.ndarray | None = None,
+                     predicted: dict[tuple[str, str], Path] | None = None) -> tuple[list[dict], dict]:
     """The real-like chain of one scene from posed recordings on: upper maps, registration, lower labels, scores.
 
     :func:`evaluate_real_like` runs it on the noisy recordings at their estimated poses; the
@@ -271,6 +272,11 @@ def chain_from_poses(sd: Path, work: Path, seqs: dict, est: dict, true: dict, mo
     transform : ndarray (4, 4), optional
         The lower frame -> upper frame transform to use instead of registering the maps (e.g.
         the identity, for recordings both at their true poses).
+    predicted : dict, optional
+        ``(recording, network) -> labels folder``: a network's labels of the ``upper`` or
+        ``lower`` frames already predicted (labels do not depend on poses); the others are
+        predicted into ``work``. ``o["world_truth"] == "traj"`` places the maps in the world
+        by the trajectory alignments alone (the mesh fit is skipped; default ``mesh``).
 
     Returns
     -------
@@ -283,7 +289,9 @@ def chain_from_poses(sd: Path, work: Path, seqs: dict, est: dict, true: dict, mo
 
     sid = sd.name
     methods, sources = tuple(methods), tuple(sources)
-    upper_maps, upper_reference = _upper_maps(seqs["upper"], models, sources, work, o["voxel_size"])
+    predicted = dict(predicted or {})
+    upper_maps, upper_reference = _upper_maps(seqs["upper"], models, sources, work, o["voxel_size"],
+                                              {n: d for (r, n), d in predicted.items() if r == "upper"})
     # the lower reference (own frame); its geometry is registered onto the upper map
     (reference,) = reconstruct_many(seqs["lower"], [None], o["voxel_size"], outs=[work / "reference.ply"])
     reg, reg_row = _registration(sd, work, sid, reference, upper_maps[0], est, true, o, transform=transform)
@@ -291,7 +299,8 @@ def chain_from_poses(sd: Path, work: Path, seqs: dict, est: dict, true: dict, mo
     # map moved by U, the lower frames at U @ T_reg @ est_lower
     U = _compact_frame(upper_maps[0])
     lower = _lower_labels(seqs["lower"], models, methods, sources, upper_maps, U, U @ reg.transform @ est["lower"],
-                          work, o["fused_base"], o["frame_jobs"])
+                          work, o["fused_base"], o["frame_jobs"],
+                          {n: d for (r, n), d in predicted.items() if r == "lower"})
     rows = _real_like_rows(work, sid, seqs["lower"], lower, reference, upper_maps, upper_reference, sources,
                            o["voxel_size"], o["eval_voxel_size"])
     return rows, reg_row
@@ -340,7 +349,7 @@ def trajectory_row(scene: str, sequence: str, poses_name: str, poses: np.ndarray
 
 
 def _upper_maps(upper: PosedSequence, models: dict, sources: tuple[str, ...], work: Path,
-                voxel_size: float) -> tuple[list, object]:
+                voxel_size: float, predicted: dict[str, Path] | None = None) -> tuple[list, object]:
     """One fusion of the upper frames (own frame), labelled by ground truth and each network:
     the upper map of every source, and the upper reference (the noisy upper frames fused with
     ground-truth labels, which scores each network's own upper map: the ``upper`` rows)."""
@@ -349,8 +358,11 @@ def _upper_maps(upper: PosedSequence, models: dict, sources: tuple[str, ...], wo
 
     upper_labels = {GT: None}
     for net in models:
-        upper_labels[net] = work / f"upper_labels_{net}"
-        predict_sequence(models[net], upper, upper_labels[net], progress=False)
+        if predicted and net in predicted:
+            upper_labels[net] = predicted[net]
+        else:
+            upper_labels[net] = work / f"upper_labels_{net}"
+            predict_sequence(models[net], upper, upper_labels[net], progress=False)
     upper_sources = [*sources, *([] if GT in sources else [GT])]
     upper_maps = reconstruct_many(upper, [upper_labels[s] for s in upper_sources], voxel_size,
                                   outs=[work / f"upper_{s}.ply" for s in upper_sources])
@@ -373,12 +385,13 @@ def _registration(sd: Path, work: Path, sid: str, reference, upper_map, est: dic
         T, nan = np.asarray(transform, dtype=np.float64), float("nan")
         reg = Registration(transform=T, fitness=nan, inlier_rmse=nan, global_transform=T, global_fitness=nan,
                            restarts=0, agreement=0, candidates=[], n_source=0, n_target=0, seconds=0.0)
-    mesh = read_map(sd / "scene.ply") if (sd / "scene.ply").is_file() else None
+    use_mesh = o.get("world_truth", "mesh") == "mesh" and (sd / "scene.ply").is_file()
+    mesh = read_map(sd / "scene.ply") if use_mesh else None
     placed = {("traj", n): world_alignment(est[n], true[n]) for n in ("upper", "lower")}
     if mesh is not None:
         placed |= {("mesh", n): world_alignment(est[n], true[n], reconstruction=m, scene_mesh=mesh)
                    for n, m in (("upper", upper_map), ("lower", reference))}
-    best = "mesh" if mesh is not None else "traj"
+    best = "mesh" if ("mesh", "upper") in placed else "traj"
     e_best = registration_errors(reg.transform, placed[best, "upper"], placed[best, "lower"], est["lower"], true["lower"])
     e_traj = registration_errors(reg.transform, placed["traj", "upper"], placed["traj", "lower"], est["lower"],
                                  true["lower"])
@@ -400,7 +413,7 @@ def _registration(sd: Path, work: Path, sid: str, reference, upper_map, est: dic
 
 def _lower_labels(lower_seq: PosedSequence, models: dict, methods: tuple[str, ...], sources: tuple[str, ...],
                   upper_maps: list, U: np.ndarray, lower_in_upper: np.ndarray, work: Path, fused_base: str | None,
-                  jobs: int) -> list[tuple[str, str, Path]]:
+                  jobs: int, predicted: dict[str, Path] | None = None) -> list[tuple[str, str, Path]]:
     """Labels of the lower frames: each network on them, each method from each upper map (in the
     frame ``U``, the lower frames at ``lower_in_upper``), and ``fused``; ``(source, method,
     labels folder)`` each."""
@@ -410,8 +423,11 @@ def _lower_labels(lower_seq: PosedSequence, models: dict, methods: tuple[str, ..
     lower = []
     for source, upper_map in zip(sources, upper_maps, strict=True):
         if source != GT:
-            low_dir = work / f"lower_labels_{source}" / "lower"
-            predict_sequence(models[source], lower_seq, low_dir, progress=False)
+            if predicted and source in predicted:
+                low_dir = predicted[source]
+            else:
+                low_dir = work / f"lower_labels_{source}" / "lower"
+                predict_sequence(models[source], lower_seq, low_dir, progress=False)
             lower.append((source, "lower", low_dir))
         index = as_map_index(_moved(upper_map, U))
         for method in methods:

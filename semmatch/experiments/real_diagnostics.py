@@ -1,0 +1,631 @@
+"""Diagnostics of the real-like chain (Table 3): what each of its parts costs the robot's labels.
+
+Table 3's chain (:mod:`semmatch.experiments.real`) turns noisy frames, drifting pose priors,
+RGB-D odometry and map registration into one score per scene. This study runs the same chain
+(:func:`semmatch.experiments.real.chain_from_poses`) in arms that switch its parts off one at a
+time, on the same scenes, paired per scene:
+
+* ``clean, true poses``: the clean renderings at their true poses, the two recordings placed by
+  the true relative transform: what is left is the transfer itself;
+* ``noisy, true poses``: Kinect-like frames (depth noise, dropouts, RGB noise, exposure) at the
+  true poses: the cost of the sensor;
+* ``clean, estimated poses``: clean frames, poses by the chain's odometry and registration: the
+  cost of the poses alone;
+* ``chain``: noisy frames at estimated poses, both cameras' odometry seeded by a drifting prior
+  (wheel odometry or an IMU would give it): Table 3's chain;
+* ``person visual-only``: as ``chain``, but the person's camera is tracked from its frames
+  alone (no prior: the paper's person used visual SLAM); the robot keeps its wheel-odometry-like
+  prior.
+
+Arms with estimated poses run in ``draws`` draws: draw ``d`` regenerates each recording's prior
+with :func:`semmatch.sim.noise.estimated_poses` from the recording's own noise settings and the
+random stream ``d`` (draw 0 is the recorded ``poses.txt``, bit for bit: Table 3's prior), and
+registers the maps with RANSAC seeds ``d * restarts ...``. A per-scene value is the mean over
+draws, so the draws' spread is inside the intervals over scenes; the spread of the mean over
+scenes from draw to draw is reported beside them. ``chain`` also runs at other drift levels:
+the priors' drift (``drift_t``, ``drift_r``) scaled by each level, the same random stream
+(level 0: the true motions plus the per-frame jitter).
+
+Sources: the ground-truth upper map (the ``ground truth`` rows) and each network's; methods
+as given, with ``lower`` (the network on the robot's frames), ``fused`` and ``upper`` (the
+network's own upper map against the person's reference: claim C16). Every score uses the
+chain's own reference (the robot's frames of the arm, fused at the arm's poses with
+ground-truth labels), as Table 3 does.
+
+``python -m semmatch.experiments.real_diagnostics --profile full`` (``make real-diagnostics``)
+runs it on the profile's evaluation scenes (the development scenes: it decides nothing) and
+writes ``figures/<profile>_real_diagnostics/``; docs/recordings.md ("Diagnosing the real-like
+chain") reports the result.
+"""
+
+from __future__ import annotations
+
+import argparse
+import functools
+import json
+import time
+import zlib
+from collections.abc import Sequence
+from dataclasses import dataclass, fields
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from ..evaluate.metrics import MEASURES
+from .layout import GT, Layout
+
+__all__ = ["Arm", "ARMS", "diagnostic_arms", "drifted_prior", "predict_scene", "run_arm", "real_like_diagnostics",
+           "summarize_arms", "arm_differences", "draw_spread", "plot_diagnostics", "main"]
+
+
+@dataclass(frozen=True)
+class Arm:
+    """One arm of the study: which frames, which poses, which priors.
+
+    Attributes
+    ----------
+    name : str
+    frames : {"clean", "noisy"}
+        The recordings' renderings: ``upper``/``lower`` or ``upper_noisy``/``lower_noisy``.
+    poses : {"true", "estimated"}
+        True poses and relative transform, or odometry plus registration.
+    person_prior : bool
+        The person's odometry is seeded by its drifting prior (else visual only).
+    drift : float
+        Scale of the priors' drift (1: the simulator's Kinect-like setting).
+    """
+
+    name: str
+    frames: str
+    poses: str
+    person_prior: bool = True
+    drift: float = 1.0
+
+    @property
+    def random(self) -> bool:
+        """Whether its result depends on the draw (estimated poses)."""
+        return self.poses == "estimated"
+
+    @property
+    def slug(self) -> str:
+        """Folder name of the arm's work."""
+        return f"{self.name.replace(' ', '_').replace(',', '')}_drift{self.drift:g}"
+
+
+#: the arms at the simulator's drift (module documentation)
+ARMS = (
+    Arm("clean, true poses", "clean", "true"),
+    Arm("noisy, true poses", "noisy", "true"),
+    Arm("clean, estimated poses", "clean", "estimated"),
+    Arm("chain", "noisy", "estimated"),
+    Arm("person visual-only", "noisy", "estimated", person_prior=False),
+)
+
+
+def diagnostic_arms(drift_levels: Sequence[float] = (0.0, 0.5, 1.0, 2.0, 4.0)) -> list[Arm]:
+    """:data:`ARMS` and ``chain`` at every other drift level of ``drift_levels``.
+
+    Raises
+    ------
+    ValueError
+        A negative or non-finite level.
+    """
+    levels = [float(v) for v in drift_levels]
+    if any(not np.isfinite(v) or v < 0 for v in levels):
+        raise ValueError(f"drift levels must be finite and >= 0, got {list(drift_levels)}")
+    return [*ARMS, *(Arm("chain", "noisy", "estimated", drift=v) for v in sorted(set(levels)) if v != 1.0)]
+
+
+def drifted_prior(seq_dir: str | Path, true: np.ndarray, *, drift: float = 1.0, draw: int = 0) -> np.ndarray:
+    """A recording's drifting pose prior, regenerated: draw ``draw``, its drift scaled by ``drift``.
+
+    The simulator's :func:`semmatch.sim.noise.estimated_poses` with the noise settings in the
+    recording's ``meta.json``; draw 0 uses the recording's own random stream, draw ``d`` the
+    stream ``[seed, d]``. Draw 0 at ``drift=1`` is the recorded ``poses.txt`` itself (the
+    regenerated poses agree with it to the file's rounding, but the odometry starts from the
+    prior, and the file is what Table 3's chain reads).
+
+    Parameters
+    ----------
+    seq_dir : path
+        The noisy recording (its ``meta.json`` holds ``noise``).
+    true : ndarray (N, 4, 4)
+        Its true poses.
+    drift : float
+        Factor on ``drift_t`` and ``drift_r`` (the jitter is kept).
+    draw : int
+
+    Returns
+    -------
+    ndarray (N, 4, 4)
+
+    Raises
+    ------
+    ValueError
+        ``meta.json`` without noise settings.
+    """
+    from dataclasses import replace
+
+    from ..io import read_tum
+    from ..sim import NoiseConfig
+    from ..sim.noise import estimated_poses
+
+    if draw == 0 and drift == 1.0 and (Path(seq_dir) / "poses.txt").is_file():
+        recorded = read_tum(Path(seq_dir) / "poses.txt")[1]
+        if len(recorded) == len(true):
+            return recorded
+    meta_file = Path(seq_dir) / "meta.json"
+    noise = json.loads(meta_file.read_text()).get("noise")
+    if not isinstance(noise, dict):
+        raise ValueError(f"{meta_file}: no 'noise' settings to regenerate the recording's prior from")
+    names = {f.name for f in fields(NoiseConfig)}
+    cfg = NoiseConfig(**{k: v for k, v in noise.items() if k in names})
+    cfg = replace(cfg, drift_t=cfg.drift_t * drift, drift_r=cfg.drift_r * drift)
+    rng = np.random.default_rng(cfg.seed if draw == 0 else [int(cfg.seed), int(draw)])
+    return estimated_poses(np.asarray(true, dtype=np.float64), cfg, rng)
+
+
+def _estimate(seq, prior: np.ndarray | None, cache: Path, tol) -> np.ndarray:
+    """The chain's odometry (:mod:`semmatch.experiments.real_poses`'s rule) from the identity, cached."""
+    from ..io import read_tum, write_tum
+    from ..poses.odometry import estimate_poses
+    from .real_poses import ODOMETRY_DOWNSAMPLE, ODOMETRY_RULE
+
+    if cache.is_file():
+        est = read_tum(cache)[1]
+        if len(est) == len(seq):
+            return est
+    est = estimate_poses(seq, init_pose=np.eye(4), prior=prior, prior_tolerance=tol, downsample=ODOMETRY_DOWNSAMPLE,
+                         progress=False, **ODOMETRY_RULE)
+    write_tum(cache, np.arange(len(est), dtype=np.float64), est)  # atomic
+    return read_tum(cache)[1]
+
+
+def _labels_folder(data_root: str | Path, sid: str, frames: str, recording: str, network: str) -> Path:
+    """Where a network's labels of a scene's recording (clean or noisy frames) are kept for every arm."""
+    return Path(data_root) / "real_diagnostics" / "labels" / sid / frames / f"{recording}_{network}"
+
+
+def _recording(sd: Path, recording: str, frames: str) -> Path:
+    return sd / (f"{recording}_noisy" if frames == "noisy" else recording)
+
+
+def predict_scene(data_root: str, networks: tuple[str, ...], task: tuple[str, str]) -> list[Path]:
+    """Each network's labels of a scene's two recordings, clean or noisy (``task``: scene, frames),
+    predicted once for every arm (labels do not depend on poses); existing folders are kept
+    (a labels folder is swapped in whole)."""
+    from ..io import read_sequence
+    from ..segment import predict_sequence
+
+    sid, frames = task
+    layout = Layout(data_root)
+    sd = layout.scenes / "eval" / sid
+    out = []
+    for net in networks:
+        model = None
+        for recording in ("upper", "lower"):
+            folder = _labels_folder(data_root, sid, frames, recording, net)
+            if not folder.is_dir():
+                model = model or layout.load_network(net)
+                predict_sequence(model, read_sequence(_recording(sd, recording, frames)), folder, progress=False)
+            out.append(folder)
+    return out
+
+
+def run_arm(data_root: str, networks: tuple[str, ...], methods: tuple[str, ...], o: dict,
+            task: tuple[Arm, int, str]) -> dict:
+    """One arm, one draw, one scene (a task of :func:`real_like_diagnostics`).
+
+    Writes under ``<data_root>/real_diagnostics/<arm>/d<draw>/<scene>/`` (the chain's maps and
+    labels, ``result.json``) and ``real_diagnostics/poses/<scene>/`` (the estimated poses, one
+    file per frames, recording and prior: arms with the same prior share them); a
+    ``result.json`` made with the same settings is reused. The networks' labels are those of
+    :func:`predict_scene` where it has run. The registration error is measured against the
+    trajectories' alignment to the truth (uncertain by about their ATE).
+
+    Returns
+    -------
+    dict
+        ``rows`` (scores), ``trajectories`` and ``registration`` (errors), each a list of dicts
+        carrying ``arm``, ``drift``, ``draw`` and ``scene``.
+    """
+    from ..io import atomic_write_text, read_sequence, read_tum
+    from ..poses.rgbd_odometry import open3d_threads
+    from .real import chain_from_poses, trajectory_row
+    from .real_poses import PosedSequence
+
+    arm, draw, sid = task
+    layout = Layout(data_root)
+    sd = layout.scenes / "eval" / sid
+    work = Path(data_root) / "real_diagnostics" / arm.slug / f"d{draw}" / sid
+    settings = dict(arm=arm.name, frames=arm.frames, poses=arm.poses, person_prior=arm.person_prior,
+                    drift=arm.drift, draw=draw, networks=list(networks), methods=list(methods),
+                    **{k: (list(v) if isinstance(v, tuple) else v) for k, v in o.items()})
+    done = work / "result.json"
+    if done.is_file():
+        prev = json.loads(done.read_text())
+        if prev.get("settings") == settings:
+            return prev["result"]
+    work.mkdir(parents=True, exist_ok=True)
+    tag = dict(arm=arm.name, drift=arm.drift, draw=draw, scene=sid)
+    models = {net: layout.load_network(net) for net in networks}
+    seqs, est, true, traj = {}, {}, {}, []
+    with open3d_threads(1):  # Open3D's sums and RANSAC repeat run to run on one thread
+        for name in ("upper", "lower"):
+            folder = sd / f"{name}_noisy"
+            if not folder.is_dir():
+                raise FileNotFoundError(f"{folder}: no noisy recording; run 01_simulate with noise on")
+            true[name] = read_tum(folder / "poses_gt.txt")[1]
+            frames = read_sequence(_recording(sd, name, arm.frames)).load()
+            if len(frames) != len(true[name]):
+                raise ValueError(f"{sd / name}: {len(frames)} frames against {len(true[name])} true poses")
+            if arm.poses == "true":
+                est[name] = true[name]
+            else:
+                use_prior = name == "lower" or arm.person_prior
+                prior = drifted_prior(folder, true[name], drift=arm.drift, draw=draw) if use_prior else None
+                if prior is not None:
+                    traj.append(tag | trajectory_row(sid, name, "prior", prior, true[name]))
+                spec = f"drift{arm.drift:g}_d{draw}" if prior is not None else "visual"
+                cache = Path(data_root) / "real_diagnostics" / "poses" / sid / f"{arm.frames}_{name}_{spec}.txt"
+                cache.parent.mkdir(parents=True, exist_ok=True)
+                est[name] = _estimate(frames, prior, cache, o["tol"])
+                traj.append(tag | trajectory_row(sid, name, "estimated", est[name], true[name]))
+            seqs[name] = PosedSequence(frames, est[name])
+        sources = (*networks, GT)  # the first network's map is registered onto, as in Table 3
+        oo = dict(o, registration_seed=int(draw) * int(o["registration_restarts"]))
+        predicted = {(r, n): _labels_folder(data_root, sid, arm.frames, r, n) for r in ("upper", "lower")
+                     for n in networks}
+        rows, reg = chain_from_poses(sd, work, seqs, est, true, models, methods, sources, oo,
+                                     transform=np.eye(4) if arm.poses == "true" else None,
+                                     predicted={k: v for k, v in predicted.items() if v.is_dir()})
+    keep = ("reg_trans_err_m", "reg_rot_err_deg", "fitness", "agreement")
+    result = dict(rows=[tag | r for r in rows], trajectories=traj,
+                  registration=[tag | {k: float(reg[k]) for k in keep}])
+    atomic_write_text(done, json.dumps(dict(settings=settings, result=result), indent=1))
+    return result
+
+
+def _task_order(task: tuple[Arm, int, str]) -> int:
+    """A stable spread of tasks over workers (scene-major order would pair the slow scenes)."""
+    arm, draw, sid = task
+    return zlib.crc32(f"{arm.slug}/{draw}/{sid}".encode())
+
+
+def real_like_diagnostics(data_root: str | Path, *, networks: Sequence[str] = ("compact",),
+                          methods: Sequence[str] = ("3d-neighborhood",), arms: Sequence[Arm] | None = None,
+                          draws: int = 3, sweep_draws: int = 1, scenes: Sequence[str] | None = None, voxel_size: float = 0.04,
+                          eval_voxel_size: float = 0.05, prior_tolerance=(0.1, 10.0), fused_base: str = "3d-neighborhood",
+                          registration_voxel: float = 0.1, registration_restarts: int = 3, jobs: int = 1,
+                          scheduler: str | None = None, progress: bool = True) -> dict[str, pd.DataFrame]:
+    """Run every arm (module documentation) on the evaluation scenes of ``data_root``.
+
+    Parameters
+    ----------
+    data_root : path
+        A profile's data folder (``scenes/eval`` with noisy recordings, ``models``).
+    networks, methods : sequences of str
+        Networks (upper-map sources beside the ground truth) and transfer methods.
+    arms : sequence of Arm, optional
+        Default :func:`diagnostic_arms`.
+    draws : int
+        Draws of each arm with estimated poses (>= 1); arms at true poses run once.
+    sweep_draws : int
+        Draws of the arms at another drift than the simulator's (at most ``draws``).
+    scenes : sequence of str, optional
+        Scene ids (default every evaluation scene).
+    voxel_size, eval_voxel_size, prior_tolerance, fused_base, registration_voxel, registration_restarts
+        As :func:`semmatch.experiments.real.evaluate_real_like` (Table 3's values by default).
+    jobs, scheduler, progress
+        Tasks (arm, draw, scene) on :func:`semmatch.engine.map_tasks`.
+
+    Returns
+    -------
+    dict of DataFrame
+        ``scores`` (arm, drift, draw, scene, model, method, the four measures),
+        ``trajectories`` (arm, drift, draw, scene, sequence, poses, ate_rmse, ...) and
+        ``registration`` (arm, drift, draw, scene, reg_trans_err_m, reg_rot_err_deg, fitness,
+        agreement).
+
+    Raises
+    ------
+    ValueError
+        ``draws < 1``, ``fused_base`` not among the methods, an unknown scene.
+    """
+    from ..engine import map_tasks
+    from .real_poses import check_tolerance
+
+    if int(draws) < 1:
+        raise ValueError(f"draws must be >= 1, got {draws}")
+    if fused_base not in methods:
+        raise ValueError(f"fused_base {fused_base!r} is not among the methods {list(methods)}")
+    layout = Layout(data_root)
+    known = [sd.name for sd in layout.scene_dirs("eval")]
+    scenes = list(known if scenes is None else scenes)
+    unknown = sorted(set(scenes) - set(known))
+    if unknown:
+        raise ValueError(f"{layout.scenes / 'eval'}: no evaluation scene {unknown}")
+    arms = list(diagnostic_arms() if arms is None else arms)
+    o = dict(voxel_size=float(voxel_size), eval_voxel_size=float(eval_voxel_size),
+             tol=check_tolerance(prior_tolerance), fused_base=fused_base, registration_voxel=float(registration_voxel),
+             registration_seed=0, registration_restarts=int(registration_restarts), frame_jobs=1,
+             world_truth="traj")
+
+    def n_draws(a: Arm) -> int:
+        return 1 if not a.random else int(draws) if a.drift == 1.0 else max(1, min(int(draws), int(sweep_draws)))
+
+    pred = [(s, f) for s in scenes for f in dict.fromkeys(a.frames for a in arms)]
+    map_tasks(functools.partial(predict_scene, str(data_root), tuple(networks)), pred, jobs=jobs, scheduler=scheduler,
+              desc="network labels", progress=progress)
+    tasks = sorted([(a, d, s) for a in arms for d in range(n_draws(a)) for s in scenes], key=_task_order)
+    fn = functools.partial(run_arm, str(data_root), tuple(networks), tuple(methods), o)
+    results = map_tasks(fn, tasks, jobs=jobs, scheduler=scheduler, desc="diagnostic arms", progress=progress)
+    parts = {"scores": "rows", "trajectories": "trajectories", "registration": "registration"}
+    return {name: pd.DataFrame([r for res in results for r in res[key]]) for name, key in parts.items()}
+
+
+#: rows shown in the summaries and the figure: (model, method); "<net>" is each network
+SHOWN = (("ground truth", "3d-neighborhood"), ("<net>", "3d-neighborhood"), ("<net>", "fused"),
+         ("<net>", "lower"), ("<net>", "upper"))
+
+#: the paired arm differences of :func:`arm_differences`: (what it measures, arm a, arm b), a - b
+DIFFERENCES = (
+    ("sensor noise (true poses)", "noisy, true poses", "clean, true poses"),
+    ("estimated poses (clean frames)", "clean, estimated poses", "clean, true poses"),
+    ("estimated poses (noisy frames)", "chain", "noisy, true poses"),
+    ("person tracked visually only", "person visual-only", "chain"),
+)
+
+#: the within-arm contrasts of :func:`arm_differences`: (name, method a, method b), per network
+CONTRASTS = (
+    ("transfer - lower (C15)", "3d-neighborhood", "lower"),
+    ("transfer - upper (C16)", "3d-neighborhood", "upper"),
+    ("fused - lower", "fused", "lower"),
+)
+
+
+def _per_scene(scores: pd.DataFrame) -> pd.DataFrame:
+    """Scores averaged over draws: one row per arm, drift, scene, model and method."""
+    key = ["arm", "drift", "scene", "model", "method"]
+    out = scores.groupby(key, sort=False)[list(MEASURES)].mean().reset_index()
+    out["draws"] = scores.groupby(key, sort=False)["draw"].nunique().to_numpy()
+    return out
+
+
+def draw_spread(scores: pd.DataFrame, measure: str = "mean_acc") -> pd.DataFrame:
+    """How much the mean over scenes moves from draw to draw.
+
+    Returns
+    -------
+    DataFrame
+        arm, drift, model, method, draws, ``<measure>`` per draw as ``draw_<d>``, their
+        standard deviation ``draw_sd`` and range ``draw_range`` (NaN with one draw).
+    """
+    means = scores.groupby(["arm", "drift", "model", "method", "draw"], sort=False)[measure].mean()
+    wide = means.unstack("draw")
+    wide.columns = [f"draw_{int(d)}" for d in wide.columns]
+    vals = wide.to_numpy(np.float64)
+    n = np.sum(~np.isnan(vals), axis=1)
+    out = wide.reset_index()
+    out.insert(4, "draws", n)
+    sd, rng = np.full(len(vals), np.nan), np.full(len(vals), np.nan)
+    for i in np.flatnonzero(n > 1):
+        v = vals[i][~np.isnan(vals[i])]
+        sd[i], rng[i] = np.std(v, ddof=1), v.max() - v.min()
+    out["draw_sd"], out["draw_range"] = sd, rng
+    return out
+
+
+def summarize_arms(result: dict[str, pd.DataFrame]) -> pd.DataFrame:
+    """Every arm's measures over scenes (draws averaged per scene) with the analysis plan's interval.
+
+    Beside them: the draws, the draw-to-draw standard deviation of the Mean Acc. over scenes,
+    the mean ATE (m, after alignment) of the person's and the robot's estimated poses and the
+    mean registration error (m, degrees), where the arm estimates them.
+
+    Returns
+    -------
+    DataFrame
+        arm, drift, model, method, scenes, draws, each measure with ``_lo``/``_hi``, draw_sd,
+        ate_upper_m, ate_lower_m, reg_trans_err_m, reg_rot_err_deg.
+    """
+    from .summaries import summarize_over_scenes
+
+    per_scene = _per_scene(result["scores"])
+    summary = summarize_over_scenes(per_scene, by=("arm", "drift", "model", "method"))
+    summary.insert(5, "draws", per_scene.groupby(["arm", "drift", "model", "method"], sort=False)["draws"].max()
+                   .to_numpy())
+    spread = draw_spread(result["scores"])[["arm", "drift", "model", "method", "draw_sd"]]
+    summary = summary.merge(spread, on=["arm", "drift", "model", "method"], how="left")
+    traj = result["trajectories"]
+    if len(traj):
+        est = traj[traj["poses"] == "estimated"]
+        ate = est.pivot_table(index=["arm", "drift"], columns="sequence", values="ate_rmse", aggfunc="mean")
+        ate = ate.rename(columns={"upper": "ate_upper_m", "lower": "ate_lower_m"}).reset_index()
+        summary = summary.merge(ate, on=["arm", "drift"], how="left")
+    reg = result["registration"]
+    if len(reg):
+        r = reg.groupby(["arm", "drift"], sort=False)[["reg_trans_err_m", "reg_rot_err_deg"]].mean().reset_index()
+        summary = summary.merge(r, on=["arm", "drift"], how="left")
+    return summary
+
+
+def _paired(a: pd.Series, b: pd.Series) -> dict | None:
+    """Mean of the paired differences ``a - b`` over the scenes both have, with the plan's interval."""
+    from ..evaluate.stats import interval, scene_kind
+    from .analysis_plan import load_analysis_plan
+
+    d = (a - b).dropna()
+    if d.empty:
+        return None
+    plan = load_analysis_plan()
+    mean, lo, hi = interval(d.to_numpy(np.float64), [scene_kind(s) for s in d.index], method=plan.interval,
+                            confidence=plan.confidence)
+    return dict(diff=mean, lo=lo, hi=hi, scenes=int(d.size))
+
+
+def arm_differences(result: dict[str, pd.DataFrame], measure: str = "mean_acc") -> tuple[pd.DataFrame, pd.DataFrame]:
+    """What each part of the chain costs, and the claims' contrasts within each arm, paired per scene.
+
+    Returns
+    -------
+    differences : DataFrame
+        effect, ``a - b`` (:data:`DIFFERENCES`), model, method, diff, lo, hi, scenes: the change
+        of ``measure`` of one row between two arms at the simulator's drift.
+    contrasts : DataFrame
+        arm, drift, model, contrast (:data:`CONTRASTS`), diff, lo, hi, scenes: two rows of one arm.
+    """
+    per_scene = _per_scene(result["scores"])
+    wide = per_scene.pivot_table(index="scene", columns=["arm", "drift", "model", "method"], values=measure)
+    diffs = []
+    for effect, a, b in DIFFERENCES:
+        for model, method in sorted({(m, t) for (arm, _, m, t) in wide.columns if arm == a}):
+            ka, kb = (a, 1.0, model, method), (b, 1.0, model, method)
+            if ka in wide.columns and kb in wide.columns:
+                c = _paired(wide[ka], wide[kb])
+                if c is not None:
+                    diffs.append(dict(effect=effect, comparison=f"{a} - {b}", model=model, method=method, **c))
+    contrasts = []
+    for arm, drift in dict.fromkeys((a, d) for (a, d, _, _) in wide.columns):
+        for model in dict.fromkeys(m for (a, d, m, _) in wide.columns if (a, d) == (arm, drift)):
+            for name, ma, mb in CONTRASTS:
+                ka, kb = (arm, drift, model, ma), (arm, drift, model, mb)
+                if ka in wide.columns and kb in wide.columns:
+                    c = _paired(wide[ka], wide[kb])
+                    if c is not None:
+                        contrasts.append(dict(arm=arm, drift=drift, model=model, contrast=name, **c))
+    return pd.DataFrame(diffs), pd.DataFrame(contrasts)
+
+
+def _shown_rows(summary: pd.DataFrame) -> list[tuple[str, str]]:
+    nets = [m for m in dict.fromkeys(summary["model"]) if m != "ground truth"]
+    rows = []
+    for model, method in SHOWN:
+        for m in (nets if model == "<net>" else [model]):
+            if ((summary["model"] == m) & (summary["method"] == method)).any():
+                rows.append((m, method))
+    return rows
+
+
+def plot_diagnostics(summary: pd.DataFrame, path: str | Path, *, measure: str = "mean_acc") -> Path:
+    """Three panels: ``measure`` per arm (simulator's drift), ``measure`` against the drift level
+    (``chain``), and the estimated trajectories' ATE against the drift level; means over scenes
+    with the analysis plan's interval."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from ..io import save_figure
+
+    rows = _shown_rows(summary)
+    arms = [a.name for a in ARMS if (summary["arm"] == a.name).any()]
+    fig, axes = plt.subplots(1, 3, figsize=(15, 4.2), gridspec_kw=dict(width_ratios=[1.5, 1, 1]))
+    width = 0.8 / max(len(rows), 1)
+    base = summary[summary["drift"] == 1.0]
+    for i, (model, method) in enumerate(rows):
+        g = base[(base["model"] == model) & (base["method"] == method)].set_index("arm").reindex(arms)
+        x = np.arange(len(arms)) + (i - (len(rows) - 1) / 2) * width
+        y = g[measure].to_numpy(np.float64)
+        err = np.vstack([y - g[f"{measure}_lo"].to_numpy(np.float64), g[f"{measure}_hi"].to_numpy(np.float64) - y])
+        axes[0].bar(x, y, width, yerr=err, capsize=2, label=f"{model}: {method}")
+    axes[0].set_xticks(np.arange(len(arms)), [a.replace(", ", ",\n") for a in arms], fontsize="small")
+    axes[0].set_ylabel(f"{measure.replace('_', ' ')} (mean over scenes, 95 % interval)")
+    axes[0].set_title("arms (simulator's drift)")
+    lo = np.nanmin(base[f"{measure}_lo"].to_numpy(np.float64)) if len(base) else 0.0
+    axes[0].set_ylim(max(0.0, lo - 0.05), 1.0)
+    axes[0].legend(fontsize="x-small", ncol=2, loc="lower left")
+    sweep = summary[summary["arm"] == "chain"].sort_values("drift")
+    for model, method in rows:
+        g = sweep[(sweep["model"] == model) & (sweep["method"] == method)]
+        (line,) = axes[1].plot(g["drift"], g[measure], marker="o", label=f"{model}: {method}")
+        axes[1].fill_between(g["drift"], g[f"{measure}_lo"], g[f"{measure}_hi"], color=line.get_color(), alpha=0.15)
+    axes[1].set_xlabel("prior drift (x the simulator's)")
+    axes[1].set_title("chain: drift of the priors")
+    per_drift = sweep.drop_duplicates("drift")
+    for col, label in (("ate_upper_m", "person (estimated)"), ("ate_lower_m", "robot (estimated)")):
+        if col in per_drift.columns:
+            axes[2].plot(per_drift["drift"], per_drift[col] * 100, marker="o", label=label)
+    if "reg_trans_err_m" in per_drift.columns:
+        axes[2].plot(per_drift["drift"], per_drift["reg_trans_err_m"] * 100, marker="s", ls="--",
+                     label="registration error")
+    axes[2].set_xlabel("prior drift (x the simulator's)")
+    axes[2].set_ylabel("cm (mean over scenes and draws)")
+    axes[2].set_title("trajectory ATE and registration error")
+    axes[2].legend(fontsize="small")
+    for ax in axes:
+        ax.grid(alpha=0.3)
+    fig.tight_layout()
+    return save_figure(fig, path)
+
+
+def write_diagnostics(result: dict[str, pd.DataFrame], figures: str | Path, *, minutes: float,
+                      settings: dict) -> list[Path]:
+    """Write the study's tables (CSV and Markdown), its figure and ``run.json`` into ``figures``."""
+    from ..io import atomic_write_text
+    from .tables import save_interval_table, save_table
+
+    figures = Path(figures)
+    figures.mkdir(parents=True, exist_ok=True)
+    summary = summarize_arms(result)
+    differences, contrasts = arm_differences(result)
+    out = list(save_interval_table(summary, figures, "real_diagnostics_arms",
+                                   keep=("draw_sd", "ate_upper_m", "ate_lower_m", "reg_trans_err_m",
+                                         "reg_rot_err_deg")))
+    for name, df in (("real_diagnostics_differences", differences), ("real_diagnostics_contrasts", contrasts),
+                     ("real_diagnostics_draw_spread", draw_spread(result["scores"])),
+                     ("real_diagnostics_per_scene", result["scores"]),
+                     ("real_diagnostics_trajectories", result["trajectories"]),
+                     ("real_diagnostics_registration", result["registration"])):
+        out += list(save_table(df, figures, name))
+    out.append(plot_diagnostics(summary, figures / "real_diagnostics.png"))
+    atomic_write_text(figures / "run.json", json.dumps(
+        dict(settings, scenes=int(result["scores"]["scene"].nunique()), minutes=round(minutes, 1),
+             finished=time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())), indent=1))
+    out.append(figures / "run.json")
+    return out
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``python -m semmatch.experiments.real_diagnostics``: run the arms, write the tables and figure."""
+    from .pipeline import ROOT
+
+    ap = argparse.ArgumentParser(prog="python -m semmatch.experiments.real_diagnostics",
+                                 description=__doc__.splitlines()[0])
+    ap.add_argument("--profile", default="full", help="data/<profile> holds the scenes and networks (%(default)s)")
+    ap.add_argument("--data", type=Path, default=None, help="data folder instead of data/<profile>")
+    ap.add_argument("--figures", type=Path, default=None,
+                    help="tables and figure (default figures/<profile>_real_diagnostics)")
+    ap.add_argument("--networks", nargs="+", default=["compact"], help="networks (default %(default)s)")
+    ap.add_argument("--methods", nargs="+", default=["3d-neighborhood"], help="transfer methods (default %(default)s)")
+    ap.add_argument("--draws", type=int, default=3, help="draws of each arm with estimated poses (%(default)s)")
+    ap.add_argument("--sweep-draws", type=int, default=1,
+                    help="draws of the chain at the other drift levels (%(default)s)")
+    ap.add_argument("--drift-levels", type=float, nargs="+", default=[0.0, 0.5, 1.0, 2.0, 4.0],
+                    help="prior drift levels of the chain arm, x the simulator's (default %(default)s)")
+    ap.add_argument("--scenes", nargs="+", default=None, help="scene ids (default every evaluation scene)")
+    ap.add_argument("--jobs", type=int, default=1, help="local worker processes (%(default)s)")
+    ap.add_argument("--scheduler", default=None, help="Dask scheduler address (default SEMMATCH_SCHEDULER)")
+    args = ap.parse_args(argv)
+    data = args.data or ROOT / "data" / args.profile
+    figures = args.figures or ROOT / "figures" / f"{args.profile}_real_diagnostics"
+    if not (data / "scenes" / "eval").is_dir():
+        ap.error(f"{data / 'scenes' / 'eval'}: no evaluation scenes; run the profile's pipeline first "
+                 f"(make repro PROFILE={args.profile})")
+    try:
+        arms = diagnostic_arms(args.drift_levels)
+    except ValueError as e:
+        ap.error(str(e))
+    t0 = time.time()
+    result = real_like_diagnostics(data, networks=args.networks, methods=args.methods, arms=arms, draws=args.draws,
+                                   sweep_draws=args.sweep_draws, scenes=args.scenes, jobs=args.jobs, scheduler=args.scheduler)
+    settings = dict(profile=args.profile, networks=args.networks, methods=args.methods, draws=args.draws,
+                    sweep_draws=args.sweep_draws, drift_levels=args.drift_levels)
+    for p in write_diagnostics(result, figures, minutes=(time.time() - t0) / 60, settings=settings):
+        print(p)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

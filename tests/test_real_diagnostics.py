@@ -1,0 +1,145 @@
+"""The real-like chain's diagnostic arms: priors regenerated, arms paired per scene, Table 3's chain reproduced."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from semmatch.experiments.layout import Layout
+from semmatch.experiments.real import evaluate_real_like
+from semmatch.experiments.real_diagnostics import (
+    ARMS,
+    Arm,
+    arm_differences,
+    diagnostic_arms,
+    draw_spread,
+    drifted_prior,
+    main,
+    real_like_diagnostics,
+    summarize_arms,
+)
+from semmatch.geometry import DEFAULT_INTRINSICS
+from semmatch.io import read_tum
+
+SCENE = "bedroom_0003"
+
+
+@pytest.fixture(scope="module")
+def tiny_root(tmp_path_factory):
+    """A data root with one small evaluation scene (clean and Kinect-like noisy recordings)."""
+    from semmatch.sim import NoiseConfig, generate_dataset
+
+    root = tmp_path_factory.mktemp("real_diag") / "data"
+    generate_dataset(root / "scenes", train_seeds=[], eval_seeds=[3], kinds=["bedroom"], n_frames_upper=20,
+                     n_frames_lower=20, heights_sweep=None, intrinsics=DEFAULT_INTRINSICS.scaled(160, 120),
+                     noise=NoiseConfig.kinect(3), progress=False)
+    return root
+
+
+@pytest.fixture
+def oracle_network(monkeypatch):
+    """A "network" that is the ground truth with 20 % blob-shaped errors (no checkpoint needed)."""
+    from semmatch.segment.oracle import NoisyOracle
+
+    monkeypatch.setattr(Layout, "load_network", lambda self, net: NoisyOracle(0.2, seed=0))
+
+
+def test_prior_draw_zero_is_the_recording_and_drift_scales_it(tiny_root):
+    rec = tiny_root / "scenes" / "eval" / SCENE / "lower_noisy"
+    true = read_tum(rec / "poses_gt.txt")[1]
+    recorded = read_tum(rec / "poses.txt")[1]
+    np.testing.assert_array_equal(drifted_prior(rec, true), recorded)  # the file itself
+    (rec.parent / "copy").mkdir()
+    (rec.parent / "copy" / "meta.json").write_text((rec / "meta.json").read_text())  # no poses.txt: regenerated
+    np.testing.assert_allclose(drifted_prior(rec.parent / "copy", true), recorded, atol=1e-6)  # the file's rounding
+    assert np.abs(drifted_prior(rec, true, draw=1) - recorded).max() > 1e-4  # another stream
+
+    def max_error(p):
+        return np.linalg.norm(p[:, :3, 3] - true[:, :3, 3], axis=1).max()
+
+    jitter_only = drifted_prior(rec, true, drift=0.0)
+    assert max_error(jitter_only) < 5 * 0.005 * np.sqrt(3)  # the per-frame jitter alone (sigma 5 mm)
+    assert max_error(drifted_prior(rec, true, drift=4.0)) > max_error(drifted_prior(rec, true, drift=1.0))
+    (rec.parent / "no_noise").mkdir()
+    (rec.parent / "no_noise" / "meta.json").write_text(json.dumps({"frames": 3}))
+    with pytest.raises(ValueError, match="no_noise.*noise"):
+        drifted_prior(rec.parent / "no_noise", true)
+
+
+def test_arms_and_their_bad_settings():
+    arms = diagnostic_arms([0.0, 1.0, 2.0])
+    assert [a.name for a in arms[:len(ARMS)]] == [a.name for a in ARMS]
+    assert [(a.name, a.drift) for a in arms[len(ARMS):]] == [("chain", 0.0), ("chain", 2.0)]
+    assert not Arm("x", "clean", "true").random and Arm("x", "noisy", "estimated").random
+    with pytest.raises(ValueError, match="drift levels"):
+        diagnostic_arms([-1.0])
+
+
+def test_study_reproduces_table3_chain_and_pairs_the_arms(tiny_root, tmp_path, oracle_network, monkeypatch):
+    kw = dict(voxel_size=0.05, registration_voxel=0.1, registration_restarts=2, prior_tolerance=(0.1, 10.0))
+    arms = [ARMS[0], ARMS[1], ARMS[3], ARMS[4], Arm("chain", "noisy", "estimated", drift=0.0)]
+    res = real_like_diagnostics(tiny_root, networks=["noisy"], arms=arms, draws=2, progress=False, **kw)
+    scores = res["scores"]
+    # arms at true poses run once; the drift-0 chain once (sweep_draws); the others every draw
+    draws = scores.groupby(["arm", "drift"])["draw"].nunique().to_dict()
+    assert draws == {("clean, true poses", 1.0): 1, ("noisy, true poses", 1.0): 1, ("chain", 1.0): 2,
+                     ("person visual-only", 1.0): 2, ("chain", 0.0): 1}
+    assert set(zip(scores["model"], scores["method"])) == {
+        ("ground truth", "3d-neighborhood"), ("noisy", "lower"), ("noisy", "3d-neighborhood"), ("noisy", "fused"),
+        ("noisy", "upper")}
+    assert scores[["jaccard", "sorensen", "color_acc", "mean_acc"]].apply(lambda c: c.between(0, 1)).all().all()
+    # draw 0 of the chain is Table 3's chain (the full profile's: network rows only): the recorded prior,
+    # RANSAC seed 0, the lower reference registered onto the network's map
+    table, _, _ = evaluate_real_like(tiny_root, ["3d-neighborhood"], ["noisy"], include_ground_truth=False,
+                                     progress=False, **kw)
+    chain0 = scores[(scores["arm"] == "chain") & (scores["drift"] == 1.0) & (scores["draw"] == 0)
+                    & (scores["model"] == "noisy")]
+    a = chain0.set_index(["model", "method"])["mean_acc"].sort_index()
+    b = table.set_index(["model", "method"])["mean_acc"].sort_index()
+    pd.testing.assert_series_equal(a, b, check_exact=False, atol=1e-9)
+    # the visual-only person: no prior row for the person; the robot keeps its prior (same draw: same poses)
+    traj = res["trajectories"]
+    vis = traj[traj["arm"] == "person visual-only"]
+    assert set(vis.loc[vis["sequence"] == "upper", "poses"]) == {"estimated"}
+    assert set(vis.loc[vis["sequence"] == "lower", "poses"]) == {"prior", "estimated"}
+    assert traj[traj["arm"].str.contains("true poses")].empty
+    # summaries
+    summary = summarize_arms(res)
+    assert {"mean_acc_lo", "mean_acc_hi", "draw_sd", "ate_lower_m", "reg_trans_err_m"} <= set(summary.columns)
+    row = summary[(summary["arm"] == "chain") & (summary["drift"] == 1.0) & (summary["method"] == "lower")].iloc[0]
+    assert row["draws"] == 2 and row["scenes"] == 1
+    spread = draw_spread(scores)
+    assert np.isnan(spread.loc[spread["arm"] == "clean, true poses", "draw_sd"]).all()
+    diffs, contrasts = arm_differences(res)
+    assert {"sensor noise (true poses)", "estimated poses (noisy frames)", "person tracked visually only"} <= set(
+        diffs["effect"])
+    one = diffs[(diffs["effect"] == "sensor noise (true poses)") & (diffs["model"] == "noisy")
+                & (diffs["method"] == "lower")].iloc[0]
+    per = scores.set_index(["arm", "model", "method"])["mean_acc"]
+    assert one["diff"] == pytest.approx(per["noisy, true poses", "noisy", "lower"]
+                                        - per["clean, true poses", "noisy", "lower"])
+    assert set(contrasts["contrast"]) == {"transfer - lower (C15)", "transfer - upper (C16)", "fused - lower"}
+
+    # a second run reuses every arm's result.json (nothing is recomputed)
+    import semmatch.experiments.real as real
+
+    monkeypatch.setattr(real, "chain_from_poses", lambda *a, **k: pytest.fail("recomputed"))
+    again = real_like_diagnostics(tiny_root, networks=["noisy"], arms=arms, draws=2, progress=False, **kw)
+    pd.testing.assert_frame_equal(again["scores"], scores)
+
+
+def test_cli_writes_the_tables_and_figure(tiny_root, tmp_path, oracle_network, capsys):
+    figures = tmp_path / "fig"
+    assert main(["--data", str(tiny_root), "--figures", str(figures), "--networks", "noisy", "--draws", "1",
+                 "--drift-levels", "1", "2"]) == 0
+    for name in ("arms", "differences", "contrasts", "draw_spread", "per_scene", "trajectories", "registration"):
+        assert (figures / f"real_diagnostics_{name}.csv").is_file() and (figures / f"real_diagnostics_{name}.md").is_file()
+    assert (figures / "real_diagnostics.png").stat().st_size > 10_000
+    run = json.loads((figures / "run.json").read_text())
+    assert run["scenes"] == 1 and run["drift_levels"] == [1.0, 2.0]
+    with pytest.raises(SystemExit):
+        main(["--data", str(tmp_path / "nowhere")])
+    assert "no evaluation scenes" in capsys.readouterr().err
