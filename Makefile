@@ -6,7 +6,7 @@ TRAIN ?=
 SEEDS ?=
 NAME ?=
 
-.PHONY: setup test test-fast repro confirm in-home smoke lint clean-data
+.PHONY: setup test test-fast repro confirm in-home real-diagnostics smoke lint clean-data
 
 setup:
 	@bash scripts/setup.sh
@@ -39,6 +39,10 @@ confirm: setup
 ## the in-home adaptation study (its plan: semmatch/experiments/in_home_plan.yaml; docs/adapt.md)
 in-home: setup
 	$(PY) -m semmatch.experiments.in_home $(if $(JOBS),--jobs $(JOBS),)
+
+## diagnostics of the real-like chain on the full profile's development scenes (docs/protocol.md)
+real-diagnostics: setup
+	$(PY) -m semmatch.experiments.real_diagnostics --profile full $(if $(JOBS),--jobs $(JOBS),)
 
 lint: setup
 	$(VENV)/bin/ruff check semmatch tests
