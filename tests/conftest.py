@@ -32,3 +32,25 @@ def shared_dir() -> Path:
 @pytest.fixture
 def rng() -> np.random.Generator:
     return np.random.default_rng(0)
+
+
+def noisy_scene_root(tmp_path_factory, name: str, n_frames: int) -> Path:
+    """A data root with one small evaluation scene, ``bedroom_0003`` (clean and Kinect-like noisy
+    recordings of ``n_frames`` frames at 160x120): the real-like chain's test scene."""
+    from semmatch.geometry import DEFAULT_INTRINSICS
+    from semmatch.sim import NoiseConfig, generate_dataset
+
+    root = tmp_path_factory.mktemp(name) / "data"
+    generate_dataset(root / "scenes", train_seeds=[], eval_seeds=[3], kinds=["bedroom"], n_frames_upper=n_frames,
+                     n_frames_lower=n_frames, heights_sweep=None, intrinsics=DEFAULT_INTRINSICS.scaled(160, 120),
+                     noise=NoiseConfig.kinect(3), progress=False)
+    return root
+
+
+@pytest.fixture
+def oracle_network(monkeypatch):
+    """Every network of a data root is the ground truth with 20 % blob-shaped errors (no checkpoint)."""
+    from semmatch.experiments.layout import Layout
+    from semmatch.segment.oracle import NoisyOracle
+
+    monkeypatch.setattr(Layout, "load_network", lambda self, net: NoisyOracle(0.2, seed=0))

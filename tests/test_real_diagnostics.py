@@ -7,8 +7,8 @@ import json
 import numpy as np
 import pandas as pd
 import pytest
+from conftest import noisy_scene_root
 
-from semmatch.experiments.layout import Layout
 from semmatch.experiments.real import evaluate_real_like
 from semmatch.experiments.real_diagnostics import (
     ARMS,
@@ -21,7 +21,6 @@ from semmatch.experiments.real_diagnostics import (
     real_like_diagnostics,
     summarize_arms,
 )
-from semmatch.geometry import DEFAULT_INTRINSICS
 from semmatch.io import read_tum
 
 SCENE = "bedroom_0003"
@@ -30,31 +29,17 @@ SCENE = "bedroom_0003"
 @pytest.fixture(scope="module")
 def tiny_root(tmp_path_factory):
     """A data root with one small evaluation scene (clean and Kinect-like noisy recordings)."""
-    from semmatch.sim import NoiseConfig, generate_dataset
-
-    root = tmp_path_factory.mktemp("real_diag") / "data"
-    generate_dataset(root / "scenes", train_seeds=[], eval_seeds=[3], kinds=["bedroom"], n_frames_upper=20,
-                     n_frames_lower=20, heights_sweep=None, intrinsics=DEFAULT_INTRINSICS.scaled(160, 120),
-                     noise=NoiseConfig.kinect(3), progress=False)
-    return root
+    return noisy_scene_root(tmp_path_factory, "real_diag", 20)
 
 
-@pytest.fixture
-def oracle_network(monkeypatch):
-    """A "network" that is the ground truth with 20 % blob-shaped errors (no checkpoint needed)."""
-    from semmatch.segment.oracle import NoisyOracle
-
-    monkeypatch.setattr(Layout, "load_network", lambda self, net: NoisyOracle(0.2, seed=0))
-
-
-def test_prior_draw_zero_is_the_recording_and_drift_scales_it(tiny_root):
+def test_prior_draw_zero_is_the_recording_and_drift_scales_it(tiny_root, tmp_path):
     rec = tiny_root / "scenes" / "eval" / SCENE / "lower_noisy"
     true = read_tum(rec / "poses_gt.txt")[1]
     recorded = read_tum(rec / "poses.txt")[1]
     np.testing.assert_array_equal(drifted_prior(rec, true), recorded)  # the file itself
-    (rec.parent / "copy").mkdir()
-    (rec.parent / "copy" / "meta.json").write_text((rec / "meta.json").read_text())  # no poses.txt: regenerated
-    np.testing.assert_allclose(drifted_prior(rec.parent / "copy", true), recorded, atol=1e-6)  # the file's rounding
+    (tmp_path / "copy").mkdir()
+    (tmp_path / "copy" / "meta.json").write_text((rec / "meta.json").read_text())  # no poses.txt: regenerated
+    np.testing.assert_allclose(drifted_prior(tmp_path / "copy", true), recorded, atol=1e-6)  # the file's rounding
     assert np.abs(drifted_prior(rec, true, draw=1) - recorded).max() > 1e-4  # another stream
 
     def max_error(p):
@@ -63,10 +48,10 @@ def test_prior_draw_zero_is_the_recording_and_drift_scales_it(tiny_root):
     jitter_only = drifted_prior(rec, true, drift=0.0)
     assert max_error(jitter_only) < 5 * 0.005 * np.sqrt(3)  # the per-frame jitter alone (sigma 5 mm)
     assert max_error(drifted_prior(rec, true, drift=4.0)) > max_error(drifted_prior(rec, true, drift=1.0))
-    (rec.parent / "no_noise").mkdir()
-    (rec.parent / "no_noise" / "meta.json").write_text(json.dumps({"frames": 3}))
+    (tmp_path / "no_noise").mkdir()
+    (tmp_path / "no_noise" / "meta.json").write_text(json.dumps({"frames": 3}))
     with pytest.raises(ValueError, match="no_noise.*noise"):
-        drifted_prior(rec.parent / "no_noise", true)
+        drifted_prior(tmp_path / "no_noise", true)
 
 
 def test_arms_and_their_bad_settings():

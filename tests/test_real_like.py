@@ -7,6 +7,7 @@ import shutil
 import numpy as np
 import pandas as pd
 import pytest
+from conftest import noisy_scene_root
 
 from semmatch.experiments.layout import GT, Layout
 from semmatch.experiments.real import evaluate_real_like, real_like_lower_map
@@ -16,7 +17,6 @@ from semmatch.experiments.real_poses import (
     registration_errors,
     select_prior_tolerance,
 )
-from semmatch.geometry import DEFAULT_INTRINSICS
 from semmatch.io import read_tum, write_map, write_tum
 
 SCENE = "bedroom_0003"
@@ -26,21 +26,7 @@ TOL = (0.1, 10.0)
 @pytest.fixture(scope="module")
 def tiny_root(tmp_path_factory):
     """A data root with one small evaluation scene (clean and Kinect-like noisy recordings)."""
-    from semmatch.sim import NoiseConfig, generate_dataset
-
-    root = tmp_path_factory.mktemp("real_like") / "data"
-    generate_dataset(root / "scenes", train_seeds=[], eval_seeds=[3], kinds=["bedroom"], n_frames_upper=24,
-                     n_frames_lower=24, heights_sweep=None, intrinsics=DEFAULT_INTRINSICS.scaled(160, 120),
-                     noise=NoiseConfig.kinect(3), progress=False)
-    return root
-
-
-@pytest.fixture
-def oracle_network(monkeypatch):
-    """A "network" that is the ground truth with 20 % blob-shaped errors (no checkpoint needed)."""
-    from semmatch.segment.oracle import NoisyOracle
-
-    monkeypatch.setattr(Layout, "load_network", lambda self, net: NoisyOracle(0.2, seed=0))
+    return noisy_scene_root(tmp_path_factory, "real_like", 24)
 
 
 def _moved_copy(root, dst, G):
