@@ -93,7 +93,7 @@ def test_study_reproduces_table3_chain_and_pairs_the_arms(tiny_root, tmp_path, o
     assert traj[traj["arm"].str.contains("true poses")].empty
     # summaries
     summary = summarize_arms(res)
-    assert {"mean_acc_lo", "mean_acc_hi", "draw_sd", "ate_lower_m", "reg_trans_err_m"} <= set(summary.columns)
+    assert {"mean_acc_lo", "mean_acc_hi", "draw_sd", "ate_lower_m", "reg_trans_err_median_m"} <= set(summary.columns)
     row = summary[(summary["arm"] == "chain") & (summary["drift"] == 1.0) & (summary["method"] == "lower")].iloc[0]
     assert row["draws"] == 2 and row["scenes"] == 1
     spread = draw_spread(scores)
@@ -114,6 +114,7 @@ def test_study_reproduces_table3_chain_and_pairs_the_arms(tiny_root, tmp_path, o
     monkeypatch.setattr(real, "chain_from_poses", lambda *a, **k: pytest.fail("recomputed"))
     again = real_like_diagnostics(tiny_root, networks=["noisy"], arms=arms, draws=2, progress=False, **kw)
     pd.testing.assert_frame_equal(again["scores"], scores)
+    assert not res["tasks"]["reused"].any() and again["tasks"]["reused"].all() and len(again["tasks"]) == 7
 
 
 def test_cli_writes_the_tables_and_figure(tiny_root, tmp_path, oracle_network, capsys):
@@ -124,7 +125,7 @@ def test_cli_writes_the_tables_and_figure(tiny_root, tmp_path, oracle_network, c
         assert (figures / f"real_diagnostics_{name}.csv").is_file() and (figures / f"real_diagnostics_{name}.md").is_file()
     assert (figures / "real_diagnostics.png").stat().st_size > 10_000
     run = json.loads((figures / "run.json").read_text())
-    assert run["scenes"] == 1 and run["drift_levels"] == [1.0, 2.0]
+    assert run["scenes"] == 1 and run["drift_levels"] == [1.0, 2.0] and run["tasks"] == 6 and run["tasks_reused"] == 0
     with pytest.raises(SystemExit):
         main(["--data", str(tmp_path / "nowhere")])
     assert "no evaluation scenes" in capsys.readouterr().err

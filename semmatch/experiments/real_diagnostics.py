@@ -228,7 +228,8 @@ def run_arm(data_root: str, networks: tuple[str, ...], methods: tuple[str, ...],
     -------
     dict
         ``rows`` (scores), ``trajectories`` and ``registration`` (errors), each a list of dicts
-        carrying ``arm``, ``drift``, ``draw`` and ``scene``.
+        carrying ``arm``, ``drift``, ``draw`` and ``scene``; ``reused``: whether it was read from
+        an earlier run's ``result.json``.
     """
     from ..io import atomic_write_text, read_sequence, read_tum
     from ..poses.rgbd_odometry import open3d_threads
@@ -246,7 +247,7 @@ def run_arm(data_root: str, networks: tuple[str, ...], methods: tuple[str, ...],
     if done.is_file():
         prev = json.loads(done.read_text())
         if prev.get("settings") == settings:
-            return prev["result"]
+            return dict(prev["result"], reused=True)
     work.mkdir(parents=True, exist_ok=True)
     tag = dict(arm=arm.name, drift=arm.drift, draw=draw, scene=sid)
     models = {net: layout.load_network(net) for net in networks}
@@ -284,7 +285,7 @@ def run_arm(data_root: str, networks: tuple[str, ...], methods: tuple[str, ...],
     result = dict(rows=[tag | r for r in rows], trajectories=traj,
                   registration=[tag | {k: float(reg[k]) for k in keep}])
     atomic_write_text(done, json.dumps(dict(settings=settings, result=result), indent=1))
-    return result
+    return dict(result, reused=False)
 
 
 def _task_order(task: tuple[Arm, int, str]) -> int:
@@ -326,7 +327,7 @@ def real_like_diagnostics(data_root: str | Path, *, networks: Sequence[str] = ("
         ``scores`` (arm, drift, draw, scene, model, method, the four measures),
         ``trajectories`` (arm, drift, draw, scene, sequence, poses, ate_rmse, ...) and
         ``registration`` (arm, drift, draw, scene, reg_trans_err_m, reg_rot_err_deg, fitness,
-        agreement).
+        agreement) and ``tasks`` (arm, drift, draw, scene, reused: computed by an earlier run).
 
     Raises
     ------
@@ -362,7 +363,10 @@ def real_like_diagnostics(data_root: str | Path, *, networks: Sequence[str] = ("
     fn = functools.partial(run_arm, str(data_root), tuple(networks), tuple(methods), o)
     results = map_tasks(fn, tasks, jobs=jobs, scheduler=scheduler, desc="diagnostic arms", progress=progress)
     parts = {"scores": "rows", "trajectories": "trajectories", "registration": "registration"}
-    return {name: pd.DataFrame([r for res in results for r in res[key]]) for name, key in parts.items()}
+    out = {name: pd.DataFrame([r for res in results for r in res[key]]) for name, key in parts.items()}
+    out["tasks"] = pd.DataFrame([dict(arm=a.name, drift=a.drift, draw=d, scene=s, reused=bool(res["reused"]))
+                                 for (a, d, s), res in zip(tasks, results, strict=True)])
+    return out
 
 
 #: rows shown in the summaries and the figure: (model, method); "<net>" is each network
@@ -422,13 +426,14 @@ def summarize_arms(result: dict[str, pd.DataFrame]) -> pd.DataFrame:
 
     Beside them: the draws, the draw-to-draw standard deviation of the Mean Acc. over scenes,
     the mean ATE (m, after alignment) of the person's and the robot's estimated poses and the
-    mean registration error (m, degrees), where the arm estimates them.
+    median registration error (m, degrees; over scenes and draws: one failed registration would
+    dominate a mean), where the arm estimates them.
 
     Returns
     -------
     DataFrame
         arm, drift, model, method, scenes, draws, each measure with ``_lo``/``_hi``, draw_sd,
-        ate_upper_m, ate_lower_m, reg_trans_err_m, reg_rot_err_deg.
+        ate_upper_m, ate_lower_m, reg_trans_err_median_m, reg_rot_err_median_deg.
     """
     from .summaries import summarize_over_scenes
 
@@ -446,7 +451,8 @@ def summarize_arms(result: dict[str, pd.DataFrame]) -> pd.DataFrame:
         summary = summary.merge(ate, on=["arm", "drift"], how="left")
     reg = result["registration"]
     if len(reg):
-        r = reg.groupby(["arm", "drift"], sort=False)[["reg_trans_err_m", "reg_rot_err_deg"]].mean().reset_index()
+        r = reg.groupby(["arm", "drift"], sort=False)[["reg_trans_err_m", "reg_rot_err_deg"]].median().reset_index()
+        r = r.rename(columns={"reg_trans_err_m": "reg_trans_err_median_m", "reg_rot_err_deg": "reg_rot_err_median_deg"})
         summary = summary.merge(r, on=["arm", "drift"], how="left")
     return summary
 
@@ -535,7 +541,8 @@ def plot_diagnostics(summary: pd.DataFrame, path: str | Path, *, measure: str = 
     axes[0].set_title("arms (simulator's drift)")
     lo = np.nanmin(base[f"{measure}_lo"].to_numpy(np.float64)) if len(base) else 0.0
     axes[0].set_ylim(max(0.0, lo - 0.05), 1.0)
-    axes[0].legend(fontsize="x-small", ncol=2, loc="lower left")
+    handles, labels = axes[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=len(rows), fontsize="small", frameon=False)
     sweep = summary[summary["arm"] == "chain"].sort_values("drift")
     for model, method in rows:
         g = sweep[(sweep["model"] == model) & (sweep["method"] == method)]
@@ -547,16 +554,16 @@ def plot_diagnostics(summary: pd.DataFrame, path: str | Path, *, measure: str = 
     for col, label in (("ate_upper_m", "person (estimated)"), ("ate_lower_m", "robot (estimated)")):
         if col in per_drift.columns:
             axes[2].plot(per_drift["drift"], per_drift[col] * 100, marker="o", label=label)
-    if "reg_trans_err_m" in per_drift.columns:
-        axes[2].plot(per_drift["drift"], per_drift["reg_trans_err_m"] * 100, marker="s", ls="--",
-                     label="registration error")
+    if "reg_trans_err_median_m" in per_drift.columns:
+        axes[2].plot(per_drift["drift"], per_drift["reg_trans_err_median_m"] * 100, marker="s", ls="--",
+                     label="registration error (median)")
     axes[2].set_xlabel("prior drift (x the simulator's)")
-    axes[2].set_ylabel("cm (mean over scenes and draws)")
+    axes[2].set_ylabel("cm (ATE: mean over scenes and draws)")
     axes[2].set_title("trajectory ATE and registration error")
     axes[2].legend(fontsize="small")
     for ax in axes:
         ax.grid(alpha=0.3)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0.07, 1, 1))
     return save_figure(fig, path)
 
 
@@ -571,8 +578,8 @@ def write_diagnostics(result: dict[str, pd.DataFrame], figures: str | Path, *, m
     summary = summarize_arms(result)
     differences, contrasts = arm_differences(result)
     out = list(save_interval_table(summary, figures, "real_diagnostics_arms",
-                                   keep=("draw_sd", "ate_upper_m", "ate_lower_m", "reg_trans_err_m",
-                                         "reg_rot_err_deg")))
+                                   keep=("draw_sd", "ate_upper_m", "ate_lower_m", "reg_trans_err_median_m",
+                                         "reg_rot_err_median_deg")))
     for name, df in (("real_diagnostics_differences", differences), ("real_diagnostics_contrasts", contrasts),
                      ("real_diagnostics_draw_spread", draw_spread(result["scores"])),
                      ("real_diagnostics_per_scene", result["scores"]),
@@ -582,6 +589,7 @@ def write_diagnostics(result: dict[str, pd.DataFrame], figures: str | Path, *, m
     out.append(plot_diagnostics(summary, figures / "real_diagnostics.png"))
     atomic_write_text(figures / "run.json", json.dumps(
         dict(settings, scenes=int(result["scores"]["scene"].nunique()), minutes=round(minutes, 1),
+             tasks=len(result["tasks"]), tasks_reused=int(result["tasks"]["reused"].sum()),
              finished=time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())), indent=1))
     out.append(figures / "run.json")
     return out
