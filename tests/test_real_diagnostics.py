@@ -115,6 +115,14 @@ def test_study_reproduces_table3_chain_and_pairs_the_arms(tiny_root, tmp_path, o
     again = real_like_diagnostics(tiny_root, networks=["noisy"], arms=arms, draws=2, progress=False, **kw)
     pd.testing.assert_frame_equal(again["scores"], scores)
     assert not res["tasks"]["reused"].any() and again["tasks"]["reused"].all() and len(again["tasks"]) == 7
+    # another checkpoint (or other recordings) is another input: nothing cached is reused
+    (tiny_root / "models").mkdir(exist_ok=True)
+    (tiny_root / "models" / "noisy.pt").write_bytes(b"another network")
+    try:
+        with pytest.raises(pytest.fail.Exception, match="recomputed"):
+            real_like_diagnostics(tiny_root, networks=["noisy"], arms=arms[:1], draws=1, progress=False, **kw)
+    finally:
+        (tiny_root / "models" / "noisy.pt").unlink()
 
 
 def test_cli_writes_the_tables_and_figure(tiny_root, tmp_path, oracle_network, capsys):

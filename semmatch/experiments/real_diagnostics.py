@@ -182,9 +182,24 @@ def _estimate(seq, prior: np.ndarray | None, cache: Path, tol) -> np.ndarray:
     return read_tum(cache)[1]
 
 
-def _labels_folder(data_root: str | Path, sid: str, frames: str, recording: str, network: str) -> Path:
+def _inputs_digest(data_root: str | Path, sid: str, networks: Sequence[str]) -> str:
+    """What the cached labels, poses and results of a scene were made from: its noisy recordings'
+    settings and true poses and each network's checkpoint (12 hex digits; ``-`` for a network
+    without a checkpoint file, e.g. a test's oracle)."""
+    import hashlib
+
+    from ..adapt.finetune import file_digest
+
+    layout = Layout(data_root)
+    sd = layout.scenes / "eval" / sid
+    parts = [file_digest(sd / f"{r}_noisy" / f) for r in ("upper", "lower") for f in ("meta.json", "poses_gt.txt")]
+    parts += [file_digest(layout.model(n)) if layout.model(n).is_file() else "-" for n in networks]
+    return hashlib.sha256("/".join(parts).encode()).hexdigest()[:12]
+
+
+def _labels_folder(data_root: str | Path, sid: str, frames: str, recording: str, network: str, digest: str) -> Path:
     """Where a network's labels of a scene's recording (clean or noisy frames) are kept for every arm."""
-    return Path(data_root) / "real_diagnostics" / "labels" / sid / frames / f"{recording}_{network}"
+    return Path(data_root) / "real_diagnostics" / "labels" / f"{sid}-{digest}" / frames / f"{recording}_{network}"
 
 
 def _recording(sd: Path, recording: str, frames: str) -> Path:
@@ -203,9 +218,9 @@ def predict_scene(data_root: str, networks: tuple[str, ...], task: tuple[str, st
     sd = layout.scenes / "eval" / sid
     out = []
     for net in networks:
-        model = None
+        model, digest = None, _inputs_digest(data_root, sid, [net])
         for recording in ("upper", "lower"):
-            folder = _labels_folder(data_root, sid, frames, recording, net)
+            folder = _labels_folder(data_root, sid, frames, recording, net, digest)
             if not folder.is_dir():
                 model = model or layout.load_network(net)
                 predict_sequence(model, read_sequence(_recording(sd, recording, frames)), folder, progress=False)
@@ -218,9 +233,10 @@ def run_arm(data_root: str, networks: tuple[str, ...], methods: tuple[str, ...],
     """One arm, one draw, one scene (a task of :func:`real_like_diagnostics`).
 
     Writes under ``<data_root>/real_diagnostics/<arm>/d<draw>/<scene>/`` (the chain's maps and
-    labels, ``result.json``) and ``real_diagnostics/poses/<scene>/`` (the estimated poses, one
+    labels, ``result.json``) and ``real_diagnostics/poses/<scene>-<inputs>/`` (the estimated poses, one
     file per frames, recording and prior: arms with the same prior share them); a
-    ``result.json`` made with the same settings is reused. The networks' labels are those of
+    ``result.json`` made with the same settings and inputs (:func:`_inputs_digest`) is reused.
+    The networks' labels are those of
     :func:`predict_scene` where it has run. The registration error is measured against the
     trajectories' alignment to the truth (uncertain by about their ATE).
 
@@ -234,7 +250,7 @@ def run_arm(data_root: str, networks: tuple[str, ...], methods: tuple[str, ...],
     from ..io import atomic_write_text, read_sequence, read_tum
     from ..poses.rgbd_odometry import open3d_threads
     from .real import chain_from_poses, trajectory_row
-    from .real_poses import PosedSequence
+    from .real_poses import PosedSequence, gate_name
 
     arm, draw, sid = task
     layout = Layout(data_root)
@@ -242,6 +258,7 @@ def run_arm(data_root: str, networks: tuple[str, ...], methods: tuple[str, ...],
     work = Path(data_root) / "real_diagnostics" / arm.slug / f"d{draw}" / sid
     settings = dict(arm=arm.name, frames=arm.frames, poses=arm.poses, person_prior=arm.person_prior,
                     drift=arm.drift, draw=draw, networks=list(networks), methods=list(methods),
+                    inputs=_inputs_digest(data_root, sid, networks),
                     **{k: (list(v) if isinstance(v, tuple) else v) for k, v in o.items()})
     done = work / "result.json"
     if done.is_file():
@@ -269,15 +286,16 @@ def run_arm(data_root: str, networks: tuple[str, ...], methods: tuple[str, ...],
                 if prior is not None:
                     traj.append(tag | trajectory_row(sid, name, "prior", prior, true[name]))
                 spec = f"drift{arm.drift:g}_d{draw}" if prior is not None else "visual"
-                cache = Path(data_root) / "real_diagnostics" / "poses" / sid / f"{arm.frames}_{name}_{spec}.txt"
+                cache = (Path(data_root) / "real_diagnostics" / "poses" / f"{sid}-{_inputs_digest(data_root, sid, ())}"
+                         / f"{arm.frames}_{name}_{spec}_{gate_name(o['tol'])}.txt")
                 cache.parent.mkdir(parents=True, exist_ok=True)
                 est[name] = _estimate(frames, prior, cache, o["tol"])
                 traj.append(tag | trajectory_row(sid, name, "estimated", est[name], true[name]))
             seqs[name] = PosedSequence(frames, est[name])
         sources = (*networks, GT)  # the first network's map is registered onto, as in Table 3
         oo = dict(o, registration_seed=int(draw) * int(o["registration_restarts"]))
-        predicted = {(r, n): _labels_folder(data_root, sid, arm.frames, r, n) for r in ("upper", "lower")
-                     for n in networks}
+        predicted = {(r, n): _labels_folder(data_root, sid, arm.frames, r, n, _inputs_digest(data_root, sid, [n]))
+                     for r in ("upper", "lower") for n in networks}
         rows, reg = chain_from_poses(sd, work, seqs, est, true, models, methods, sources, oo,
                                      transform=np.eye(4) if arm.poses == "true" else None,
                                      predicted={k: v for k, v in predicted.items() if v.is_dir()})
