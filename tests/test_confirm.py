@@ -129,3 +129,32 @@ def test_where_a_confirmatory_run_takes_its_adapted_networks(tmp_path):
     (tmp_path / "full" / "adapted" / "adaptation.json").write_text("{}")
     assert confirm.adapted_networks_source(tmp_path / "full") == "shipped"
     assert "09_adapt_robot_view" in confirm.SKIPPED and confirm.ADAPT_NOTEBOOK == "09_adapt_robot_view"
+
+
+def test_the_in_home_study_runs_in_the_confirm_homes(tmp_path, monkeypatch):
+    """``--in-home``: the plan's study in the homes of the run's seeds (its kinds x seeds), after the notebooks."""
+    import semmatch.experiments.claims as claims
+    import semmatch.experiments.in_home as in_home
+
+    order, seen = [], {}
+    monkeypatch.setattr(confirm, "run_notebook", lambda nb, profile, **kw: order.append(nb))
+    monkeypatch.setattr(claims, "judge_figures", lambda figures: order.append("verdicts"))
+
+    def fake_study(data, figures, **kw):
+        order.append("in_home")
+        seen.update(kw, data=Path(data), figures=Path(figures))
+
+    monkeypatch.setattr(in_home, "run_in_home_study", fake_study)
+    record = confirm.run_confirm([9911, 9912], name="inhome", out_root=tmp_path, in_home=True)
+    plan = in_home.load_in_home_plan()
+    assert order[-2:] == ["verdicts", "in_home"] and "01_simulate" in order
+    assert seen["homes"] == [(k, s) for s in (9911, 9912) for k in plan.kinds]
+    assert seen["data"] == tmp_path / "data" / "confirm" / "inhome" / "in_home"
+    assert seen["figures"] == tmp_path / "figures" / "confirm" / "inhome" / "in_home"
+    assert record["in_home"] is True and "in_home" in record["wall_seconds"]
+
+
+def test_the_in_home_study_needs_its_plans_profile(tmp_path):
+    with pytest.raises(ValueError, match="in-home plan uses the networks of profile 'full'"):
+        confirm.run_confirm([9913], base_profile="smoke", out_root=tmp_path, in_home=True, allow_training=True)
+    assert not any(tmp_path.iterdir())  # refused before anything was written

@@ -149,7 +149,7 @@ def unshipped_networks(params_file: str | os.PathLike, profile: str, data_root: 
 def run_confirm(seeds: Sequence[int], *, name: str | None = None, base_profile: str = "full",
                 allow_training: bool = False, params_file: str | os.PathLike = ROOT / "params.yaml",
                 out_root: str | os.PathLike | None = None, log_output: bool = False,
-                scheduler: str | None = None) -> dict:
+                scheduler: str | None = None, in_home: bool = False) -> dict:
     """Run every evaluation study of ``base_profile`` on the scenes of ``seeds``.
 
     Parameters
@@ -170,6 +170,11 @@ def run_confirm(seeds: Sequence[int], *, name: str | None = None, base_profile: 
         Stream the notebooks' output to the console.
     scheduler : str, optional
         Dask scheduler address for the per-scene tasks.
+    in_home : bool
+        Also run the in-home adaptation study (:func:`semmatch.experiments.in_home.run_in_home_study`,
+        the committed ``in_home_plan.yaml``) in the homes of the run's scenes (its kinds x ``seeds``),
+        with the shipped networks and the shipped across-homes adaptation; results in
+        ``figures/confirm/<name>/in_home/``. Only with the plan's profile (``full``).
 
     Returns
     -------
@@ -179,7 +184,9 @@ def run_confirm(seeds: Sequence[int], *, name: str | None = None, base_profile: 
     Raises
     ------
     ValueError
-        Refused seeds, or networks that are not shipped (without ``allow_training``).
+        Refused seeds, or networks that are not shipped (without ``allow_training``); with
+        ``in_home``, a base profile other than the in-home plan's or no shipped across-homes
+        adaptation.
     NotebookFailed
         A notebook failed (naming it and the cell).
     """
@@ -193,6 +200,7 @@ def run_confirm(seeds: Sequence[int], *, name: str | None = None, base_profile: 
             for k, sub in (("data_root", "data"), ("figures_dir", "figures"), ("reports_dir", "reports"))}
     where = {k: ROOT / v for k, v in dirs.items()}  # an absolute out_root stays as it is
     data_root = where["data_root"]
+    in_home_plan = _check_in_home(base_profile) if in_home else None
     params = write_confirm_params(seeds, data_root / "params.yaml", base_profile=base_profile,
                                   params_file=params_file)
     shipped_dir = Path("models") / base_profile
@@ -229,6 +237,17 @@ def run_confirm(seeds: Sequence[int], *, name: str | None = None, base_profile: 
     t = time.perf_counter()
     judge_figures(where["figures_dir"])
     walls["verdicts"] = round(time.perf_counter() - t, 1)
+    if in_home_plan is not None:
+        from .in_home import run_in_home_study
+
+        t = time.perf_counter()
+        homes = [(kind, s) for s in seeds for kind in in_home_plan.kinds]
+        print(f"[confirm] in-home study: {len(homes)} homes (seeds {seeds} x {len(in_home_plan.kinds)} kinds)",
+              file=sys.stderr)
+        jobs = int((data["profiles"][base_profile].get("common") or {}).get("jobs", 1))
+        run_in_home_study(data_root / "in_home", where["figures_dir"] / "in_home", homes=homes, jobs=jobs,
+                          scheduler=scheduler, progress=log_output)
+        walls["in_home"] = round(time.perf_counter() - t, 1)
 
     models = data_root / "models"
     record = {
@@ -237,12 +256,26 @@ def run_confirm(seeds: Sequence[int], *, name: str | None = None, base_profile: 
         "networks": {p.stem: file_sha256(p) for p in sorted(models.glob("*.pt"))},
         "networks_from": "trained here" if missing else str(shipped_dir),
         "adapted_networks_from": (f"{shipped_dir}/adapted" if adapted_from == "shipped" else adapted_from) or "skipped",
-        "skipped": skipped, "code_version": code_version(), "started": started,
+        "skipped": skipped, "in_home": in_home_plan is not None, "code_version": code_version(), "started": started,
         "wall_seconds": walls, "total_seconds": round(time.perf_counter() - t0, 1),
     }
     atomic_write_text(where["figures_dir"] / "confirm.json", json.dumps(record, indent=2) + "\n")
     print(f"[confirm] {name}: done in {record['total_seconds'] / 60:.1f} min -> {dirs['figures_dir']}", file=sys.stderr)
     return record
+
+
+def _check_in_home(base_profile: str):
+    """The in-home plan, when a confirmatory run of ``base_profile`` can run it (else ValueError, naming why)."""
+    from .in_home import load_in_home_plan
+
+    plan = load_in_home_plan()
+    if plan.profile != base_profile:
+        raise ValueError(f"--in-home: the in-home plan uses the networks of profile {plan.profile!r} "
+                         f"(models/{plan.profile}/), not {base_profile!r}")
+    across = ROOT / "models" / plan.profile / "adapted" / f"{plan.across_homes}.pt"
+    if not across.is_file():
+        raise ValueError(f"--in-home: {across} (the shipped across-homes adaptation) is missing; restore it from git")
+    return plan
 
 
 def add_confirm_parser(sub) -> None:
@@ -257,12 +290,14 @@ def add_confirm_parser(sub) -> None:
     c.add_argument("--params", default=str(ROOT / "params.yaml"))
     c.add_argument("--quiet", action="store_true", help="do not stream the notebooks' output")
     c.add_argument("--scheduler", help="Dask scheduler address for the per-scene tasks")
+    c.add_argument("--in-home", action="store_true",
+                   help="also run the in-home adaptation study in the run's homes (docs/adapt.md)")
     c.set_defaults(handler=_confirm_main)
 
 
 def _confirm_main(args) -> int:
     run_confirm(args.seeds, name=args.name, base_profile=args.base_profile, allow_training=args.allow_training,
-                params_file=args.params, log_output=not args.quiet, scheduler=args.scheduler)
+                params_file=args.params, log_output=not args.quiet, scheduler=args.scheduler, in_home=args.in_home)
     return 0
 
 

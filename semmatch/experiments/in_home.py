@@ -32,7 +32,8 @@ import yaml
 from ..adapt import AdaptRecipe
 
 __all__ = ["InHomePlan", "load_in_home_plan", "simulate_home", "person_map", "score_home", "run_home",
-           "in_home_study", "in_home_comparisons", "plot_in_home", "write_in_home_results", "ARMS", "PLAN_PATH"]
+           "in_home_study", "run_in_home_study", "in_home_comparisons", "plot_in_home", "write_in_home_results",
+           "ARMS", "PLAN_PATH"]
 
 PLAN_PATH = Path(__file__).with_name("in_home_plan.yaml")
 #: the arms, in table order
@@ -401,9 +402,47 @@ def write_in_home_results(per_home: pd.DataFrame, comparisons: pd.DataFrame, pla
     out.append(plot_in_home(per_home, figures / "in_home.png", measure=plan.primary))
     atomic_write_text(figures / "run.json", json.dumps(
         {"plan_version": plan.raw.get("plan_version"), "homes": int(per_home["home"].nunique()),
+         "seeds": sorted(int(v) for v in per_home["seed"].unique()),
          "minutes": round(minutes, 1), "finished": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}, indent=1))
     out.append(figures / "run.json")
     return out
+
+
+def run_in_home_study(data: str | Path, figures: str | Path, *, plan_path: str | Path | None = None,
+                      models: str | Path | None = None, homes: Sequence[tuple[str, int]] | None = None,
+                      jobs: int = 1, scheduler: str | None = None, progress: bool = True) -> pd.DataFrame:
+    """Run the study (:func:`in_home_study`), judge its comparisons and write its results into ``figures``.
+
+    Parameters
+    ----------
+    data, figures : path
+        Homes and adapted checkpoints; tables, figure and ``run.json``.
+    plan_path : path, optional
+        Default the committed plan.
+    models : path, optional
+        Shipped networks (default ``models/<the plan's profile>``).
+    homes : sequence of (kind, seed), optional
+        Other homes than the plan's (e.g. a confirmatory run's scenes); the rest of the plan holds.
+    jobs, scheduler, progress
+        As :func:`in_home_study`.
+
+    Returns
+    -------
+    DataFrame
+        The comparisons (:func:`in_home_comparisons`).
+    """
+    from .pipeline import ROOT
+
+    plan = load_in_home_plan(plan_path)
+    models = Path(models or ROOT / "models" / plan.profile)
+    t0 = time.perf_counter()
+    per_home = in_home_study(data, plan_path=plan_path, models=models, homes=homes, jobs=jobs, scheduler=scheduler,
+                             views_cache=_views_cache(models, plan.network, Path(data)), progress=progress)
+    comps = in_home_comparisons(per_home, plan)
+    for p in write_in_home_results(per_home, comps, plan, figures, minutes=(time.perf_counter() - t0) / 60):
+        if progress:
+            print(p)
+    return comps
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -426,13 +465,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                             where=str(args.plan))
     except (OSError, ValueError) as e:
         ap.error(str(e))
-    models = args.models or ROOT / "models" / plan.profile
-    t0 = time.perf_counter()
-    per_home = in_home_study(args.data, plan_path=args.plan, models=models, jobs=args.jobs,
-                             views_cache=_views_cache(models, plan.network, args.data))
-    comps = in_home_comparisons(per_home, plan)
-    for p in write_in_home_results(per_home, comps, plan, args.figures, minutes=(time.perf_counter() - t0) / 60):
-        print(p)
+    comps = run_in_home_study(args.data, args.figures, plan_path=args.plan, models=args.models, jobs=args.jobs)
     print(comps[comps["role"] == "primary"].to_string(index=False))
     return 0
 
