@@ -158,3 +158,12 @@ def test_the_in_home_study_needs_its_plans_profile(tmp_path):
     with pytest.raises(ValueError, match="in-home plan uses the networks of profile 'full'"):
         confirm.run_confirm([9913], base_profile="smoke", out_root=tmp_path, in_home=True, allow_training=True)
     assert not any(tmp_path.iterdir())  # refused before anything was written
+
+
+def test_the_in_home_studys_seeds_are_refused(tmp_path):
+    from semmatch.experiments.in_home import load_in_home_plan
+
+    seed = load_in_home_plan().seeds[0]
+    with pytest.raises(ValueError, match=f"refusing confirmatory seeds \\[{seed}\\].*in-home study"):
+        confirm.run_confirm([seed], out_root=tmp_path)
+    assert not any(tmp_path.iterdir())

@@ -192,6 +192,7 @@ def run_confirm(seeds: Sequence[int], *, name: str | None = None, base_profile: 
     """
     data = yaml.safe_load(Path(params_file).read_text())
     seeds = check_confirm_seeds(seeds, data.get("profiles") or {}, where=str(params_file))
+    _refuse_in_home_seeds(seeds)
     name = name or confirm_name(seeds)
     if not name.replace("-", "").replace("_", "").replace(".", "").isalnum():
         raise ValueError(f"run name {name!r}: use letters, digits, '-', '_' and '.' only")
@@ -262,6 +263,16 @@ def run_confirm(seeds: Sequence[int], *, name: str | None = None, base_profile: 
     atomic_write_text(where["figures_dir"] / "confirm.json", json.dumps(record, indent=2) + "\n")
     print(f"[confirm] {name}: done in {record['total_seconds'] / 60:.1f} min -> {dirs['figures_dir']}", file=sys.stderr)
     return record
+
+
+def _refuse_in_home_seeds(seeds: Sequence[int]) -> None:
+    """Refuse the in-home study's home seeds: their scenes were generated and scored there."""
+    from .in_home import PLAN_PATH, load_in_home_plan
+
+    used = sorted(set(seeds) & set(load_in_home_plan().seeds))
+    if used:
+        raise ValueError(f"{PLAN_PATH.name}: refusing confirmatory seeds {used}: they are the in-home study's homes "
+                         f"(every kind generated and scored there); choose seeds nobody has used")
 
 
 def _check_in_home(base_profile: str):
