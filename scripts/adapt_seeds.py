@@ -12,6 +12,7 @@ Three phases, so that the fine-tunings can run as separate processes::
     python scripts/adapt_seeds.py prepare  [--data-root DIR] [--out DIR]           # the labelled robot frames
     python scripts/adapt_seeds.py finetune --seed 1 [--data-root DIR] [--out DIR]  # one seed, every source
     python scripts/adapt_seeds.py score --seeds 0 1 2 [--data-root DIR] [--out DIR] [--figures DIR]
+    python scripts/adapt_seeds.py summarize [--figures DIR]   # the spread and bounds again, from score's tables
 
 Seed 0 is the stage's own checkpoints (``DATA/adapted/``, checked to be that recipe and seed).
 Checkpoints and the labelled frames go to ``--out`` (default ``<data-root>_adapt_seeds``), tables
@@ -102,7 +103,7 @@ def two_way_ratio_ci(gain: np.ndarray, gap: np.ndarray, *, n_resamples: int = 10
 
 
 def score(args, p) -> None:
-    from semmatch.experiments.adapt import adapted_height_study, gap_table, per_scene_changes
+    from semmatch.experiments.adapt import adapted_height_study, gap_table
     from semmatch.experiments.tables import save_table
 
     per_seed, gaps = [], []
@@ -111,26 +112,54 @@ def score(args, p) -> None:
                                   frame_step=p["sweep_frame_step"], jobs=p["jobs"])
         per_seed.append(ps.assign(seed=seed))
         gaps.append(gap_table(ps, p["network"]).assign(seed=seed))
-    figures = args.figures or Path(f"{p['figures_dir']}_adapt_seeds")  # beside the stage's figures
-    per_scene, gaps = pd.concat(per_seed, ignore_index=True), pd.concat(gaps, ignore_index=True)
-    save_table(per_scene, figures, "adapt_seeds_height_per_scene")
-    save_table(gaps, figures, "adapt_seeds_gap")
+    figures = _figures(args, p)
+    save_table(pd.concat(per_seed, ignore_index=True), figures, "adapt_seeds_height_per_scene")
+    save_table(pd.concat(gaps, ignore_index=True), figures, "adapt_seeds_gap")
+    summarize(args, p)
+
+
+def _figures(args, p) -> Path:
+    return args.figures or Path(f"{p['figures_dir']}_adapt_seeds")  # beside the stage's figures
+
+
+def summarize(args, p) -> None:
+    """The spread over seeds and the one-sided bounds, from the per-scene table that ``score`` wrote.
+
+    Per source: the share of the gap closed by each seed, their SD, the ratio over seeds and
+    scenes with an interval resampling both (:func:`two_way_ratio_ci`), and, for the mean over
+    seeds, the one-sided 95 % lower bounds of stage 09's ``adapt_gap_bounds`` (Fieller's bound
+    from the t over scenes, each scene's gain and gap averaged over the seeds first) and whether
+    the gap's bound clears 60 %.
+    """
+    from semmatch.experiments.adapt import gap_bounds, per_scene_changes
+    from semmatch.experiments.tables import save_table
+
+    figures = _figures(args, p)
+    per_scene = pd.read_csv(figures / "adapt_seeds_height_per_scene.csv")
+    gaps = pd.read_csv(figures / "adapt_seeds_gap.csv")
+    seeds = sorted(int(v) for v in per_scene["seed"].unique())
+    keys = [c for c in ("model", "scene", "height") if c in per_scene.columns]
+    seed_mean = per_scene.groupby(keys, sort=False)["miou"].mean().reset_index()  # gap_bounds measures mIoU
+    bounds = gap_bounds(seed_mean, p["network"]).set_index("source")
     rows = []
     for source, g in gaps[gaps["source"] != "none (unadapted)"].groupby("source", sort=False):
         ch = []
-        for s in args.seeds:
+        for s in seeds:
             c = per_scene_changes(per_scene[per_scene["seed"] == s], p["network"])
             ch.append(c[c["source"] == source].set_index("scene"))
         gain = np.stack([c["gain_low"].to_numpy() for c in ch])
         gap = np.stack([c["gap"].to_numpy() for c in ch])
         change = np.stack([c["change_high"].to_numpy() for c in ch])
         r = two_way_ratio_ci(gain, gap)
-        rows.append({"source": source, "seeds": len(args.seeds), "scenes": gain.shape[1],
+        b = bounds.loc[source]
+        rows.append({"source": source, "seeds": len(seeds), "scenes": gain.shape[1],
                      "gap_closed_per_seed": " / ".join(f"{v:.0%}" for v in g["gap_closed"]),
                      "gap_closed_seed_sd": float(g["gap_closed"].std(ddof=1)),
                      "gap_closed": r[0], "gap_closed_lo": r[1], "gap_closed_hi": r[2],
+                     "gap_closed_lower": float(b["gap_closed_lower"]), "clears_60": bool(b["clears_target"]),
                      "gain_low": float(gain.mean()), "change_high": float(change.mean()),
-                     "change_high_seed_sd": float(change.mean(axis=1).std(ddof=1))})
+                     "change_high_seed_sd": float(change.mean(axis=1).std(ddof=1)),
+                     "change_high_lower": float(b["change_high_lower"]), "scenes_losing": int(b["scenes_losing"])})
     spread = pd.DataFrame(rows)
     save_table(spread, figures, "adapt_seeds_spread")
     _plot(gaps, spread, figures / "adapt_seeds.png")
@@ -164,7 +193,7 @@ def _plot(gaps: pd.DataFrame, spread: pd.DataFrame, path: Path) -> None:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("phase", choices=["prepare", "finetune", "score"])
+    ap.add_argument("phase", choices=["prepare", "finetune", "score", "summarize"])
     ap.add_argument("--profile", default=None, help="profile of params.yaml (default: its 'profile')")
     ap.add_argument("--data-root", type=Path, default=None, help="the pipeline's data root (default: the profile's)")
     ap.add_argument("--out", type=Path, default=None, help="labelled frames and checkpoints")
@@ -177,7 +206,7 @@ def main() -> None:
     p = _params(args)
     p["stage_figures"] = args.stage_figures or p["figures_dir"]
     args.out = args.out or Path(f"{p['data_root']}_adapt_seeds")
-    {"prepare": prepare, "finetune": finetune, "score": score}[args.phase](args, p)
+    {"prepare": prepare, "finetune": finetune, "score": score, "summarize": summarize}[args.phase](args, p)
 
 
 if __name__ == "__main__":
