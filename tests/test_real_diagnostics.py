@@ -13,14 +13,12 @@ from semmatch.experiments.real import evaluate_real_like
 from semmatch.experiments.real_diagnostics import (
     ARMS,
     Arm,
-    arm_differences,
     diagnostic_arms,
-    draw_spread,
     drifted_prior,
     main,
     real_like_diagnostics,
-    summarize_arms,
 )
+from semmatch.experiments.real_diagnostics_tables import arm_differences, draw_spread, summarize_arms
 from semmatch.io import read_tum
 
 SCENE = "bedroom_0003"

@@ -34,7 +34,8 @@ ground-truth labels), as Table 3 does.
 
 ``python -m semmatch.experiments.real_diagnostics --profile full`` (``make real-diagnostics``)
 runs it on the profile's evaluation scenes (the development scenes: it decides nothing) and
-writes ``figures/<profile>_real_diagnostics/``; docs/protocol.md ("Diagnosing the real-like
+writes ``figures/<profile>_real_diagnostics/`` (tables and figure:
+:mod:`semmatch.experiments.real_diagnostics_tables`); docs/protocol.md ("Diagnosing the real-like
 chain") reports the result.
 """
 
@@ -52,11 +53,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ..evaluate.metrics import MEASURES
 from .layout import GT, Layout
 
 __all__ = ["Arm", "ARMS", "diagnostic_arms", "drifted_prior", "predict_scene", "run_arm", "real_like_diagnostics",
-           "summarize_arms", "arm_differences", "draw_spread", "plot_diagnostics", "main"]
+           "main"]
 
 
 @dataclass(frozen=True)
@@ -387,235 +387,10 @@ def real_like_diagnostics(data_root: str | Path, *, networks: Sequence[str] = ("
     return out
 
 
-#: rows shown in the summaries and the figure: (model, method); "<net>" is each network
-SHOWN = (("ground truth", "3d-neighborhood"), ("<net>", "3d-neighborhood"), ("<net>", "fused"),
-         ("<net>", "lower"), ("<net>", "upper"))
-
-#: the paired arm differences of :func:`arm_differences`: (what it measures, arm a, arm b), a - b
-DIFFERENCES = (
-    ("sensor noise (true poses)", "noisy, true poses", "clean, true poses"),
-    ("estimated poses (clean frames)", "clean, estimated poses", "clean, true poses"),
-    ("estimated poses (noisy frames)", "chain", "noisy, true poses"),
-    ("person tracked visually only", "person visual-only", "chain"),
-)
-
-#: the within-arm contrasts of :func:`arm_differences`: (name, method a, method b), per network
-CONTRASTS = (
-    ("transfer - lower (C15)", "3d-neighborhood", "lower"),
-    ("transfer - upper (C16)", "3d-neighborhood", "upper"),
-    ("fused - lower", "fused", "lower"),
-)
-
-
-def _per_scene(scores: pd.DataFrame) -> pd.DataFrame:
-    """Scores averaged over draws: one row per arm, drift, scene, model and method."""
-    key = ["arm", "drift", "scene", "model", "method"]
-    out = scores.groupby(key, sort=False)[list(MEASURES)].mean().reset_index()
-    out["draws"] = scores.groupby(key, sort=False)["draw"].nunique().to_numpy()
-    return out
-
-
-def draw_spread(scores: pd.DataFrame, measure: str = "mean_acc") -> pd.DataFrame:
-    """How much the mean over scenes moves from draw to draw.
-
-    Returns
-    -------
-    DataFrame
-        arm, drift, model, method, draws, ``<measure>`` per draw as ``draw_<d>``, their
-        standard deviation ``draw_sd`` and range ``draw_range`` (NaN with one draw).
-    """
-    means = scores.groupby(["arm", "drift", "model", "method", "draw"], sort=False)[measure].mean()
-    wide = means.unstack("draw")
-    wide.columns = [f"draw_{int(d)}" for d in wide.columns]
-    vals = wide.to_numpy(np.float64)
-    n = np.sum(~np.isnan(vals), axis=1)
-    out = wide.reset_index()
-    out.insert(4, "draws", n)
-    sd, rng = np.full(len(vals), np.nan), np.full(len(vals), np.nan)
-    for i in np.flatnonzero(n > 1):
-        v = vals[i][~np.isnan(vals[i])]
-        sd[i], rng[i] = np.std(v, ddof=1), v.max() - v.min()
-    out["draw_sd"], out["draw_range"] = sd, rng
-    return out
-
-
-def summarize_arms(result: dict[str, pd.DataFrame]) -> pd.DataFrame:
-    """Every arm's measures over scenes (draws averaged per scene) with the analysis plan's interval.
-
-    Beside them: the draws, the draw-to-draw standard deviation of the Mean Acc. over scenes,
-    the mean ATE (m, after alignment) of the person's and the robot's estimated poses and the
-    median registration error (m, degrees; over scenes and draws: one failed registration would
-    dominate a mean), where the arm estimates them.
-
-    Returns
-    -------
-    DataFrame
-        arm, drift, model, method, scenes, draws, each measure with ``_lo``/``_hi``, draw_sd,
-        ate_upper_m, ate_lower_m, reg_trans_err_median_m, reg_rot_err_median_deg.
-    """
-    from .summaries import summarize_over_scenes
-
-    per_scene = _per_scene(result["scores"])
-    summary = summarize_over_scenes(per_scene, by=("arm", "drift", "model", "method"))
-    summary.insert(5, "draws", per_scene.groupby(["arm", "drift", "model", "method"], sort=False)["draws"].max()
-                   .to_numpy())
-    spread = draw_spread(result["scores"])[["arm", "drift", "model", "method", "draw_sd"]]
-    summary = summary.merge(spread, on=["arm", "drift", "model", "method"], how="left")
-    traj = result["trajectories"]
-    if len(traj):
-        est = traj[traj["poses"] == "estimated"]
-        ate = est.pivot_table(index=["arm", "drift"], columns="sequence", values="ate_rmse", aggfunc="mean")
-        ate = ate.rename(columns={"upper": "ate_upper_m", "lower": "ate_lower_m"}).reset_index()
-        summary = summary.merge(ate, on=["arm", "drift"], how="left")
-    reg = result["registration"]
-    if len(reg):
-        r = reg.groupby(["arm", "drift"], sort=False)[["reg_trans_err_m", "reg_rot_err_deg"]].median().reset_index()
-        r = r.rename(columns={"reg_trans_err_m": "reg_trans_err_median_m", "reg_rot_err_deg": "reg_rot_err_median_deg"})
-        summary = summary.merge(r, on=["arm", "drift"], how="left")
-    return summary
-
-
-def _paired(a: pd.Series, b: pd.Series) -> dict | None:
-    """Mean of the paired differences ``a - b`` over the scenes both have, with the plan's interval."""
-    from ..evaluate.stats import interval, scene_kind
-    from .analysis_plan import load_analysis_plan
-
-    d = (a - b).dropna()
-    if d.empty:
-        return None
-    plan = load_analysis_plan()
-    mean, lo, hi = interval(d.to_numpy(np.float64), [scene_kind(s) for s in d.index], method=plan.interval,
-                            confidence=plan.confidence)
-    return dict(diff=mean, lo=lo, hi=hi, scenes=int(d.size))
-
-
-def arm_differences(result: dict[str, pd.DataFrame], measure: str = "mean_acc") -> tuple[pd.DataFrame, pd.DataFrame]:
-    """What each part of the chain costs, and the claims' contrasts within each arm, paired per scene.
-
-    Returns
-    -------
-    differences : DataFrame
-        effect, ``a - b`` (:data:`DIFFERENCES`), model, method, diff, lo, hi, scenes: the change
-        of ``measure`` of one row between two arms at the simulator's drift.
-    contrasts : DataFrame
-        arm, drift, model, contrast (:data:`CONTRASTS`), diff, lo, hi, scenes: two rows of one arm.
-    """
-    per_scene = _per_scene(result["scores"])
-    wide = per_scene.pivot_table(index="scene", columns=["arm", "drift", "model", "method"], values=measure)
-    diffs = []
-    for effect, a, b in DIFFERENCES:
-        for model, method in sorted({(m, t) for (arm, _, m, t) in wide.columns if arm == a}):
-            ka, kb = (a, 1.0, model, method), (b, 1.0, model, method)
-            if ka in wide.columns and kb in wide.columns:
-                c = _paired(wide[ka], wide[kb])
-                if c is not None:
-                    diffs.append(dict(effect=effect, comparison=f"{a} - {b}", model=model, method=method, **c))
-    contrasts = []
-    for arm, drift in dict.fromkeys((a, d) for (a, d, _, _) in wide.columns):
-        for model in dict.fromkeys(m for (a, d, m, _) in wide.columns if (a, d) == (arm, drift)):
-            for name, ma, mb in CONTRASTS:
-                ka, kb = (arm, drift, model, ma), (arm, drift, model, mb)
-                if ka in wide.columns and kb in wide.columns:
-                    c = _paired(wide[ka], wide[kb])
-                    if c is not None:
-                        contrasts.append(dict(arm=arm, drift=drift, model=model, contrast=name, **c))
-    return pd.DataFrame(diffs), pd.DataFrame(contrasts)
-
-
-def _shown_rows(summary: pd.DataFrame) -> list[tuple[str, str]]:
-    nets = [m for m in dict.fromkeys(summary["model"]) if m != "ground truth"]
-    rows = []
-    for model, method in SHOWN:
-        for m in (nets if model == "<net>" else [model]):
-            if ((summary["model"] == m) & (summary["method"] == method)).any():
-                rows.append((m, method))
-    return rows
-
-
-def plot_diagnostics(summary: pd.DataFrame, path: str | Path, *, measure: str = "mean_acc") -> Path:
-    """Three panels: ``measure`` per arm (simulator's drift), ``measure`` against the drift level
-    (``chain``), and the estimated trajectories' ATE against the drift level; means over scenes
-    with the analysis plan's interval."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from ..io import save_figure
-
-    rows = _shown_rows(summary)
-    arms = [a.name for a in ARMS if (summary["arm"] == a.name).any()]
-    fig, axes = plt.subplots(1, 3, figsize=(15, 4.2), gridspec_kw=dict(width_ratios=[1.5, 1, 1]))
-    width = 0.8 / max(len(rows), 1)
-    base = summary[summary["drift"] == 1.0]
-    for i, (model, method) in enumerate(rows):
-        g = base[(base["model"] == model) & (base["method"] == method)].set_index("arm").reindex(arms)
-        x = np.arange(len(arms)) + (i - (len(rows) - 1) / 2) * width
-        y = g[measure].to_numpy(np.float64)
-        err = np.vstack([y - g[f"{measure}_lo"].to_numpy(np.float64), g[f"{measure}_hi"].to_numpy(np.float64) - y])
-        axes[0].bar(x, y, width, yerr=err, capsize=2, label=f"{model}: {method}")
-    axes[0].set_xticks(np.arange(len(arms)), [a.replace(", ", ",\n") for a in arms], fontsize="small")
-    axes[0].set_ylabel(f"{measure.replace('_', ' ')} (mean over scenes, 95 % interval)")
-    axes[0].set_title("arms (simulator's drift)")
-    lo = np.nanmin(base[f"{measure}_lo"].to_numpy(np.float64)) if len(base) else 0.0
-    axes[0].set_ylim(max(0.0, lo - 0.05), 1.0)
-    handles, labels = axes[0].get_legend_handles_labels()
-    fig.legend(handles, labels, loc="lower center", ncol=len(rows), fontsize="small", frameon=False)
-    sweep = summary[summary["arm"] == "chain"].sort_values("drift")
-    for model, method in rows:
-        g = sweep[(sweep["model"] == model) & (sweep["method"] == method)]
-        (line,) = axes[1].plot(g["drift"], g[measure], marker="o", label=f"{model}: {method}")
-        axes[1].fill_between(g["drift"], g[f"{measure}_lo"], g[f"{measure}_hi"], color=line.get_color(), alpha=0.15)
-    axes[1].set_xlabel("prior drift (x the simulator's)")
-    axes[1].set_title("chain: drift of the priors")
-    per_drift = sweep.drop_duplicates("drift")
-    for col, label in (("ate_upper_m", "person (estimated)"), ("ate_lower_m", "robot (estimated)")):
-        if col in per_drift.columns:
-            axes[2].plot(per_drift["drift"], per_drift[col] * 100, marker="o", label=label)
-    if "reg_trans_err_median_m" in per_drift.columns:
-        axes[2].plot(per_drift["drift"], per_drift["reg_trans_err_median_m"] * 100, marker="s", ls="--",
-                     label="registration error (median)")
-    axes[2].set_xlabel("prior drift (x the simulator's)")
-    axes[2].set_ylabel("cm (ATE: mean over scenes and draws)")
-    axes[2].set_title("trajectory ATE and registration error")
-    axes[2].legend(fontsize="small")
-    for ax in axes:
-        ax.grid(alpha=0.3)
-    fig.tight_layout(rect=(0, 0.07, 1, 1))
-    return save_figure(fig, path)
-
-
-def write_diagnostics(result: dict[str, pd.DataFrame], figures: str | Path, *, minutes: float,
-                      settings: dict) -> list[Path]:
-    """Write the study's tables (CSV and Markdown), its figure and ``run.json`` into ``figures``."""
-    from ..io import atomic_write_text
-    from .tables import save_interval_table, save_table
-
-    figures = Path(figures)
-    figures.mkdir(parents=True, exist_ok=True)
-    summary = summarize_arms(result)
-    differences, contrasts = arm_differences(result)
-    out = list(save_interval_table(summary, figures, "real_diagnostics_arms",
-                                   keep=("draw_sd", "ate_upper_m", "ate_lower_m", "reg_trans_err_median_m",
-                                         "reg_rot_err_median_deg")))
-    for name, df in (("real_diagnostics_differences", differences), ("real_diagnostics_contrasts", contrasts),
-                     ("real_diagnostics_draw_spread", draw_spread(result["scores"])),
-                     ("real_diagnostics_per_scene", result["scores"]),
-                     ("real_diagnostics_trajectories", result["trajectories"]),
-                     ("real_diagnostics_registration", result["registration"])):
-        out += list(save_table(df, figures, name))
-    out.append(plot_diagnostics(summary, figures / "real_diagnostics.png"))
-    atomic_write_text(figures / "run.json", json.dumps(
-        dict(settings, scenes=int(result["scores"]["scene"].nunique()), minutes=round(minutes, 1),
-             tasks=len(result["tasks"]), tasks_reused=int(result["tasks"]["reused"].sum()),
-             finished=time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())), indent=1))
-    out.append(figures / "run.json")
-    return out
-
-
 def main(argv: Sequence[str] | None = None) -> int:
     """``python -m semmatch.experiments.real_diagnostics``: run the arms, write the tables and figure."""
     from .pipeline import ROOT
+    from .real_diagnostics_tables import write_diagnostics
 
     ap = argparse.ArgumentParser(prog="python -m semmatch.experiments.real_diagnostics",
                                  description=__doc__.splitlines()[0])
@@ -648,7 +423,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                                    sweep_draws=args.sweep_draws, scenes=args.scenes, jobs=args.jobs, scheduler=args.scheduler)
     settings = dict(profile=args.profile, networks=args.networks, methods=args.methods, draws=args.draws,
                     sweep_draws=args.sweep_draws, drift_levels=args.drift_levels)
-    for p in write_diagnostics(result, figures, minutes=(time.time() - t0) / 60, settings=settings):
+    for p in write_diagnostics(result, figures, minutes=(time.time() - t0) / 60, settings=settings,
+                               arms=[a.name for a in ARMS]):
         print(p)
     return 0
 
