@@ -135,3 +135,8 @@ def test_cli_writes_the_tables_and_figure(tiny_root, tmp_path, oracle_network, c
     with pytest.raises(SystemExit):
         main(["--data", str(tmp_path / "nowhere")])
     assert "no evaluation scenes" in capsys.readouterr().err
+    for bad, msg in ((["--methods", "dbscan"], "need 3d-neighborhood"), (["--scenes", "attic_0001"], "no evaluation scene"),
+                     (["--draws", "0"], "draws must be >= 1")):
+        with pytest.raises(SystemExit):
+            main(["--data", str(tiny_root), "--figures", str(figures), *bad])
+        assert msg in capsys.readouterr().err

@@ -419,8 +419,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ValueError as e:
         ap.error(str(e))
     t0 = time.time()
-    result = real_like_diagnostics(data, networks=args.networks, methods=args.methods, arms=arms, draws=args.draws,
-                                   sweep_draws=args.sweep_draws, scenes=args.scenes, jobs=args.jobs, scheduler=args.scheduler)
+    if args.methods and "3d-neighborhood" not in args.methods:
+        ap.error(f"--methods {' '.join(args.methods)}: the fused rows need 3d-neighborhood among them")
+    try:
+        result = real_like_diagnostics(data, networks=args.networks, methods=args.methods, arms=arms,
+                                       draws=args.draws, sweep_draws=args.sweep_draws, scenes=args.scenes,
+                                       jobs=args.jobs, scheduler=args.scheduler)
+    except (ValueError, FileNotFoundError) as e:  # a bad scene, draw count or missing network, named
+        ap.error(str(e))
     settings = dict(profile=args.profile, networks=args.networks, methods=args.methods, draws=args.draws,
                     sweep_draws=args.sweep_draws, drift_levels=args.drift_levels)
     for p in write_diagnostics(result, figures, minutes=(time.time() - t0) / 60, settings=settings,
