@@ -62,7 +62,8 @@ def test_arms_and_their_bad_settings():
 
 
 def test_study_reproduces_table3_chain_and_pairs_the_arms(tiny_root, tmp_path, oracle_network, monkeypatch):
-    kw = dict(voxel_size=0.05, registration_voxel=0.1, registration_restarts=2, prior_tolerance=(0.1, 10.0))
+    # the command line's settings (its test below then reuses these arms)
+    kw = dict(voxel_size=0.04, registration_voxel=0.1, registration_restarts=3, prior_tolerance=(0.1, 10.0))
     arms = [ARMS[0], ARMS[1], ARMS[3], ARMS[4], Arm("chain", "noisy", "estimated", drift=0.0)]
     res = real_like_diagnostics(tiny_root, networks=["noisy"], arms=arms, draws=2, progress=False, **kw)
     scores = res["scores"]
@@ -131,7 +132,7 @@ def test_cli_writes_the_tables_and_figure(tiny_root, tmp_path, oracle_network, c
         assert (figures / f"real_diagnostics_{name}.csv").is_file() and (figures / f"real_diagnostics_{name}.md").is_file()
     assert (figures / "real_diagnostics.png").stat().st_size > 10_000
     run = json.loads((figures / "run.json").read_text())
-    assert run["scenes"] == 1 and run["drift_levels"] == [1.0, 2.0] and run["tasks"] == 6 and run["tasks_reused"] == 0
+    assert run["scenes"] == 1 and run["drift_levels"] == [1.0, 2.0] and run["tasks"] == 6 and run["tasks_reused"] in (0, 4)  # 4 when the study test ran first
     with pytest.raises(SystemExit):
         main(["--data", str(tmp_path / "nowhere")])
     assert "no evaluation scenes" in capsys.readouterr().err
