@@ -256,6 +256,7 @@ def run_arm(data_root: str, networks: tuple[str, ...], methods: tuple[str, ...],
     layout = Layout(data_root)
     sd = layout.scenes / "eval" / sid
     work = Path(data_root) / "real_diagnostics" / arm.slug / f"d{draw}" / sid
+    poses_dir = Path(data_root) / "real_diagnostics" / "poses" / f"{sid}-{_inputs_digest(data_root, sid, ())}"
     settings = dict(arm=arm.name, frames=arm.frames, poses=arm.poses, person_prior=arm.person_prior,
                     drift=arm.drift, draw=draw, networks=list(networks), methods=list(methods),
                     inputs=_inputs_digest(data_root, sid, networks),
@@ -286,8 +287,7 @@ def run_arm(data_root: str, networks: tuple[str, ...], methods: tuple[str, ...],
                 if prior is not None:
                     traj.append(tag | trajectory_row(sid, name, "prior", prior, true[name]))
                 spec = f"drift{arm.drift:g}_d{draw}" if prior is not None else "visual"
-                cache = (Path(data_root) / "real_diagnostics" / "poses" / f"{sid}-{_inputs_digest(data_root, sid, ())}"
-                         / f"{arm.frames}_{name}_{spec}_{gate_name(o['tol'])}.txt")
+                cache = poses_dir / f"{arm.frames}_{name}_{spec}_{gate_name(o['tol'])}.txt"
                 cache.parent.mkdir(parents=True, exist_ok=True)
                 est[name] = _estimate(frames, prior, cache, o["tol"])
                 traj.append(tag | trajectory_row(sid, name, "estimated", est[name], true[name]))
