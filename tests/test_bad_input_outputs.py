@@ -196,6 +196,23 @@ def test_stale_temporary_folders_are_swept_live_ones_kept(base, tmp_path):
                                                      "000003.png", "probs"]
 
 
+def test_stale_temporary_files_of_atomic_writes_are_swept_live_ones_kept(tmp_path):
+    """A SIGKILLed writer leaves ``.NAME.PID-RANDOM.tmp.EXT``; the next write of the same file
+    removes it (not those of a live writer, nor other files)."""
+    from semmatch.io import atomic_write_text
+
+    dead = _dead_pid()
+    stale = tmp_path / f".map.{dead}-0123abcd.tmp.ply"
+    live = tmp_path / f".map.{os.getppid()}-89abcdef.tmp.ply"
+    other = tmp_path / f".mapx.{dead}-0123abcd.tmp.ply"
+    for f in (stale, live, other):
+        f.write_bytes(b"partial")
+    atomic_write_text(tmp_path / "map.ply", "ply\n")
+    assert (tmp_path / "map.ply").read_text() == "ply\n"
+    assert not stale.exists() and live.exists() and other.exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([live.name, other.name, "map.ply"])
+
+
 def test_sigterm_removes_the_temporary_folders(base, tmp_path, capsys, monkeypatch):
     """SIGTERM mid-run (as Ctrl-C): exit 143, no output, no temporary folder left."""
     import semmatch.cli.predict as cli_predict

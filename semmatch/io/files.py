@@ -11,6 +11,7 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import re
 import shutil
 import uuid
 from collections.abc import Iterator
@@ -28,13 +29,16 @@ def atomic_path(path: PathLike) -> Iterator[Path]:
     """Yield a temporary path beside ``path``; rename it to ``path`` when the block succeeds.
 
     The temporary file keeps the suffix of ``path`` so that libraries choosing a format by
-    extension (OpenCV, Open3D, matplotlib) still work. On error it is removed.
+    extension (OpenCV, Open3D, matplotlib) still work. On error it is removed; its name carries
+    the writer's process id, so the temporary files of a killed writer are removed by the next
+    write of the same file.
     """
     path = Path(path)
     if path.is_dir():
         raise ValueError(f"{path}: is a folder; give the name of the file to write")
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.stem}.{uuid.uuid4().hex[:8]}.tmp{path.suffix}")
+    _sweep_stale_files(path)
+    tmp = path.with_name(f".{path.stem}.{os.getpid()}-{uuid.uuid4().hex[:8]}.tmp{path.suffix}")
     try:
         yield tmp
         os.replace(tmp, path)
@@ -45,6 +49,23 @@ def atomic_path(path: PathLike) -> Iterator[Path]:
     finally:
         if tmp.exists():
             tmp.unlink()
+
+
+_TEMP_FILE = re.compile(r"\.(?P<pid>\d+)-[0-9a-f]{8}\.tmp")
+
+
+def _sweep_stale_files(path: Path) -> list[Path]:
+    """Remove the temporary files of :func:`atomic_path` beside ``path`` whose writer has ended
+    (a SIGKILL runs no clean-up; those of live writers stay)."""
+    from .outputs import _alive, glob_escape
+
+    gone = []
+    for tmp in path.parent.glob(f".{glob_escape(path.stem)}.*.tmp{glob_escape(path.suffix)}"):
+        m = _TEMP_FILE.search(tmp.name)
+        if m and not _alive(int(m["pid"])):
+            tmp.unlink(missing_ok=True)
+            gone.append(tmp)
+    return gone
 
 
 def atomic_write_text(path: PathLike, text: str) -> None:
