@@ -1,6 +1,6 @@
 """Confirmatory runs: every evaluation study of a profile on fresh scenes, with the shipped networks.
 
-``make confirm SEEDS="9101 9102 9103" [NAME=mine]`` runs
+``make confirm SEEDS="9111 9112 9113" [NAME=mine]`` runs
 ``python -m semmatch.experiments confirm --seeds ... --name ...``: the base profile (``full``)
 with its evaluation seeds replaced by the given ones (each seed gives one scene of every kind),
 the networks and flip choice shipped in ``models/<profile>/`` (nothing is trained), and every
@@ -61,7 +61,7 @@ def adapted_networks_source(shipped_dir: str | os.PathLike) -> str | None:
 
 
 def confirm_name(seeds: Sequence[int]) -> str:
-    """The default run name of a seed list: ``seeds-9101-9102`` (``seeds-9101-9124-n24`` for many)."""
+    """The default run name of a seed list: ``seeds-9111-9112`` (``seeds-9111-9134-n24`` for many)."""
     seeds = [int(s) for s in seeds]
     if len(seeds) <= 6:
         return "seeds-" + "-".join(map(str, seeds))
