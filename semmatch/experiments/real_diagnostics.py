@@ -166,22 +166,6 @@ def drifted_prior(seq_dir: str | Path, true: np.ndarray, *, drift: float = 1.0, 
     return estimated_poses(np.asarray(true, dtype=np.float64), cfg, rng)
 
 
-def _estimate(seq, prior: np.ndarray | None, cache: Path, tol) -> np.ndarray:
-    """The chain's odometry (:mod:`semmatch.experiments.real_poses`'s rule) from the identity, cached."""
-    from ..io import read_tum, write_tum
-    from ..poses.odometry import estimate_poses
-    from .real_poses import ODOMETRY_DOWNSAMPLE, ODOMETRY_RULE
-
-    if cache.is_file():
-        est = read_tum(cache)[1]
-        if len(est) == len(seq):
-            return est
-    est = estimate_poses(seq, init_pose=np.eye(4), prior=prior, prior_tolerance=tol, downsample=ODOMETRY_DOWNSAMPLE,
-                         progress=False, **ODOMETRY_RULE)
-    write_tum(cache, np.arange(len(est), dtype=np.float64), est)  # atomic
-    return read_tum(cache)[1]
-
-
 def _inputs_digest(data_root: str | Path, sid: str, networks: Sequence[str]) -> str:
     """What the cached labels, poses and results of a scene were made from: its noisy recordings'
     settings and true poses and each network's checkpoint (12 hex digits; ``-`` for a network
@@ -250,7 +234,7 @@ def run_arm(data_root: str, networks: tuple[str, ...], methods: tuple[str, ...],
     from ..io import atomic_write_text, read_sequence, read_tum
     from ..poses.rgbd_odometry import open3d_threads
     from .real import chain_from_poses, trajectory_row
-    from .real_poses import PosedSequence, gate_name
+    from .real_poses import PosedSequence, cached_odometry, gate_name
 
     arm, draw, sid = task
     layout = Layout(data_root)
@@ -289,7 +273,7 @@ def run_arm(data_root: str, networks: tuple[str, ...], methods: tuple[str, ...],
                 spec = f"drift{arm.drift:g}_d{draw}" if prior is not None else "visual"
                 cache = poses_dir / f"{arm.frames}_{name}_{spec}_{gate_name(o['tol'])}.txt"
                 cache.parent.mkdir(parents=True, exist_ok=True)
-                est[name] = _estimate(frames, prior, cache, o["tol"])
+                est[name] = cached_odometry(frames, cache, prior=prior, prior_tolerance=o["tol"], progress=False)
                 traj.append(tag | trajectory_row(sid, name, "estimated", est[name], true[name]))
             seqs[name] = PosedSequence(frames, est[name])
         sources = (*networks, GT)  # the first network's map is registered onto, as in Table 3

@@ -33,6 +33,7 @@ __all__ = [
     "gate_name",
     "pose_cache_name",
     "estimate_or_load_poses",
+    "cached_odometry",
     "world_alignment",
     "registration_errors",
     "select_prior_tolerance",
@@ -148,8 +149,6 @@ def estimate_or_load_poses(
     FileNotFoundError
         ``seq_dir`` has no ``poses_gt.txt``.
     """
-    from ..poses.odometry import estimate_poses
-
     seq_dir, out = Path(seq_dir), Path(out)
     tol = check_tolerance(prior_tolerance)
     seq = read_sequence(seq_dir) if seq is None else seq
@@ -157,15 +156,51 @@ def estimate_or_load_poses(
     if not gt_file.is_file():
         raise FileNotFoundError(f"{gt_file}: no true poses to report the trajectory errors against")
     _, true = read_tum(gt_file)
+    return cached_odometry(seq, out, prior=seq.poses, prior_tolerance=tol, progress=progress), true
+
+
+def cached_odometry(
+    seq: _SequenceABC,
+    out: Path,
+    *,
+    prior: np.ndarray | None,
+    prior_tolerance: tuple[float, float] | None = DEFAULT_PRIOR_TOLERANCE,
+    progress: bool = True,
+) -> np.ndarray:
+    """The chain's odometry of ``seq`` from the identity, cached in ``out``.
+
+    :func:`semmatch.poses.odometry.estimate_poses` with :data:`ODOMETRY_RULE` on frames shrunk by
+    :data:`ODOMETRY_DOWNSAMPLE`, seeded by the frame-to-frame motions of ``prior`` (None: visual
+    only) and gated by ``prior_tolerance``. A cache with one pose per frame is returned as it is;
+    name it after everything the estimate depends on (:func:`pose_cache_name`).
+
+    Parameters
+    ----------
+    seq : sequence
+        The frames.
+    out : path
+        Cache file (TUM format, written atomically).
+    prior : ndarray (N,4,4) or None
+    prior_tolerance : (metres, degrees) or None
+    progress : bool
+
+    Returns
+    -------
+    ndarray (N,4,4)
+        The poses as the cache holds them (a fresh and a cached run use the same numbers);
+        the first is the identity.
+    """
+    from ..poses.odometry import estimate_poses
+
+    out = Path(out)
     if out.is_file():
         _, est = read_tum(out)
         if len(est) == len(seq):
-            return est, true
-    est = estimate_poses(seq, init_pose=np.eye(4), prior=seq.poses, prior_tolerance=tol,
+            return est
+    est = estimate_poses(seq, init_pose=np.eye(4), prior=prior, prior_tolerance=check_tolerance(prior_tolerance),
                          downsample=ODOMETRY_DOWNSAMPLE, progress=progress, **ODOMETRY_RULE)
     write_tum(out, np.arange(len(est), dtype=np.float64), est)  # atomic
-    # the poses as the cache holds them, so that a fresh and a cached run use the same numbers
-    return read_tum(out)[1], true
+    return read_tum(out)[1]
 
 
 def finite_frames(*arrays: np.ndarray) -> np.ndarray:
