@@ -50,7 +50,7 @@ def test_adaptation_refuses_held_out_scenes_and_unknown_sources(tiny_network, ro
         fine_tune(tiny_network, robot, "fused", tmp_path / "x.pt", steps=1, progress=False)
 
 
-def test_adapted_checkpoint_says_what_it_was_adapted_from_and_loads(tiny_network, robot, tmp_path):
+def test_adapted_checkpoint_says_what_it_was_adapted_from_and_loads(tiny_network, robot, tmp_path, monkeypatch):
     out = fine_tune(tiny_network, robot, "3d-neighborhood", tmp_path / "a.pt", steps=2, batch_size=4,
                     progress=False)
     m = load_model(out)
@@ -66,6 +66,24 @@ def test_adapted_checkpoint_says_what_it_was_adapted_from_and_loads(tiny_network
                                  progress=False))
     for p, q in zip(m.net.parameters(), again.net.parameters(), strict=True):
         np.testing.assert_array_equal(p.detach().numpy(), q.detach().numpy())
+    assert "device" not in a  # a CPU fine-tuning: the pipeline's, recorded as before
+    # "auto" without a GPU is the CPU: the same weights
+    import torch
+
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
+    auto = load_model(fine_tune(tiny_network, robot, "3d-neighborhood", tmp_path / "c.pt", steps=2, batch_size=4,
+                                progress=False, device="auto"))
+    for p, q in zip(m.net.parameters(), auto.net.parameters(), strict=True):
+        np.testing.assert_array_equal(p.detach().numpy(), q.detach().numpy())
+
+
+def test_fine_tuning_on_a_missing_gpu_is_refused(tiny_network, robot, tmp_path, monkeypatch):
+    import torch
+
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
+    with pytest.raises(ValueError, match="CUDA is not available"):
+        fine_tune(tiny_network, robot, "3d-neighborhood", tmp_path / "x.pt", steps=1, progress=False, device="cuda")
+    assert not (tmp_path / "x.pt").exists()
 
 
 def test_gap_table_on_a_hand_made_sweep():

@@ -8,6 +8,7 @@ human-height training views), :func:`adapt_in_home` does it in one home the pers
 from __future__ import annotations
 
 import copy
+import os
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, fields, replace
@@ -207,6 +208,7 @@ def fine_tune(
     extra: dict | None = None,
     cache_dir: str | Path | None = "checkpoint",
     progress: bool = True,
+    device: str = "cpu",
     **changes: Any,
 ) -> Path:
     """Fine-tune a network on the robot's frames labelled by ``source``; write the checkpoint.
@@ -246,6 +248,10 @@ def fine_tune(
         machine (``"checkpoint-if-present"``: a shipped network's training folder is never
         created elsewhere), another folder, or None (rendered, not cached).
     progress : bool
+    device : str
+        Where to fine-tune: ``cpu`` (the pipeline's), ``cuda`` or ``auto`` (a lent GPU: the
+        checkpoint's ``adapted`` record then names the device; GPU kernels are not bit-for-bit
+        deterministic, so a GPU fine-tuning repeats only approximately).
     **changes
         Fields of the recipe set over ``recipe`` (``steps=2, batch_size=4``).
 
@@ -268,7 +274,14 @@ def fine_tune(
 
     from ..progress import tqdm
     from ..segment import load_model
-    from ..segment.training import TrainConfig, augment, build_views, make_optimiser, optimisation_step
+    from ..segment.training import (
+        TrainConfig,
+        augment,
+        build_views,
+        make_optimiser,
+        optimisation_step,
+        resolve_device,
+    )
 
     _check_sources([source])
     if source not in robot.pseudo:
@@ -292,11 +305,14 @@ def fine_tune(
     elif cache_dir != "checkpoint":
         cfg.cache_dir = None if cache_dir is None else str(cache_dir)
     upper_views, _ = build_views(cfg)
+    dev = resolve_device(device)
+    if dev.type == "cuda":
+        os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")
     torch.manual_seed(seed)
-    torch.use_deterministic_algorithms(True)
-    net = seg.net
+    torch.use_deterministic_algorithms(True, warn_only=dev.type == "cuda")
+    net = seg.net.to(dev)
     opt, sched = make_optimiser(net, lr, cfg.weight_decay, steps)
-    w_t = torch.tensor(info["class_weights"], dtype=torch.float32)
+    w_t = torch.tensor(info["class_weights"], dtype=torch.float32, device=dev)
     rng = np.random.default_rng(seed)
     n_up = int(round(batch_size * upper_share))
     n_lo = batch_size - n_up
@@ -306,7 +322,7 @@ def fine_tune(
     if len(usable) == 0:
         raise ValueError(f"{source}: no robot frame carries a label")
     aug = dict(crop=cfg.crop_size, zoom=cfg.zoom, jitter=cfg.jitter, base_zoom=cfg.width / cfg.net_size[0],
-               use_depth=cfg.use_depth)
+               use_depth=cfg.use_depth, device=dev)
     t0 = time.perf_counter()
     losses = []
     net.train()
@@ -331,6 +347,7 @@ def fine_tune(
         "from": str(checkpoint), "from_sha256": file_digest(checkpoint), "label_source": source,
         "scenes": list(robot.scenes), "frames": int(len(robot.views)), "label_coverage": robot.coverage.get(source),
         **recipe.as_dict(), "final_loss": float(np.mean(losses[-20:])), "seconds": time.perf_counter() - t0,
+        **({"device": str(dev), "device_name": torch.cuda.get_device_name(dev)} if dev.type == "cuda" else {}),
         **(extra or {}),
     }
     out = Path(out)

@@ -47,12 +47,19 @@ from .train_config import (
 __all__ = [
     "TrainConfig", "PROFILES", "make_config", "network_spec", "pipeline_configs", "train", "train_or_load", "validation_table", "augment",
     "evaluate_views", "build_views", "optimisation_step", "CHECKPOINT_FORMAT", "config_differences", "config_record",
-    "views_digest", "machine_record",
+    "views_digest", "machine_record", "resolve_device",
 ]
 
 
 
-def _device(name: str) -> torch.device:
+def resolve_device(name: str) -> torch.device:
+    """The torch device ``name`` names: ``cpu``, ``cuda`` or ``auto`` (CUDA when available).
+
+    Raises
+    ------
+    ValueError
+        ``cuda`` requested where CUDA is not available.
+    """
     if name == "auto":
         return torch.device("cuda" if torch.cuda.is_available() else "cpu")
     if name == "cuda" and not torch.cuda.is_available():
@@ -298,7 +305,7 @@ def train(config: TrainConfig, *, views: tuple[D.Views, D.Views] | None = None) 
     config.validate()
     if config.threads:
         torch.set_num_threads(int(config.threads))
-    device = _device(config.device)
+    device = resolve_device(config.device)
     if device.type == "cuda":
         os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")
     torch.manual_seed(config.seed)
