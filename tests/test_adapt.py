@@ -477,3 +477,13 @@ def test_ship_adapted_command_writes_the_shipped_folder(tmp_path, capsys):
     assert m["recipe"]["steps"] == params["steps"] and m["code_version"] == "test"
     assert sorted(p.name for p in dest.iterdir()) == sorted(
         ["adaptation.json", "validation_adapt_recipe.csv", *(f"compact~{s}.pt" for s in params["sources"])])
+
+
+def test_recipe_candidates_are_scored_one_checkpoint_each(tmp_path):
+    from semmatch.experiments.adapt import score_recipe_candidates
+
+    with pytest.raises(ValueError, match="2 recipes for 1 checkpoints"):
+        score_recipe_candidates(tmp_path, "compact", [{"lr": 1e-3}, {"lr": 3e-4}], [tmp_path / "a.pt"],
+                                source="self-training")
+    with pytest.raises(ValueError, match="0 recipes for 0 checkpoints"):
+        score_recipe_candidates(tmp_path, "compact", [], [], source="self-training")

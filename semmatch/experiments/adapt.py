@@ -24,7 +24,7 @@ from ..io import read_sequence
 from .layout import Layout
 from .synthetic import eval_grid_origin, reference_grid
 
-__all__ = ["robot_views", "adapt_networks", "recipe_candidates", "choose_adaptation_recipe", "pick_recipe",
+__all__ = ["robot_views", "adapt_networks", "recipe_candidates", "choose_adaptation_recipe", "score_recipe_candidates", "pick_recipe",
            "chosen_recipe_checkpoint", "load_adapted", "adapted_height_study", "gap_table", "adapted_lower_maps",
            "robot_map_comparison", "gap_bounds", "per_scene_changes"]
 
@@ -256,13 +256,52 @@ def choose_adaptation_recipe(
     if not max_forgetting >= 0:
         raise ValueError(f"max_forgetting must be >= 0, got {max_forgetting}")
     layout = Layout(data_root)
-    heights = validation_gap_sweeps(data_root, low, high)
+    validation_gap_sweeps(data_root, low, high)  # before any fine-tuning: the sweeps exist
     base = dict(defaults or {})
     trials = [base | dict(c) for c in candidates]
     recipe_dir = _adapt_dir(data_root) / "recipe"
-    checkpoints = {f"candidate{i}": fine_tune(layout.model(network), robot, source, recipe_dir / f"candidate{i}.pt",
-                                              seed=seed, progress=progress, **kw) for i, kw in enumerate(trials)}
-    per_scene = score_on_sweeps(data_root, network, checkpoints, heights, jobs=jobs, scheduler=scheduler,
+    checkpoints = [fine_tune(layout.model(network), robot, source, recipe_dir / f"candidate{i}.pt", seed=seed,
+                             progress=progress, **kw) for i, kw in enumerate(trials)]
+    table = score_recipe_candidates(data_root, network, trials, checkpoints, source=source,
+                                    max_forgetting=max_forgetting, low=low, high=high, jobs=jobs,
+                                    scheduler=scheduler, progress=progress)
+    return trials[int(np.flatnonzero(table["chosen"])[0])], table
+
+
+def score_recipe_candidates(
+    data_root: str | Path,
+    network: str,
+    trials: Sequence[dict],
+    checkpoints: Sequence[str | Path],
+    *,
+    source: str,
+    max_forgetting: float = 0.02,
+    low: float = 0.2,
+    high: float = 1.6,
+    jobs: int = 1,
+    scheduler: str | None = None,
+    progress: bool = True,
+) -> pd.DataFrame:
+    """Score fine-tuned candidates on the **validation** sweeps and pick one (:func:`pick_recipe`).
+
+    The scoring and rule of :func:`choose_adaptation_recipe`, for checkpoints fine-tuned
+    beforehand (``checkpoints[i]`` with the recipe ``trials[i]`` and ``source`` labels).
+
+    Returns
+    -------
+    DataFrame
+        One row per candidate, as :func:`choose_adaptation_recipe`'s table.
+
+    Raises
+    ------
+    ValueError
+        ``trials`` and ``checkpoints`` differ in length, or are empty.
+    """
+    if len(trials) != len(checkpoints) or not trials:
+        raise ValueError(f"{len(trials)} recipes for {len(checkpoints)} checkpoints")
+    heights = validation_gap_sweeps(data_root, low, high)
+    named = {f"candidate{i}": Path(c) for i, c in enumerate(checkpoints)}
+    per_scene = score_on_sweeps(data_root, network, named, heights, jobs=jobs, scheduler=scheduler,
                                 progress=progress)
     gaps = gap_table(per_scene, network, low=low, high=high).set_index("model")
     rows = []
@@ -271,8 +310,7 @@ def choose_adaptation_recipe(
         # lr as text: a table's fixed decimals would print 1e-4 as 0.000
         rows.append({"candidate": i, **{k: (f"{kw[k]:g}" if k == "lr" else kw[k]) for k in sorted(kw)}, "source": source,
                      **{k: float(g[k]) for k in g.index if k not in ("source",)}})
-    table = pick_recipe(pd.DataFrame(rows), max_forgetting)
-    return trials[int(np.flatnonzero(table["chosen"])[0])], table
+    return pick_recipe(pd.DataFrame(rows), max_forgetting)
 
 
 def pick_recipe(table: pd.DataFrame, max_forgetting: float = 0.02) -> pd.DataFrame:
