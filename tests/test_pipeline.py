@@ -141,6 +141,15 @@ def test_readme_results_section_is_generated_from_figures(tmp_path):
     assert readme.update_readme(r, fig)
     assert "1 of 2 comparisons get the same verdict with every seed; they differ for C2 c - d (mean_acc: holds, " \
            "not resolved)." in (tmp_path / "docs" / "results.md").read_text()
+    # the profile's training-seed study, once it has run, stands instead of the older variance profile
+    seeds = tmp_path / "figures" / "full_training_seeds"
+    seeds.mkdir()
+    (seeds / "training_seeds_table3.md").write_text("| model | method | seed 0 |\n|---|---|---|\n| strong | lower | 0.8 |\n")
+    (seeds / "training_seeds.png").write_bytes(b"png")
+    assert readme.update_readme(r, fig)
+    doc = (tmp_path / "docs" / "results.md").read_text()
+    assert "Training seeds (from" in doc and "| strong | lower | 0.8 |" in doc and "Training variance" not in doc
+    assert "](../figures/full_training_seeds/training_seeds.png)" in doc
 
 
 def test_readme_headline_comes_from_the_plans_confirmatory_run(tmp_path):

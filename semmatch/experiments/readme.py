@@ -15,7 +15,7 @@ from pathlib import Path
 
 from ..io import atomic_write_text
 
-__all__ = ["results_markdown", "headline_markdown", "variance_markdown", "update_readme", "confirmatory_run"]
+__all__ = ["results_markdown", "headline_markdown", "variance_markdown", "training_seeds_markdown", "update_readme", "confirmatory_run"]
 
 BEGIN, END = "<!-- RESULTS:BEGIN -->", "<!-- RESULTS:END -->"
 
@@ -55,6 +55,37 @@ _VARIANCE_SECTIONS = (
     ("table2_training_seeds.md", "Table 2's Mean Acc. over the compact network's training seeds (each seed's mean over the evaluation scenes; `sd` over seeds):"),
     ("fig3_training_seeds.md", "Fig. 3's Mean Acc. over the same training seeds, per camera height:"),
 )
+
+
+#: tables of the training-seed study (:mod:`semmatch.experiments.training_seeds`): both networks
+#: of the profile's configuration trained from other seeds, every study run again with them
+_SEED_SECTIONS = (
+    ("training_seeds_table2.md", "Table 2's Mean Acc. with each training seed's networks (each seed's mean over the "
+     "scenes; `sd` and `range` over the seeds; `scene_ci_half`: the half-width of the shipped run's 95 % interval "
+     "over scenes, for scale):"),
+    ("training_seeds_table3.md", "Table 3's Mean Acc. with each training seed's networks:"),
+    ("training_seeds_fig3.md", "Fig. 3's Mean Acc. with each training seed's networks, per camera height:"),
+    ("training_seeds_verdicts.md", "Every claim's verdict with each training seed's networks (`agree`: the same "
+     "verdict with every seed, fusion reference; `agree_mesh`: mesh reference):"),
+)
+
+
+def training_seeds_markdown(seeds_dir: str | Path, readme_dir: str | Path) -> str:
+    """The training-seed study's part of the results (empty when it has not run)."""
+    seeds_dir = Path(seeds_dir)
+    if not any(_has_rows(seeds_dir / md) for md, _ in _SEED_SECTIONS):
+        return ""
+    rel = _rel(seeds_dir, Path(readme_dir))
+    parts = [f"### Training seeds (from `{_shown(seeds_dir)}/`)\n",
+             "Both networks of this configuration trained again from other seeds (seed 0: the shipped networks), "
+             "every study of notebooks 03-07 run again with them on the same scenes "
+             "([protocol.md](protocol.md#training-variance)).\n"]
+    if (seeds_dir / "training_seeds.png").is_file():
+        parts.append(f"![training_seeds.png]({rel}/training_seeds.png)\n")
+    for md, caption in _SEED_SECTIONS:
+        if _has_rows(seeds_dir / md):
+            parts += [caption + "\n", (seeds_dir / md).read_text().strip() + "\n"]
+    return "\n".join(parts)
 
 
 def _has_rows(md: Path) -> bool:
@@ -127,8 +158,10 @@ def results_markdown(figures_dir: str | Path, readme_dir: str | Path) -> str:
         parts.append(f"_No results yet: run `make repro` to fill `{rel}/`._\n")
     elif missing:
         parts.append(f"_Not generated yet (their pipeline stages have not run): {', '.join(missing)}._\n")
+    # the training-seed study of this profile when it has run, else the older variance profile's
     variance = ("" if run or figures_dir.name == "variance"
-                else variance_markdown(figures_dir.parent / "variance", readme_dir))
+                else training_seeds_markdown(figures_dir.parent / f"{figures_dir.name}_training_seeds", readme_dir)
+                or variance_markdown(figures_dir.parent / "variance", readme_dir))
     if variance:
         parts.append(variance)
     return "\n".join(parts)
