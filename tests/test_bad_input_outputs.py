@@ -197,20 +197,28 @@ def test_stale_temporary_folders_are_swept_live_ones_kept(base, tmp_path):
 
 
 def test_stale_temporary_files_of_atomic_writes_are_swept_live_ones_kept(tmp_path):
-    """A SIGKILLed writer leaves ``.NAME.PID-RANDOM.tmp.EXT``; the next write of the same file
-    removes it (not those of a live writer, nor other files)."""
+    """A SIGKILLed writer leaves ``.NAME.PID-RANDOM.tmp.EXT``; the next process that writes into
+    the folder removes it and any other dead writer's (not those of a live writer, nor other files)."""
     from semmatch.io import atomic_write_text
 
     dead = _dead_pid()
-    stale = tmp_path / f".map.{dead}-0123abcd.tmp.ply"
+    stale = [tmp_path / f".map.{dead}-0123abcd.tmp.ply", tmp_path / f".other.{dead}-0123abcd.tmp",
+             tmp_path / f".a.b.{dead}-89abcdef.tmp.png"]
     live = tmp_path / f".map.{os.getppid()}-89abcdef.tmp.ply"
-    other = tmp_path / f".mapx.{dead}-0123abcd.tmp.ply"
-    for f in (stale, live, other):
+    keep = [tmp_path / f".map.{dead}-xyz.tmp.ply", tmp_path / "map.1234-0123abcd.tmp.ply", tmp_path / ".hidden"]
+    for f in (*stale, live, *keep):
         f.write_bytes(b"partial")
     atomic_write_text(tmp_path / "map.ply", "ply\n")
     assert (tmp_path / "map.ply").read_text() == "ply\n"
-    assert not stale.exists() and live.exists() and other.exists()
-    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([live.name, other.name, "map.ply"])
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([live.name, *(k.name for k in keep), "map.ply"])
+    # a killed writer's file in a folder this process has swept already waits for the next process
+    late = tmp_path / f".late.{dead}-0123abcd.tmp"
+    late.write_bytes(b"partial")
+    atomic_write_text(tmp_path / "map.ply", "ply 2\n")
+    assert late.exists()
+    code = f"from semmatch.io import atomic_write_text; atomic_write_text({str(tmp_path / 'x.txt')!r}, 'x')"
+    subprocess.run([sys.executable, "-c", code], check=True)
+    assert not late.exists() and live.exists()
 
 
 def test_sigterm_removes_the_temporary_folders(base, tmp_path, capsys, monkeypatch):

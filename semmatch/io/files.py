@@ -31,13 +31,13 @@ def atomic_path(path: PathLike) -> Iterator[Path]:
     The temporary file keeps the suffix of ``path`` so that libraries choosing a format by
     extension (OpenCV, Open3D, matplotlib) still work. On error it is removed; its name carries
     the writer's process id, so the temporary files of a killed writer are removed by the next
-    write of the same file.
+    process that writes into the same folder.
     """
     path = Path(path)
     if path.is_dir():
         raise ValueError(f"{path}: is a folder; give the name of the file to write")
     path.parent.mkdir(parents=True, exist_ok=True)
-    _sweep_stale_files(path)
+    _sweep_stale_files(path.parent)
     tmp = path.with_name(f".{path.stem}.{os.getpid()}-{uuid.uuid4().hex[:8]}.tmp{path.suffix}")
     try:
         yield tmp
@@ -51,20 +51,27 @@ def atomic_path(path: PathLike) -> Iterator[Path]:
             tmp.unlink()
 
 
-_TEMP_FILE = re.compile(r"\.(?P<pid>\d+)-[0-9a-f]{8}\.tmp")
+_TEMP_FILE = re.compile(r"^\..+\.(?P<pid>\d+)-[0-9a-f]{8}\.tmp(\.[^.]*)?$")
+_SWEPT: set[str] = set()  # folders this process has swept
 
 
-def _sweep_stale_files(path: Path) -> list[Path]:
-    """Remove the temporary files of :func:`atomic_path` beside ``path`` whose writer has ended
-    (a SIGKILL runs no clean-up; those of live writers stay)."""
-    from .outputs import _alive, glob_escape
+def _sweep_stale_files(folder: Path) -> list[Path]:
+    """Remove the temporary files of :func:`atomic_path` in ``folder`` whose writer has ended (a
+    SIGKILL runs no clean-up; those of live writers stay). Once per folder and process: the
+    first atomic write into a folder lists it, later ones do not."""
+    from .outputs import _alive
 
+    key = os.path.abspath(folder)
+    if key in _SWEPT:
+        return []
     gone = []
-    for tmp in path.parent.glob(f".{glob_escape(path.stem)}.*.tmp{glob_escape(path.suffix)}"):
-        m = _TEMP_FILE.search(tmp.name)
-        if m and not _alive(int(m["pid"])):
-            tmp.unlink(missing_ok=True)
-            gone.append(tmp)
+    with os.scandir(folder) as entries:
+        for e in entries:
+            m = _TEMP_FILE.match(e.name) if e.name.startswith(".") else None
+            if m and not _alive(int(m["pid"])) and e.is_file(follow_symlinks=False):
+                Path(e.path).unlink(missing_ok=True)
+                gone.append(Path(e.path))
+    _SWEPT.add(key)
     return gone
 
 
