@@ -51,6 +51,15 @@ def test_verdicts_agree_or_not_and_files_written(tmp_path):
     agree = ts.verdict_agreement(ts.read_seed_runs(runs)["verdicts"])
     assert agree.loc[0, "seed 0"] == "holds" and agree.loc[0, "seed 1"] == "inconclusive"
     assert not agree.loc[0, "agree"] and agree.loc[0, "agree_mesh"]
+    # a run without the claim's table cannot agree
+    (tmp_path / "c").mkdir()
+    pd.DataFrame([dict(claim="C2", statement="s", data="real-like", role="primary", verdict="holds",
+                       verdict_mesh="holds", counts="", paper_in_ci="")]).to_csv(tmp_path / "c" / "verdicts_real.csv",
+                                                                                  index=False)
+    runs2 = {"0": runs["0"], "2": tmp_path / "c"}
+    agree2 = ts.verdict_agreement(ts.read_seed_runs(runs2)["verdicts"]).set_index("claim")
+    assert agree2.at["C1", "seed 2"] == "missing" and not agree2.at["C1", "agree"]
+    assert agree2.at["C2", "seed 0"] == "missing" and not agree2.at["C2", "agree_mesh"]
     out = tmp_path / "out"
     assert ts.main(["--run", f"0={runs['0']}", "--run", f"1={runs['1']}", "--out", str(out)]) == 0
     for name in ("training_seeds_table2.csv", "training_seeds_table2.md", "training_seeds_verdicts.csv",

@@ -141,18 +141,21 @@ def verdict_agreement(verdicts: pd.DataFrame) -> pd.DataFrame:
     -------
     DataFrame
         ``claim, data, role``, one column per seed and reference (``seed 0``, ``seed 0 (mesh)``,
-        ...), ``agree`` (the same verdict with every seed under the fusion reference) and
-        ``agree_mesh``.
+        ...; ``missing`` where a run has no verdict for the claim), ``agree`` (every seed has the
+        same verdict under the fusion reference) and ``agree_mesh``.
     """
+    seeds = list(dict.fromkeys(verdicts["seed"]))
     rows = []
     for (claim, data, role), g in verdicts.groupby(["claim", "data", "role"], sort=False):
         row = {"claim": claim, "data": data, "role": role}
-        for _, r in g.iterrows():
-            row[f"seed {r['seed']}"] = r["verdict"]
-            row[f"seed {r['seed']} (mesh)"] = r.get("verdict_mesh", "-")
-        row["agree"] = g["verdict"].nunique() == 1
-        mesh = g["verdict_mesh"] if "verdict_mesh" in g else pd.Series(["-"])
-        row["agree_mesh"] = mesh.nunique() == 1
+        by_seed = g.set_index("seed")
+        for s in seeds:
+            have = s in by_seed.index
+            row[f"seed {s}"] = by_seed.at[s, "verdict"] if have else "missing"
+            row[f"seed {s} (mesh)"] = by_seed.at[s, "verdict_mesh"] if have and "verdict_mesh" in g else "-"
+        complete = g["seed"].nunique() == len(seeds)  # a run without this claim cannot agree
+        row["agree"] = bool(complete and g["verdict"].nunique() == 1)
+        row["agree_mesh"] = bool(complete and ("verdict_mesh" not in g or g["verdict_mesh"].nunique() == 1))
         rows.append(row)
     return pd.DataFrame(rows)
 
