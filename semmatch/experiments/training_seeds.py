@@ -185,8 +185,9 @@ def plot_seed_spread(spreads: Mapping[str, pd.DataFrame], path: str | Path):
         ax.set_xlabel("Mean Acc.")
         ax.set_title(f"{'Table 2 (synthetic)' if t == 'table2' else 'Table 3 (real-like)'}: {model}", fontsize=10)
         ax.grid(axis="x", alpha=0.3)
-    axes[0][0].legend(fontsize=7, loc="lower left")
-    fig.tight_layout()
+    handles, labels = axes[0][0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=len(labels), fontsize=8, frameon=False)
+    fig.tight_layout(rect=(0, 0.08, 1, 1))
     return save_figure(fig, path)
 
 
