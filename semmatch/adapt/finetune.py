@@ -274,14 +274,7 @@ def fine_tune(
 
     from ..progress import tqdm
     from ..segment import load_model
-    from ..segment.training import (
-        TrainConfig,
-        augment,
-        build_views,
-        make_optimiser,
-        optimisation_step,
-        resolve_device,
-    )
+    from ..segment.training import TrainConfig, augment, build_views, make_optimiser, optimisation_step
 
     _check_sources([source])
     if source not in robot.pseudo:
@@ -305,11 +298,7 @@ def fine_tune(
     elif cache_dir != "checkpoint":
         cfg.cache_dir = None if cache_dir is None else str(cache_dir)
     upper_views, _ = build_views(cfg)
-    dev = resolve_device(device)
-    if dev.type == "cuda":
-        os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")
-    torch.manual_seed(seed)
-    torch.use_deterministic_algorithms(True, warn_only=dev.type == "cuda")
+    dev = _seeded_device(device, seed)
     net = seg.net.to(dev)
     opt, sched = make_optimiser(net, lr, cfg.weight_decay, steps)
     w_t = torch.tensor(info["class_weights"], dtype=torch.float32, device=dev)
@@ -354,6 +343,21 @@ def fine_tune(
     with atomic_path(out) as tmp:
         torch.save(ckpt, tmp)
     return out
+
+
+def _seeded_device(device: str, seed: int):
+    """The torch device of a fine-tuning (:func:`semmatch.segment.training.resolve_device`), torch
+    seeded and deterministic (on a GPU: where its kernels allow, with a warning otherwise)."""
+    import torch
+
+    from ..segment.training import resolve_device
+
+    dev = resolve_device(device)
+    if dev.type == "cuda":
+        os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")
+    torch.manual_seed(seed)
+    torch.use_deterministic_algorithms(True, warn_only=dev.type == "cuda")
+    return dev
 
 
 def _distillation(teacher, n_upper: int, weight: float):
