@@ -64,11 +64,13 @@ def _processes(tmp_path_factory):
         procs["scheduler"] = subprocess.Popen(
             [sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1", "--port", "0",
              "--no-dashboard", "--scheduler-file", str(sched_file)], **popen)
-        deadline = time.monotonic() + 60
-        while not sched_file.is_file() and time.monotonic() < deadline:
-            time.sleep(0.1)
-        address = json.loads(sched_file.read_text())["address"]
-        assert address.startswith("tcp://127.0.0.1:")
+        deadline, address = time.monotonic() + 60, None
+        while address is None and time.monotonic() < deadline:
+            try:  # Dask writes the file in place: it may exist before its content does
+                address = json.loads(sched_file.read_text())["address"]
+            except (FileNotFoundError, ValueError, KeyError):
+                time.sleep(0.1)
+        assert address and address.startswith("tcp://127.0.0.1:"), f"no scheduler address in {sched_file} after 60 s"
         yield {"address": address, "procs": procs, "popen": popen}
     finally:
         for proc in procs.values():
