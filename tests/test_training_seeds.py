@@ -79,3 +79,22 @@ def test_cli_errors_name_the_problem(tmp_path, capsys):
         ts.main(["--run", f"0={tmp_path / 'empty'}", "--out", str(tmp_path / "o")])
     assert e.value.code == 1 and "none of table2_per_scene.csv" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
+
+
+def test_the_run_script_checks_its_inputs_before_writing(tmp_path):
+    import subprocess
+    from pathlib import Path
+
+    script = Path(__file__).parents[1] / "scripts" / "training_seeds.sh"
+    usage = subprocess.run(["bash", str(script)], capture_output=True, text=True)
+    assert usage.returncode == 2 and "DATA CHECKPOINTS OUT SEED" in usage.stderr
+    (tmp_path / "ck").mkdir()
+    (tmp_path / "ck" / "compact_s1.pt").write_bytes(b"x")
+    r = subprocess.run(["bash", str(script), str(tmp_path / "data"), str(tmp_path / "ck"), str(tmp_path / "out"), "1"],
+                       capture_output=True, text=True)
+    assert r.returncode == 1 and "strong_s1.pt: no such checkpoint" in r.stderr
+    (tmp_path / "ck" / "strong_s1.pt").write_bytes(b"x")
+    r = subprocess.run(["bash", str(script), str(tmp_path / "data"), str(tmp_path / "ck"), str(tmp_path / "out"), "1"],
+                       capture_output=True, text=True)
+    assert r.returncode == 1 and "no scenes/ or models/recipe.json" in r.stderr
+    assert not (tmp_path / "out").exists()
