@@ -33,25 +33,17 @@ import pandas as pd
 GRID_FIELDS = ("lr", "upper_share", "distill")
 
 
-def _params(args):
-    from semmatch.experiments.pipeline import notebook_parameters
-
-    kw = {"data_root": str(args.data_root)} if args.data_root else {}
-    return notebook_parameters("09_adapt_robot_view", args.profile, **kw)
-
-
 def trials(p) -> tuple[list[dict], int]:
     """The candidates (the stage's recipe with the large grid's fields) and the index of the one
     equal to the stage's own recipe (-1 when the grid lacks it)."""
-    from semmatch.adapt import AdaptRecipe
     from semmatch.experiments.adapt import recipe_candidates
+    from semmatch.experiments.adapt_studies import stage_recipe
     from semmatch.experiments.pipeline import notebook_parameters
 
-    table = Path(p["figures_dir"]) / "validation_adapt_recipe.csv"
-    if not table.is_file():
-        raise SystemExit(f"{table}: run stage 09 (dvc repro -s adapt_robot_view) first")
-    chosen = pd.read_csv(table)
-    stage = AdaptRecipe.from_mapping(chosen[chosen["chosen"].astype(bool)].iloc[0]).as_dict()
+    try:
+        stage = stage_recipe(p["figures_dir"]).as_dict()
+    except (FileNotFoundError, ValueError) as e:
+        raise SystemExit(str(e)) from None
     grid = notebook_parameters("09_adapt_robot_view", "large", data_root=p["data_root"])["recipe_grid"]
     out, same = [], -1
     for i, c in enumerate(recipe_candidates(grid)):
@@ -152,7 +144,9 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=None, help="candidate checkpoints (default <data-root>_adapt_equal)")
     ap.add_argument("--figures", type=Path, default=None, help="tables")
     args = ap.parse_args()
-    p = _params(args)
+    from semmatch.experiments.adapt_studies import stage_parameters
+
+    p = stage_parameters(args.profile, args.data_root)
     root = Path(p["data_root"])
     args.views = args.views or root.with_name(root.name + "_adapt_seeds") / "robot_views.pkl"
     args.out = args.out or root.with_name(root.name + "_adapt_equal")

@@ -30,21 +30,13 @@ import numpy as np
 import pandas as pd
 
 
-def _params(args):
-    from semmatch.experiments.pipeline import notebook_parameters
-
-    kw = {"data_root": str(args.data_root)} if args.data_root else {}
-    return notebook_parameters("09_adapt_robot_view", args.profile, **kw)
-
-
 def _recipe(p, seed: int):
-    from semmatch.adapt import AdaptRecipe
+    from semmatch.experiments.adapt_studies import stage_recipe
 
-    table = Path(p["stage_figures"]) / "validation_adapt_recipe.csv"
-    if not table.is_file():
-        raise SystemExit(f"{table}: run stage 09 (dvc repro -s adapt_robot_view) first")
-    chosen = pd.read_csv(table)
-    return AdaptRecipe.from_mapping(chosen[chosen["chosen"].astype(bool)].iloc[0], seed=seed)
+    try:
+        return stage_recipe(p["stage_figures"], seed=seed)
+    except (FileNotFoundError, ValueError) as e:
+        raise SystemExit(str(e)) from None
 
 
 def prepare(args, p) -> None:
@@ -203,7 +195,9 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=1, help="finetune: the recipe's seed (default %(default)s)")
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2], help="score: these seeds (0: the stage's)")
     args = ap.parse_args()
-    p = _params(args)
+    from semmatch.experiments.adapt_studies import stage_parameters
+
+    p = stage_parameters(args.profile, args.data_root)
     p["stage_figures"] = args.stage_figures or p["figures_dir"]
     args.out = args.out or Path(f"{p['data_root']}_adapt_seeds")
     {"prepare": prepare, "finetune": finetune, "score": score, "summarize": summarize}[args.phase](args, p)

@@ -167,4 +167,6 @@ def test_the_in_home_studys_seeds_are_refused(tmp_path):
     seed = load_in_home_plan().seeds[0]
     with pytest.raises(ValueError, match=f"refusing confirmatory seeds \\[{seed}\\].*in-home study"):
         confirm.run_confirm([seed], out_root=tmp_path)
+    with pytest.raises(ValueError, match=r"refusing confirmatory seeds \[8310\]: they are held-out adaptation scenes"):
+        confirm.run_confirm([9999, 8310], out_root=tmp_path)
     assert not any(tmp_path.iterdir())

@@ -19,7 +19,7 @@ from semmatch.experiments.real_diagnostics import (
     real_like_diagnostics,
 )
 from semmatch.experiments.real_diagnostics_tables import arm_differences, draw_spread, summarize_arms
-from semmatch.io import read_tum
+from semmatch.io import read_sequence, read_tum
 
 SCENE = "bedroom_0003"
 
@@ -64,13 +64,24 @@ def test_arms_and_their_bad_settings():
 def test_study_reproduces_table3_chain_and_pairs_the_arms(tiny_root, tmp_path, oracle_network, monkeypatch):
     # the command line's settings (its test below then reuses these arms)
     kw = dict(voxel_size=0.04, registration_voxel=0.1, registration_restarts=3, prior_tolerance=(0.1, 10.0))
-    arms = [ARMS[0], ARMS[1], ARMS[3], ARMS[4], Arm("chain", "noisy", "estimated", drift=0.0)]
+    arms = [ARMS[0], ARMS[1], ARMS[3], ARMS[4], ARMS[5], Arm("chain", "noisy", "estimated", drift=0.0)]
     res = real_like_diagnostics(tiny_root, networks=["noisy"], arms=arms, draws=2, progress=False, **kw)
     scores = res["scores"]
     # arms at true poses run once; the drift-0 chain once (sweep_draws); the others every draw
     draws = scores.groupby(["arm", "drift"])["draw"].nunique().to_dict()
     assert draws == {("clean, true poses", 1.0): 1, ("noisy, true poses", 1.0): 1, ("chain", 1.0): 2,
-                     ("person visual-only", 1.0): 2, ("chain", 0.0): 1}
+                     ("person visual-only", 1.0): 2, ("chain", 0.0): 1, ("held-out appearance, true poses", 1.0): 1}
+    # the held-out look: the noisy recording's depth, labels and poses, other RGB
+    looks = list((tiny_root / "real_diagnostics" / "appearance").glob(f"{SCENE}-*/lower"))
+    assert len(looks) == 1
+    noisy, held = read_sequence(tiny_root / "scenes" / "eval" / SCENE / "lower_noisy"), read_sequence(looks[0])
+    assert json.loads((looks[0] / "meta.json").read_text())["appearance"]["seed"] == 3
+    for i in (0, len(noisy) - 1):
+        a, b = noisy[i], held[i]
+        np.testing.assert_array_equal(a.depth, b.depth)
+        np.testing.assert_array_equal(noisy.read_labels(i), held.read_labels(i))
+        np.testing.assert_array_equal(a.pose, b.pose)
+        assert np.abs(a.rgb.astype(int) - b.rgb.astype(int)).mean() > 20
     assert set(zip(scores["model"], scores["method"])) == {
         ("ground truth", "3d-neighborhood"), ("noisy", "lower"), ("noisy", "3d-neighborhood"), ("noisy", "fused"),
         ("noisy", "upper")}
@@ -98,8 +109,8 @@ def test_study_reproduces_table3_chain_and_pairs_the_arms(tiny_root, tmp_path, o
     spread = draw_spread(scores)
     assert np.isnan(spread.loc[spread["arm"] == "clean, true poses", "draw_sd"]).all()
     diffs, contrasts = arm_differences(res)
-    assert {"sensor noise (true poses)", "estimated poses (noisy frames)", "person tracked visually only"} <= set(
-        diffs["effect"])
+    assert {"sensor noise (true poses)", "estimated poses (noisy frames)", "person tracked visually only",
+            "held-out appearance (true poses)"} <= set(diffs["effect"])
     one = diffs[(diffs["effect"] == "sensor noise (true poses)") & (diffs["model"] == "noisy")
                 & (diffs["method"] == "lower")].iloc[0]
     per = scores.set_index(["arm", "model", "method"])["mean_acc"]
@@ -113,7 +124,7 @@ def test_study_reproduces_table3_chain_and_pairs_the_arms(tiny_root, tmp_path, o
     monkeypatch.setattr(real, "chain_from_poses", lambda *a, **k: pytest.fail("recomputed"))
     again = real_like_diagnostics(tiny_root, networks=["noisy"], arms=arms, draws=2, progress=False, **kw)
     pd.testing.assert_frame_equal(again["scores"], scores)
-    assert not res["tasks"]["reused"].any() and again["tasks"]["reused"].all() and len(again["tasks"]) == 7
+    assert not res["tasks"]["reused"].any() and again["tasks"]["reused"].all() and len(again["tasks"]) == 8
     # another checkpoint (or other recordings) is another input: nothing cached is reused
     (tiny_root / "models").mkdir(exist_ok=True)
     (tiny_root / "models" / "noisy.pt").write_bytes(b"another network")
@@ -132,7 +143,14 @@ def test_cli_writes_the_tables_and_figure(tiny_root, tmp_path, oracle_network, c
         assert (figures / f"real_diagnostics_{name}.csv").is_file() and (figures / f"real_diagnostics_{name}.md").is_file()
     assert (figures / "real_diagnostics.png").stat().st_size > 10_000
     run = json.loads((figures / "run.json").read_text())
-    assert run["scenes"] == 1 and run["drift_levels"] == [1.0, 2.0] and run["tasks"] == 6 and run["tasks_reused"] in (0, 4)  # 4 when the study test ran first
+    assert run["scenes"] == 1 and run["drift_levels"] == [1.0, 2.0] and run["tasks"] == 8 and run["tasks_reused"] in (0, 5)  # 5 when the study test ran first
+    gap = pd.read_csv(figures / "real_diagnostics_appearance_gap.csv").set_index(["model", "method"])
+    assert gap.loc[("noisy", "lower"), "paper_drop"] == pytest.approx(0.766 - 0.590, abs=1e-4)  # the CSV's 4 places
+    assert np.isnan(gap.loc[("ground truth", "3d-neighborhood"), "paper_drop"])
+    assert gap.loc[("noisy", "lower"), "drop"] == pytest.approx(gap.loc[("noisy", "lower"), "clean, true poses"]
+                                                               - gap.loc[("noisy", "lower"), "held-out appearance, true poses"],
+                                                               abs=2e-4)
+    assert (figures / "real_diagnostics_appearance_gap.png").stat().st_size > 10_000
     with pytest.raises(SystemExit):
         main(["--data", str(tmp_path / "nowhere")])
     assert "no evaluation scenes" in capsys.readouterr().err

@@ -192,7 +192,7 @@ def run_confirm(seeds: Sequence[int], *, name: str | None = None, base_profile: 
     """
     data = yaml.safe_load(Path(params_file).read_text())
     seeds = check_confirm_seeds(seeds, data.get("profiles") or {}, where=str(params_file))
-    _refuse_in_home_seeds(seeds)
+    _refuse_study_seeds(seeds)
     name = name or confirm_name(seeds)
     if not name.replace("-", "").replace("_", "").replace(".", "").isalnum():
         raise ValueError(f"run name {name!r}: use letters, digits, '-', '_' and '.' only")
@@ -265,14 +265,21 @@ def run_confirm(seeds: Sequence[int], *, name: str | None = None, base_profile: 
     return record
 
 
-def _refuse_in_home_seeds(seeds: Sequence[int]) -> None:
-    """Refuse the in-home study's home seeds: their scenes were generated and scored there."""
+def _refuse_study_seeds(seeds: Sequence[int]) -> None:
+    """Refuse the seeds of the side studies' scenes: the in-home study's homes and the held-out
+    adaptation scenes (:data:`semmatch.experiments.adapt_studies.HELDOUT_ADAPT_SEEDS`); they were
+    generated and scored there."""
+    from .adapt_studies import HELDOUT_ADAPT_SEEDS
     from .in_home import PLAN_PATH, load_in_home_plan
 
     used = sorted(set(seeds) & set(load_in_home_plan().seeds))
     if used:
         raise ValueError(f"{PLAN_PATH.name}: refusing confirmatory seeds {used}: they are the in-home study's homes "
                          f"(every kind generated and scored there); choose seeds nobody has used")
+    used = sorted(set(seeds) & set(HELDOUT_ADAPT_SEEDS))
+    if used:
+        raise ValueError(f"refusing confirmatory seeds {used}: they are held-out adaptation scenes "
+                         f"(scripts/adapt_heldout.py, docs/adapt.md); choose seeds nobody has used")
 
 
 def _check_in_home(base_profile: str):

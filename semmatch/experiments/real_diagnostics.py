@@ -15,7 +15,13 @@ time, on the same scenes, paired per scene:
   (wheel odometry or an IMU would give it): Table 3's chain;
 * ``person visual-only``: as ``chain``, but the person's camera is tracked from its frames
   alone (no prior: the paper's person used visual SLAM); the robot keeps its wheel-odometry-like
-  prior.
+  prior;
+* ``held-out appearance, true poses`` and ``chain, held-out appearance``: the noisy recordings
+  with their RGB rendered in a look no training view shows (:mod:`semmatch.sim.appearance`:
+  held-out materials, textures and lighting; depth, labels and priors unchanged), at the true
+  poses and through the whole chain: the appearance gap the paper's networks met on real images
+  (issue 36 item 5). The recordings are written once per scene under
+  ``<data_root>/real_diagnostics/appearance/`` (:func:`heldout_recording`).
 
 Arms with estimated poses run in ``draws`` draws: draw ``d`` regenerates each recording's prior
 with :func:`semmatch.sim.noise.estimated_poses` from the recording's own noise settings and the
@@ -55,7 +61,7 @@ import pandas as pd
 
 from .layout import GT, Layout
 
-__all__ = ["Arm", "ARMS", "diagnostic_arms", "drifted_prior", "predict_scene", "run_arm", "real_like_diagnostics",
+__all__ = ["Arm", "ARMS", "FRAMES", "heldout_recording", "diagnostic_arms", "drifted_prior", "predict_scene", "run_arm", "real_like_diagnostics",
            "main"]
 
 
@@ -66,8 +72,9 @@ class Arm:
     Attributes
     ----------
     name : str
-    frames : {"clean", "noisy"}
-        The recordings' renderings: ``upper``/``lower`` or ``upper_noisy``/``lower_noisy``.
+    frames : {"clean", "noisy", "heldout"}
+        The recordings' renderings: ``upper``/``lower``, ``upper_noisy``/``lower_noisy``, or the
+        noisy ones with the held-out appearance (:func:`heldout_recording`).
     poses : {"true", "estimated"}
         True poses and relative transform, or odometry plus registration.
     person_prior : bool
@@ -100,7 +107,12 @@ ARMS = (
     Arm("clean, estimated poses", "clean", "estimated"),
     Arm("chain", "noisy", "estimated"),
     Arm("person visual-only", "noisy", "estimated", person_prior=False),
+    Arm("held-out appearance, true poses", "heldout", "true"),
+    Arm("chain, held-out appearance", "heldout", "estimated"),
 )
+
+#: the kinds of frames an arm can use
+FRAMES = ("clean", "noisy", "heldout")
 
 
 def diagnostic_arms(drift_levels: Sequence[float] = (0.0, 1.0, 2.0, 4.0)) -> list[Arm]:
@@ -186,7 +198,27 @@ def _labels_folder(data_root: str | Path, sid: str, frames: str, recording: str,
     return Path(data_root) / "real_diagnostics" / "labels" / f"{sid}-{digest}" / frames / f"{recording}_{network}"
 
 
-def _recording(sd: Path, recording: str, frames: str) -> Path:
+def heldout_recording(data_root: str | Path, sid: str, recording: str) -> Path:
+    """The scene's noisy ``recording`` (``upper`` or ``lower``) with the held-out appearance
+    (:func:`semmatch.sim.appearance.write_heldout_recording`), written on first use under
+    ``<data_root>/real_diagnostics/appearance/<scene>-<inputs>/``."""
+    from ..sim.appearance import write_heldout_recording
+
+    layout = Layout(data_root)
+    out = Path(data_root) / "real_diagnostics" / "appearance" / f"{sid}-{_inputs_digest(data_root, sid, ())}" / recording
+    if not out.is_dir():
+        try:
+            write_heldout_recording(layout.scenes / "eval" / sid / f"{recording}_noisy", out)
+        except FileExistsError:  # another worker wrote it meanwhile
+            pass
+    return out
+
+
+def _recording(data_root: str | Path, sd: Path, recording: str, frames: str) -> Path:
+    if frames not in FRAMES:
+        raise ValueError(f"unknown frames {frames!r}; valid: {', '.join(FRAMES)}")
+    if frames == "heldout":
+        return heldout_recording(data_root, sd.name, recording)
     return sd / (f"{recording}_noisy" if frames == "noisy" else recording)
 
 
@@ -207,7 +239,8 @@ def predict_scene(data_root: str, networks: tuple[str, ...], task: tuple[str, st
             folder = _labels_folder(data_root, sid, frames, recording, net, digest)
             if not folder.is_dir():
                 model = model or layout.load_network(net)
-                predict_sequence(model, read_sequence(_recording(sd, recording, frames)), folder, progress=False)
+                predict_sequence(model, read_sequence(_recording(data_root, sd, recording, frames)), folder,
+                                 progress=False)
             out.append(folder)
     return out
 
@@ -260,7 +293,7 @@ def run_arm(data_root: str, networks: tuple[str, ...], methods: tuple[str, ...],
             if not folder.is_dir():
                 raise FileNotFoundError(f"{folder}: no noisy recording; run 01_simulate with noise on")
             true[name] = read_tum(folder / "poses_gt.txt")[1]
-            frames = read_sequence(_recording(sd, name, arm.frames)).load()
+            frames = read_sequence(_recording(data_root, sd, name, arm.frames)).load()
             if len(frames) != len(true[name]):
                 raise ValueError(f"{sd / name}: {len(frames)} frames against {len(true[name])} true poses")
             if arm.poses == "true":

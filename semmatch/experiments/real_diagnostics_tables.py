@@ -19,8 +19,8 @@ import pandas as pd
 
 from ..evaluate.metrics import MEASURES
 
-__all__ = ["SHOWN", "DIFFERENCES", "CONTRASTS", "draw_spread", "summarize_arms", "arm_differences",
-           "plot_diagnostics", "write_diagnostics"]
+__all__ = ["SHOWN", "DIFFERENCES", "CONTRASTS", "APPEARANCE_ARMS", "PAPER_GAP", "draw_spread", "summarize_arms",
+           "arm_differences", "appearance_gap", "plot_appearance_gap", "plot_diagnostics", "write_diagnostics"]
 
 
 #: rows shown in the summaries and the figure: (model, method); "<net>" is each network
@@ -33,7 +33,15 @@ DIFFERENCES = (
     ("estimated poses (clean frames)", "clean, estimated poses", "clean, true poses"),
     ("estimated poses (noisy frames)", "chain", "noisy, true poses"),
     ("person tracked visually only", "person visual-only", "chain"),
+    ("held-out appearance (true poses)", "held-out appearance, true poses", "noisy, true poses"),
+    ("held-out appearance (chain)", "chain, held-out appearance", "chain"),
 )
+
+#: the appearance gap's arms, in order: synthetic frames, the sensor model, the held-out look
+APPEARANCE_ARMS = ("clean, true poses", "noisy, true poses", "held-out appearance, true poses")
+
+#: the paper's Mask R-CNN rows (Mean Acc.): synthetic (Table 2) and real (Table 3)
+PAPER_GAP = {"lower": (0.766, 0.590), "3d-neighborhood": (0.808, 0.768)}
 
 #: the within-arm contrasts of :func:`arm_differences`: (name, method a, method b), per network
 CONTRASTS = (
@@ -223,6 +231,68 @@ def plot_diagnostics(summary: pd.DataFrame, path: str | Path, *, measure: str = 
     return save_figure(fig, path)
 
 
+def appearance_gap(summary: pd.DataFrame, measure: str = "mean_acc") -> pd.DataFrame:
+    """The appearance gap: each shown row's ``measure`` on synthetic frames, Kinect-like frames and
+    Kinect-like frames with the held-out look (:data:`APPEARANCE_ARMS`, true poses), and the
+    drop from synthetic to the held-out look beside the paper's drop from its synthetic to its
+    real data (:data:`PAPER_GAP`, Mask R-CNN; empty where the paper has no such row).
+
+    Returns
+    -------
+    DataFrame
+        model, method, one column per arm (``measure`` and its interval), ``drop`` (synthetic minus
+        held-out look), ``paper_synthetic``, ``paper_real``, ``paper_drop``; empty when an arm is
+        missing.
+    """
+    base = summary[(summary["drift"] == 1.0) & summary["arm"].isin(APPEARANCE_ARMS)]
+    if set(base["arm"]) != set(APPEARANCE_ARMS):
+        return pd.DataFrame()
+    rows = []
+    for model, method in _shown_rows(base):
+        if method == "upper":
+            continue
+        g = base[(base["model"] == model) & (base["method"] == method)].set_index("arm")
+        row = {"model": model, "method": method}
+        for arm in APPEARANCE_ARMS:
+            for suffix in ("", "_lo", "_hi"):
+                row[f"{arm}{suffix}"] = float(g.loc[arm, f"{measure}{suffix}"])
+        row["drop"] = row[APPEARANCE_ARMS[0]] - row[APPEARANCE_ARMS[-1]]
+        paper = PAPER_GAP.get(method) if model != "ground truth" else None
+        row.update(paper_synthetic=paper[0] if paper else np.nan, paper_real=paper[1] if paper else np.nan,
+                   paper_drop=paper[0] - paper[1] if paper else np.nan)
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def plot_appearance_gap(gap: pd.DataFrame, path: str | Path, *, measure: str = "mean_acc") -> Path:
+    """``measure`` from synthetic frames to the held-out look per row (95 % intervals), with the
+    paper's synthetic-to-real change of its lower view and 3D neighborhood rows beside them."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from ..io import save_figure
+
+    fig, ax = plt.subplots(figsize=(8, 4.2))
+    x = np.arange(len(APPEARANCE_ARMS))
+    for _, r in gap.iterrows():
+        y = np.array([r[a] for a in APPEARANCE_ARMS])
+        err = np.vstack([y - [r[f"{a}_lo"] for a in APPEARANCE_ARMS], [r[f"{a}_hi"] for a in APPEARANCE_ARMS] - y])
+        (line,) = ax.plot(x, y, marker="o", label=f"{r['model']}: {r['method']}")
+        ax.errorbar(x, y, yerr=err, fmt="none", ecolor=line.get_color(), capsize=3)
+        if np.isfinite(r["paper_synthetic"]):
+            ax.plot([x[0] - 0.15, x[-1] + 0.15], [r["paper_synthetic"], r["paper_real"]], ls=":", marker="s",
+                    color=line.get_color(), alpha=0.8, label=f"paper (Mask R-CNN): {r['method']}, synthetic -> real")
+    ax.set_xticks(x, ["synthetic\n(clean)", "Kinect-like\nnoise", "noise +\nheld-out look"])
+    ax.set_ylabel(f"{measure.replace('_', ' ')} (mean over scenes, 95 % interval)")
+    ax.set_title("The appearance gap (true poses)")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize="x-small", loc="lower left")
+    fig.tight_layout()
+    return save_figure(fig, path)
+
+
 def write_diagnostics(result: dict[str, pd.DataFrame], figures: str | Path, *, minutes: float,
                       settings: dict, arms: Sequence[str] | None = None) -> list[Path]:
     """Write the study's tables (CSV and Markdown), its figure (arms in the order ``arms``) and
@@ -244,6 +314,10 @@ def write_diagnostics(result: dict[str, pd.DataFrame], figures: str | Path, *, m
                      ("real_diagnostics_registration", result["registration"])):
         out += list(save_table(df, figures, name))
     out.append(plot_diagnostics(summary, figures / "real_diagnostics.png", arms=arms))
+    gap = appearance_gap(summary)
+    if len(gap):
+        out += list(save_table(gap, figures, "real_diagnostics_appearance_gap"))
+        out.append(plot_appearance_gap(gap, figures / "real_diagnostics_appearance_gap.png"))
     atomic_write_text(figures / "run.json", json.dumps(
         dict(settings, scenes=int(result["scores"]["scene"].nunique()), minutes=round(minutes, 1),
              tasks=len(result["tasks"]), tasks_reused=int(result["tasks"]["reused"].sum()),
