@@ -20,6 +20,7 @@ from semmatch.experiments.real_diagnostics import (
 )
 from semmatch.experiments.real_diagnostics_tables import arm_differences, draw_spread, summarize_arms
 from semmatch.io import read_sequence, read_tum
+from semmatch.sim.appearance import write_heldout_recording
 
 SCENE = "bedroom_0003"
 
@@ -82,6 +83,12 @@ def test_study_reproduces_table3_chain_and_pairs_the_arms(tiny_root, tmp_path, o
         np.testing.assert_array_equal(noisy.read_labels(i), held.read_labels(i))
         np.testing.assert_array_equal(a.pose, b.pose)
         assert np.abs(a.rgb.astype(int) - b.rgb.astype(int)).mean() > 20
+    # written again elsewhere: the same frames, and a killed writer's temporary folder is removed
+    stale = tmp_path / ".again.999999999-x.partial"
+    stale.mkdir()
+    again = write_heldout_recording(tiny_root / "scenes" / "eval" / SCENE / "lower_noisy", tmp_path / "again")
+    assert not stale.exists() and not list(tmp_path.glob(".again*"))
+    np.testing.assert_array_equal(read_sequence(again)[1].rgb, held[1].rgb)
     assert set(zip(scores["model"], scores["method"])) == {
         ("ground truth", "3d-neighborhood"), ("noisy", "lower"), ("noisy", "3d-neighborhood"), ("noisy", "fused"),
         ("noisy", "upper")}

@@ -391,14 +391,12 @@ def write_in_home_results(per_home: pd.DataFrame, comparisons: pd.DataFrame, pla
     """Write the study's tables (CSV and Markdown), its figure and ``run.json`` into ``figures``
     (each file atomically); return the paths."""
     from ..io import atomic_write_text
+    from .tables import save_table
 
     figures = Path(figures)
-    figures.mkdir(parents=True, exist_ok=True)
     out = []
     for name, df in (("in_home_per_home", per_home), ("in_home_comparisons", comparisons)):
-        atomic_write_text(figures / f"{name}.csv", df.to_csv(index=False))
-        atomic_write_text(figures / f"{name}.md", df.to_markdown(index=False, floatfmt=".3f") + "\n")
-        out += [figures / f"{name}.csv", figures / f"{name}.md"]
+        out += list(save_table(df, figures, name))
     out.append(plot_in_home(per_home, figures / "in_home.png", measure=plan.primary))
     atomic_write_text(figures / "run.json", json.dumps(
         {"plan_version": plan.raw.get("plan_version"), "homes": int(per_home["home"].nunique()),

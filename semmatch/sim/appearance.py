@@ -189,7 +189,8 @@ def write_heldout_recording(noisy: str | Path, out: str | Path, *, progress: boo
     one scene shares it. Each frame is rendered at its true pose (``poses_gt.txt``) and passes
     through the recording's own RGB noise (its ``noise`` settings: exposure drift and pixel noise,
     a random stream of its own). Depth, labels, instances, poses and intrinsics are the noisy
-    recording's, copied. Written to a temporary folder and renamed to ``out``.
+    recording's, copied. Written to a temporary folder and renamed to ``out`` (the temporary
+    folders of killed writers are removed first).
 
     Parameters
     ----------
@@ -218,7 +219,7 @@ def write_heldout_recording(noisy: str | Path, out: str | Path, *, progress: boo
     from dataclasses import fields
 
     from ..io import read_intrinsics, read_sequence, read_tum, write_image
-    from ..io.outputs import temp_dir
+    from ..io.outputs import sweep_stale, temp_dir
     from ..progress import tqdm
     from .noise import NoiseConfig, exposure_gains, noisy_rgb
     from .procedural import generate_scene
@@ -248,6 +249,7 @@ def write_heldout_recording(noisy: str | Path, out: str | Path, *, progress: boo
     names = sorted(p.name for p in (noisy / "rgb").iterdir())
     if len(names) != len(true):
         raise ValueError(f"{noisy / 'rgb'}: {len(names)} images against {len(true)} true poses")
+    sweep_stale(out)  # a killed writer's temporary folder
     tmp = temp_dir(out)
     try:
         shutil.copytree(noisy, tmp, dirs_exist_ok=True)
