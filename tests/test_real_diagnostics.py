@@ -11,10 +11,13 @@ from conftest import noisy_scene_root
 
 from semmatch.experiments.real import evaluate_real_like
 from semmatch.experiments.real_diagnostics import (
+    APPEARANCE_SEVERITY,
     ARMS,
     Arm,
+    appearance_severity_on_validation,
     diagnostic_arms,
     drifted_prior,
+    frames_kind,
     main,
     real_like_diagnostics,
 )
@@ -60,6 +63,11 @@ def test_arms_and_their_bad_settings():
     assert not Arm("x", "clean", "true").random and Arm("x", "noisy", "estimated").random
     with pytest.raises(ValueError, match="drift levels"):
         diagnostic_arms([-1.0])
+    assert frames_kind("noisy") == ("noisy", 0.0) and frames_kind("heldout") == ("heldout", 1.0)
+    assert frames_kind("heldout@0.25") == ("heldout", 0.25)
+    for bad in ("noisy@0.5", "heldout@0", "heldout@2", "sunny"):
+        with pytest.raises(ValueError, match="frames"):
+            frames_kind(bad)
 
 
 def test_study_reproduces_table3_chain_and_pairs_the_arms(tiny_root, tmp_path, oracle_network, monkeypatch):
@@ -150,13 +158,16 @@ def test_cli_writes_the_tables_and_figure(tiny_root, tmp_path, oracle_network, c
         assert (figures / f"real_diagnostics_{name}.csv").is_file() and (figures / f"real_diagnostics_{name}.md").is_file()
     assert (figures / "real_diagnostics.png").stat().st_size > 10_000
     run = json.loads((figures / "run.json").read_text())
-    assert run["scenes"] == 1 and run["drift_levels"] == [1.0, 2.0] and run["tasks"] == 8 and run["tasks_reused"] in (0, 5)  # 5 when the study test ran first
+    assert run["scenes"] == 1 and run["drift_levels"] == [1.0, 2.0] and run["tasks"] == 10 and run["tasks_reused"] in (0, 5)  # 5 when the study test ran first
     gap = pd.read_csv(figures / "real_diagnostics_appearance_gap.csv").set_index(["model", "method"])
     assert gap.loc[("noisy", "lower"), "paper_drop"] == pytest.approx(0.766 - 0.590, abs=1e-4)  # the CSV's 4 places
     assert np.isnan(gap.loc[("ground truth", "3d-neighborhood"), "paper_drop"])
-    assert gap.loc[("noisy", "lower"), "drop"] == pytest.approx(gap.loc[("noisy", "lower"), "clean, true poses"]
-                                                               - gap.loc[("noisy", "lower"), "held-out appearance, true poses"],
-                                                               abs=2e-4)
+    assert gap.loc[("noisy", "lower"), "drop x1"] == pytest.approx(gap.loc[("noisy", "lower"), "clean, true poses"]
+                                                                  - gap.loc[("noisy", "lower"), "held-out appearance, true poses"],
+                                                                  abs=2e-4)
+    assert f"drop x{APPEARANCE_SEVERITY:g}" in gap.columns
+    diffs = pd.read_csv(figures / "real_diagnostics_differences.csv")
+    assert f"held-out appearance x{APPEARANCE_SEVERITY:g} (chain)" in set(diffs["effect"])
     assert (figures / "real_diagnostics_appearance_gap.png").stat().st_size > 10_000
     with pytest.raises(SystemExit):
         main(["--data", str(tmp_path / "nowhere")])
@@ -166,3 +177,22 @@ def test_cli_writes_the_tables_and_figure(tiny_root, tmp_path, oracle_network, c
         with pytest.raises(SystemExit):
             main(["--data", str(tiny_root), "--figures", str(figures), *bad])
         assert msg in capsys.readouterr().err
+
+
+def test_the_appearance_severity_is_chosen_on_validation_scenes(tmp_path, oracle_network, capsys):
+    from semmatch.geometry import DEFAULT_INTRINSICS
+    from semmatch.sim import NoiseConfig, generate_dataset
+
+    root = tmp_path / "data"
+    generate_dataset(root / "scenes", train_seeds=[], val_seeds=[5], eval_seeds=[3], kinds=["bedroom"],
+                     n_frames_upper=8, n_frames_lower=8, heights_sweep=None,
+                     intrinsics=DEFAULT_INTRINSICS.scaled(160, 120), noise=NoiseConfig.kinect(3), progress=False)
+    table, chosen = appearance_severity_on_validation(root, "noisy", levels=(0.5, 1.0), progress=False)
+    assert list(table["frames"]) == ["clean", "noisy", "0.5", "1"]
+    assert table.loc[0, "kept"] == pytest.approx(1.0) and table["scenes"].eq(1).all()
+    assert table["chosen"].sum() == 1 and chosen in (0.5, 1.0)
+    assert table.loc[table["chosen"], "frames"].item() == f"{chosen:g}"
+    assert (root / "real_diagnostics" / "appearance_validation").is_dir()
+    assert main(["--data", str(root), "--figures", str(tmp_path / "fig"), "--networks", "noisy", "--choose-severity"]) == 0
+    assert (tmp_path / "fig" / "appearance_severity_validation.md").is_file()
+    assert "chosen severity" in capsys.readouterr().out

@@ -77,3 +77,21 @@ def test_recording_errors(tmp_path):
     (tmp_path / "out").mkdir()
     with pytest.raises(FileExistsError, match="out: exists"):
         write_heldout_recording(tmp_path / "rec", tmp_path / "out")
+
+
+def test_severity_blends_the_training_and_held_out_looks(scene):
+    full, half = heldout_appearance(scene, 11), heldout_appearance(scene, 11, 0.5)
+    np.testing.assert_array_equal(full.texture, half.texture)  # the same draws
+    assert half.severity == 0.5 and half.scene.texture is not None  # training textures kept for the blend
+    d_full = np.abs(full.scene.albedo - scene.albedo).mean()
+    d_half = np.abs(half.scene.albedo - scene.albedo).mean()
+    assert 0.2 * d_full < d_half < 0.8 * d_full
+    intr = DEFAULT_INTRINSICS.scaled(80, 60)
+    pose = make_trajectory(scene, 1.2, 3, seed=0, kind="upper")[1]
+    plain = Renderer(scene, intr).render(pose).rgb.astype(int)
+    gaps = [np.abs(HeldOutRenderer(heldout_appearance(scene, 11, s), intr).render(pose).rgb.astype(int) - plain).mean()
+            for s in (0.25, 0.5, 1.0)]
+    assert gaps[0] < gaps[1] < gaps[2]
+    for bad in (0.0, -0.1, 1.5):
+        with pytest.raises(ValueError, match="severity must be in"):
+            heldout_appearance(scene, 11, bad)

@@ -37,8 +37,35 @@ DIFFERENCES = (
     ("held-out appearance (chain)", "chain, held-out appearance", "chain"),
 )
 
-#: the appearance gap's arms, in order: synthetic frames, the sensor model, the held-out look
-APPEARANCE_ARMS = ("clean, true poses", "noisy, true poses", "held-out appearance, true poses")
+#: the appearance gap's first arms: synthetic frames, the sensor model; the held-out looks at true
+#: poses follow, by severity (``held-out appearance xS, true poses``; no ``xS``: severity 1)
+APPEARANCE_ARMS = ("clean, true poses", "noisy, true poses")
+
+
+def _differences(arms) -> list[tuple[str, str, str]]:
+    """:data:`DIFFERENCES` and, per held-out look at another severity among ``arms``, its cost at
+    true poses and in the chain."""
+    import re
+
+    out = list(DIFFERENCES)
+    for a in arms:
+        m = re.fullmatch(r"held-out appearance x([0-9.]+), true poses", str(a))
+        if m:
+            out.append((f"held-out appearance x{m.group(1)} (true poses)", a, "noisy, true poses"))
+            out.append((f"held-out appearance x{m.group(1)} (chain)", f"chain, held-out appearance x{m.group(1)}", "chain"))
+    return out
+
+
+def _appearance_arms(arms) -> list[str]:
+    """:data:`APPEARANCE_ARMS` and the held-out-look arms at true poses among ``arms``, by severity."""
+    import re
+
+    held = {}
+    for a in dict.fromkeys(arms):
+        m = re.fullmatch(r"held-out appearance(?: x([0-9.]+))?, true poses", str(a))
+        if m:
+            held[a] = float(m.group(1) or 1.0)
+    return [*APPEARANCE_ARMS, *sorted(held, key=held.get)]
 
 #: the paper's Mask R-CNN rows (Mean Acc.): synthetic (Table 2) and real (Table 3)
 PAPER_GAP = {"lower": (0.766, 0.590), "3d-neighborhood": (0.808, 0.768)}
@@ -147,7 +174,7 @@ def arm_differences(result: dict[str, pd.DataFrame], measure: str = "mean_acc") 
     per_scene = _per_scene(result["scores"])
     wide = per_scene.pivot_table(index="scene", columns=["arm", "drift", "model", "method"], values=measure)
     diffs = []
-    for effect, a, b in DIFFERENCES:
+    for effect, a, b in _differences(dict.fromkeys(arm for arm, *_ in wide.columns)):
         for model, method in sorted({(m, t) for (arm, _, m, t) in wide.columns if arm == a}):
             ka, kb = (a, 1.0, model, method), (b, 1.0, model, method)
             if ka in wide.columns and kb in wide.columns:
@@ -233,19 +260,20 @@ def plot_diagnostics(summary: pd.DataFrame, path: str | Path, *, measure: str = 
 
 def appearance_gap(summary: pd.DataFrame, measure: str = "mean_acc") -> pd.DataFrame:
     """The appearance gap: each shown row's ``measure`` on synthetic frames, Kinect-like frames and
-    Kinect-like frames with the held-out look (:data:`APPEARANCE_ARMS`, true poses), and the
-    drop from synthetic to the held-out look beside the paper's drop from its synthetic to its
-    real data (:data:`PAPER_GAP`, Mask R-CNN; empty where the paper has no such row).
+    Kinect-like frames with the held-out look at each severity (true poses), and the drops from
+    synthetic to each look beside the paper's drop from its synthetic to its real data
+    (:data:`PAPER_GAP`, Mask R-CNN; empty where the paper has no such row).
 
     Returns
     -------
     DataFrame
-        model, method, one column per arm (``measure`` and its interval), ``drop`` (synthetic minus
-        held-out look), ``paper_synthetic``, ``paper_real``, ``paper_drop``; empty when an arm is
-        missing.
+        model, method, one column per arm (``measure`` and its interval), ``drop xS`` per look
+        (synthetic minus that look), ``paper_synthetic``, ``paper_real``, ``paper_drop``; empty
+        when the clean, noisy or every held-out arm is missing.
     """
-    base = summary[(summary["drift"] == 1.0) & summary["arm"].isin(APPEARANCE_ARMS)]
-    if set(base["arm"]) != set(APPEARANCE_ARMS):
+    arms = _appearance_arms(summary["arm"])
+    base = summary[(summary["drift"] == 1.0) & summary["arm"].isin(arms)]
+    if not set(APPEARANCE_ARMS) <= set(base["arm"]) or len(arms) == len(APPEARANCE_ARMS):
         return pd.DataFrame()
     rows = []
     for model, method in _shown_rows(base):
@@ -253,10 +281,12 @@ def appearance_gap(summary: pd.DataFrame, measure: str = "mean_acc") -> pd.DataF
             continue
         g = base[(base["model"] == model) & (base["method"] == method)].set_index("arm")
         row = {"model": model, "method": method}
-        for arm in APPEARANCE_ARMS:
+        for arm in arms:
             for suffix in ("", "_lo", "_hi"):
                 row[f"{arm}{suffix}"] = float(g.loc[arm, f"{measure}{suffix}"])
-        row["drop"] = row[APPEARANCE_ARMS[0]] - row[APPEARANCE_ARMS[-1]]
+        for arm in arms[len(APPEARANCE_ARMS):]:
+            row[f"drop {arm.removeprefix('held-out appearance').removesuffix(', true poses').strip() or 'x1'}"] = (
+                row[arms[0]] - row[arm])
         paper = PAPER_GAP.get(method) if model != "ground truth" else None
         row.update(paper_synthetic=paper[0] if paper else np.nan, paper_real=paper[1] if paper else np.nan,
                    paper_drop=paper[0] - paper[1] if paper else np.nan)
@@ -265,8 +295,9 @@ def appearance_gap(summary: pd.DataFrame, measure: str = "mean_acc") -> pd.DataF
 
 
 def plot_appearance_gap(gap: pd.DataFrame, path: str | Path, *, measure: str = "mean_acc") -> Path:
-    """``measure`` from synthetic frames to the held-out look per row (95 % intervals), with the
-    paper's synthetic-to-real change of its lower view and 3D neighborhood rows beside them."""
+    """``measure`` from synthetic frames to the held-out looks per row (95 % intervals), with the
+    paper's synthetic-to-real change of its lower view and 3D neighborhood rows beside them, its
+    real end at the mildest look when there are several (the one sized like the paper's gap)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -274,17 +305,20 @@ def plot_appearance_gap(gap: pd.DataFrame, path: str | Path, *, measure: str = "
 
     from ..io import save_figure
 
-    fig, ax = plt.subplots(figsize=(8, 4.2))
-    x = np.arange(len(APPEARANCE_ARMS))
+    arms = _appearance_arms(c.removesuffix("_lo") for c in gap.columns if c.endswith("_lo"))
+    fig, ax = plt.subplots(figsize=(8.5, 4.4))
+    x = np.arange(len(arms))
+    real = len(APPEARANCE_ARMS) if len(arms) > len(APPEARANCE_ARMS) + 1 else len(arms) - 1  # the look sized like the paper's
     for _, r in gap.iterrows():
-        y = np.array([r[a] for a in APPEARANCE_ARMS])
-        err = np.vstack([y - [r[f"{a}_lo"] for a in APPEARANCE_ARMS], [r[f"{a}_hi"] for a in APPEARANCE_ARMS] - y])
+        y = np.array([r[a] for a in arms])
+        err = np.vstack([y - [r[f"{a}_lo"] for a in arms], [r[f"{a}_hi"] for a in arms] - y])
         (line,) = ax.plot(x, y, marker="o", label=f"{r['model']}: {r['method']}")
         ax.errorbar(x, y, yerr=err, fmt="none", ecolor=line.get_color(), capsize=3)
         if np.isfinite(r["paper_synthetic"]):
-            ax.plot([x[0] - 0.15, x[-1] + 0.15], [r["paper_synthetic"], r["paper_real"]], ls=":", marker="s",
+            ax.plot([x[0] - 0.15, x[real] + 0.15], [r["paper_synthetic"], r["paper_real"]], ls=":", marker="s",
                     color=line.get_color(), alpha=0.8, label=f"paper (Mask R-CNN): {r['method']}, synthetic -> real")
-    ax.set_xticks(x, ["synthetic\n(clean)", "Kinect-like\nnoise", "noise +\nheld-out look"])
+    looks = [a.removeprefix("held-out appearance").removesuffix(", true poses").strip() or "x1" for a in arms[2:]]
+    ax.set_xticks(x, ["synthetic\n(clean)", "Kinect-like\nnoise", *(f"noise +\nheld-out look {v}" for v in looks)])
     ax.set_ylabel(f"{measure.replace('_', ' ')} (mean over scenes, 95 % interval)")
     ax.set_title("The appearance gap (true poses)")
     ax.grid(alpha=0.3)

@@ -17,8 +17,10 @@ appearance shift the way the paper's networks met real images (issue 36 item 5):
   daylight) that tints every surface.
 
 Geometry and labels are untouched, so the depth and ground truth of a recording stay valid; only
-its RGB changes (:class:`HeldOutRenderer`). The families were fixed before any network was scored
-on them; docs/protocol.md ("An appearance gap") describes them.
+its RGB changes (:class:`HeldOutRenderer`). A ``severity`` below 1 blends the training look and the
+held-out one (albedos, textures, illuminant tint and irradiance), so that the size of the shift can
+be set on validation scenes, e.g. to the paper's synthetic-to-real drop. The families were fixed
+before any network was scored on them; docs/protocol.md ("An appearance gap") describes them.
 """
 
 from __future__ import annotations
@@ -29,12 +31,12 @@ from pathlib import Path
 import numpy as np
 
 from ..geometry import DEFAULT_INTRINSICS, Intrinsics
+from .materials import texture_factor
 from .render import Renderer
 from .scene import Scene
 
 __all__ = ["HELDOUT_ALBEDOS", "HELDOUT_TEXTURES", "ILLUMINANTS", "Appearance", "heldout_appearance",
-           "heldout_texture_factor", "HeldOutRenderer",
-           "write_heldout_recording"]
+           "heldout_texture_factor", "HeldOutRenderer", "write_heldout_recording"]
 
 #: albedos of the held-out materials (RGB in [0, 1]); none is in the training pool
 HELDOUT_ALBEDOS: dict[str, tuple[float, float, float]] = {
@@ -80,6 +82,10 @@ class Appearance:
     ambient : float
     illuminant : str
         Key of :data:`ILLUMINANTS`.
+    severity : float
+        How far the look goes from the training look to the held-out one, in (0, 1]: albedos,
+        textures, illuminant tint and irradiance are blended ``(1 - severity) * training +
+        severity * held-out``. ``scene.texture`` keeps the training texture kinds for the blend.
     """
 
     scene: Scene
@@ -87,9 +93,10 @@ class Appearance:
     lights: np.ndarray
     ambient: float
     illuminant: str
+    severity: float = 1.0
 
 
-def heldout_appearance(scene: Scene, seed: int) -> Appearance:
+def heldout_appearance(scene: Scene, seed: int, severity: float = 1.0) -> Appearance:
     """Give ``scene`` a held-out look (module documentation), drawn with ``seed``.
 
     Parameters
@@ -97,12 +104,23 @@ def heldout_appearance(scene: Scene, seed: int) -> Appearance:
     scene : Scene
         A rendered scene (its ``meta["lights"]`` or the renderer's default lights are used).
     seed : int
-        Same scene and seed, same look.
+        Same scene and seed, same look (the draws do not depend on ``severity``).
+    severity : float
+        In (0, 1]: 1 is the held-out look, smaller values blend it with the training look
+        (:class:`Appearance`).
 
     Returns
     -------
     Appearance
+
+    Raises
+    ------
+    ValueError
+        ``severity`` outside (0, 1].
     """
+    severity = float(severity)
+    if not 0.0 < severity <= 1.0:
+        raise ValueError(f"appearance severity must be in (0, 1], got {severity}")
     rng = np.random.default_rng([int(seed), 36005])
     tex_in = scene.texture if scene.texture is not None else np.zeros(len(scene.labels), np.uint8)
     keys = np.concatenate([np.round(scene.albedo, 4), tex_in[:, None].astype(np.float32)], axis=1)
@@ -116,7 +134,11 @@ def heldout_appearance(scene: Scene, seed: int) -> Appearance:
     illuminant = list(ILLUMINANTS)[int(rng.integers(0, len(ILLUMINANTS)))]
     tint = np.asarray(ILLUMINANTS[illuminant], np.float32)
     tint /= tint.mean()
-    albedo = np.clip(albedo_of[group] * tint, 0.0, 1.0)
+    if severity == 1.0:
+        albedo = np.clip(albedo_of[group] * tint, 0.0, 1.0)
+    else:
+        mixed = (1.0 - severity) * scene.albedo + severity * albedo_of[group]
+        albedo = np.clip(mixed * (1.0 + severity * (tint - 1.0)), 0.0, 1.0).astype(np.float32)
     lights = scene.meta.get("lights")
     if lights is None or len(lights) == 0:
         lo, hi = scene.bounds
@@ -124,8 +146,8 @@ def heldout_appearance(scene: Scene, seed: int) -> Appearance:
     lights = np.asarray(lights, np.float32).reshape(-1, 3)
     light = lights[int(rng.integers(0, len(lights)))].copy()
     light[2] -= LIGHT_DROP
-    return Appearance(replace(scene, albedo=albedo, texture=None), kinds[group].astype(np.uint8), light[None, :],
-                      HELDOUT_AMBIENT, illuminant)
+    return Appearance(replace(scene, albedo=albedo, texture=None if severity == 1.0 else scene.texture),
+                      kinds[group].astype(np.uint8), light[None, :], HELDOUT_AMBIENT, illuminant, severity)
 
 
 _TABLE = np.array([[("sine", "square", "checker").index(p), a, 2 * np.pi / per, *d, w]
@@ -162,12 +184,19 @@ def heldout_texture_factor(points: np.ndarray, kinds: np.ndarray) -> np.ndarray:
 class HeldOutRenderer(Renderer):
     """:class:`semmatch.sim.render.Renderer` of an :class:`Appearance`: its lights and ambient,
     and the held-out textures in place of the training ones (the shading is the parent's:
-    albedo x interpolated irradiance x texture, through the same display curve)."""
+    albedo x interpolated irradiance x texture, through the same display curve). Below severity
+    1 the irradiance of the training lighting (the scene's lights, ambient 0.3) and the training
+    textures are blended in."""
 
     def __init__(self, appearance: Appearance, intrinsics: Intrinsics = DEFAULT_INTRINSICS, **kwargs) -> None:
+        s = float(appearance.severity)
         super().__init__(appearance.scene, intrinsics, lights=appearance.lights, ambient=appearance.ambient,
-                         texture=False, **kwargs)
+                         texture=s < 1.0, **kwargs)
         self._heldout_texture = np.asarray(appearance.texture, np.uint8)
+        self._severity = s
+        if s < 1.0:
+            training = Renderer(appearance.scene, intrinsics, texture=False, **kwargs)
+            self._irradiance = s * self._irradiance + (1.0 - s) * training._irradiance
 
     def _shade(self, rays, t, prim, uv) -> np.ndarray:
         """RGB of hit points: the parent's shading times the held-out texture (misses: black)."""
@@ -175,13 +204,18 @@ class HeldOutRenderer(Renderer):
         corners = self._irradiance[tri + self._side[tri]]
         u, v = uv[:, 0], uv[:, 1]
         shade = corners[:, 0] + (corners[:, 1] - corners[:, 0]) * u + (corners[:, 2] - corners[:, 0]) * v
-        shade *= heldout_texture_factor(rays[:, :3] + rays[:, 3:] * t[:, None], self._heldout_texture[tri])
+        p = rays[:, :3] + rays[:, 3:] * t[:, None]
+        held = heldout_texture_factor(p, self._heldout_texture[tri])
+        if self._severity < 1.0:
+            train = texture_factor(p, self.scene.texture[tri]) if self.use_texture else np.ones_like(held)
+            held = 1.0 + (1.0 - self._severity) * (train - 1.0) + self._severity * (held - 1.0)
+        shade *= held
         col = self._albedo_ext[prim] * shade[:, None]
         np.minimum(col, 4095.0, out=col)
         return self._lut[col.astype(np.int16)]
 
 
-def write_heldout_recording(noisy: str | Path, out: str | Path, *, progress: bool = False) -> Path:
+def write_heldout_recording(noisy: str | Path, out: str | Path, *, severity: float = 1.0, progress: bool = False) -> Path:
     """A noisy recording again, its RGB rendered with the scene's held-out appearance.
 
     The scene is regenerated from the recording's ``meta.json`` (procedural ``kind`` and
@@ -198,6 +232,8 @@ def write_heldout_recording(noisy: str | Path, out: str | Path, *, progress: boo
         A noisy recording of a procedural scene (the simulator's ``upper_noisy``/``lower_noisy``).
     out : path
         The new recording's folder; it must not exist.
+    severity : float
+        :func:`heldout_appearance`'s blend of the training and held-out looks, in (0, 1].
     progress : bool
 
     Returns
@@ -244,7 +280,7 @@ def write_heldout_recording(noisy: str | Path, out: str | Path, *, progress: boo
     cfg = NoiseConfig(**{k: v for k, v in noise.items() if k in {f.name for f in fields(NoiseConfig)}})
     rng = np.random.default_rng([int(cfg.seed), 36005])
     gains = exposure_gains(len(true), cfg, rng)
-    appearance = heldout_appearance(scene, int(sm["seed"]))
+    appearance = heldout_appearance(scene, int(sm["seed"]), severity)
     renderer = HeldOutRenderer(appearance, read_intrinsics(noisy / "intrinsics.json"))
     names = sorted(p.name for p in (noisy / "rgb").iterdir())
     if len(names) != len(true):
@@ -257,7 +293,8 @@ def write_heldout_recording(noisy: str | Path, out: str | Path, *, progress: boo
             rgb = renderer.render(true[i]).rgb
             write_image(tmp / "rgb" / name, noisy_rgb(rgb, cfg, rng, float(gains[i])))
         meta["appearance"] = {"family": "held-out (semmatch.sim.appearance)", "seed": int(sm["seed"]),
-                              "illuminant": appearance.illuminant, "from": noisy.name}
+                              "illuminant": appearance.illuminant, "severity": appearance.severity,
+                              "from": noisy.name}
         (tmp / "meta.json").write_text(json.dumps(meta, indent=2) + "\n")
         os.replace(tmp, out)
     except BaseException:
