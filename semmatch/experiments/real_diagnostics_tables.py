@@ -10,6 +10,7 @@ errors).
 from __future__ import annotations
 
 import json
+import textwrap
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -218,7 +219,7 @@ def plot_diagnostics(summary: pd.DataFrame, path: str | Path, *, measure: str = 
 
     rows = _shown_rows(summary)
     arms = [a for a in (arms or dict.fromkeys(summary["arm"])) if (summary["arm"] == a).any()]
-    fig, axes = plt.subplots(1, 3, figsize=(15, 4.2), gridspec_kw=dict(width_ratios=[1.5, 1, 1]))
+    fig, axes = plt.subplots(1, 3, figsize=(16, 5.0), gridspec_kw=dict(width_ratios=[2, 1, 1]))
     width = 0.8 / max(len(rows), 1)
     base = summary[summary["drift"] == 1.0]
     for i, (model, method) in enumerate(rows):
@@ -227,7 +228,8 @@ def plot_diagnostics(summary: pd.DataFrame, path: str | Path, *, measure: str = 
         y = g[measure].to_numpy(np.float64)
         err = np.vstack([y - g[f"{measure}_lo"].to_numpy(np.float64), g[f"{measure}_hi"].to_numpy(np.float64) - y])
         axes[0].bar(x, y, width, yerr=err, capsize=2, label=f"{model}: {method}")
-    axes[0].set_xticks(np.arange(len(arms)), [a.replace(", ", ",\n") for a in arms], fontsize="small")
+    axes[0].set_xticks(np.arange(len(arms)), [textwrap.fill(a, 18) for a in arms], fontsize="x-small", rotation=35,
+                       ha="right", rotation_mode="anchor")
     axes[0].set_ylabel(f"{measure.replace('_', ' ')} (mean over scenes, 95 % interval)")
     axes[0].set_title("arms (simulator's drift)")
     lo = np.nanmin(base[f"{measure}_lo"].to_numpy(np.float64)) if len(base) else 0.0
