@@ -198,7 +198,10 @@ def test_a_run_whose_workers_all_vanish_fails_after_its_timeout(cluster, tmp_pat
     out.mkdir()
     watcher = _when_files(out, 1, lambda: [_kill(cluster["procs"][w]) for w in WORKERS])
     t = time.monotonic()
-    with pytest.raises(engine.ClusterError, match=r"has had no worker for 2 s; \d+ of 12 tasks unfinished"):
+    # the no-worker timeout, or, on a loaded machine where the scheduler saw the tasks' workers die
+    # one by one before the last went, its KilledWorker verdict: either way a clear error, no hang
+    with pytest.raises(engine.ClusterError, match=r"has had no worker for 2 s; \d+ of 12 tasks unfinished"
+                                                  r"|was on workers that died under it"):
         engine.map_tasks(_write, [(str(out), i, 0.5) for i in range(12)], scheduler=cluster["address"],
                          progress=False, timeout=2)
     assert time.monotonic() - t < 30  # not a hang
