@@ -169,4 +169,6 @@ def test_the_in_home_studys_seeds_are_refused(tmp_path):
         confirm.run_confirm([seed], out_root=tmp_path)
     with pytest.raises(ValueError, match=r"refusing confirmatory seeds \[8310\]: they are held-out adaptation scenes"):
         confirm.run_confirm([9999, 8310], out_root=tmp_path)
+    with pytest.raises(ValueError, match=r"refusing confirmatory seeds \[8301\]: they are held-out adaptation scenes"):
+        confirm.write_confirm_params([8301], tmp_path / "params.yaml")
     assert not any(tmp_path.iterdir())

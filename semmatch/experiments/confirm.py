@@ -109,6 +109,7 @@ def write_confirm_params(seeds: Sequence[int], out: str | os.PathLike, *, base_p
         raise ValueError(f"{params_file}: profile {base_profile!r} does not exist; valid profiles: "
                          f"{', '.join(sorted(profiles))}")
     seeds = check_confirm_seeds(seeds, profiles, where=str(params_file))
+    _refuse_study_seeds(seeds)
     profile = copy.deepcopy(profiles[base_profile])
     profile["common"]["eval_seeds"] = seeds
     check_protocol(profile["common"], where=f"confirmatory run on seeds {seeds}")
