@@ -20,7 +20,10 @@ time, on the same scenes, paired per scene:
   with their RGB rendered in a look no training view shows (:mod:`semmatch.sim.appearance`:
   held-out materials, textures and lighting; depth, labels and priors unchanged), at the true
   poses and through the whole chain: the appearance gap the paper's networks met on real images
-  (issue 36 item 5). The recordings are written once per scene under
+  (issue 36 item 5). The same two arms run with that look blended into the training look at
+  :data:`APPEARANCE_SEVERITY` (``x0.35``), the severity at which the robot's network loses what
+  the paper's lost on real images, chosen on the validation scenes
+  (:func:`appearance_severity_on_validation`). The recordings are written once per scene under
   ``<data_root>/real_diagnostics/appearance/`` (:func:`heldout_recording`).
 
 Arms with estimated poses run in ``draws`` draws: draw ``d`` regenerates each recording's prior
@@ -62,8 +65,8 @@ import pandas as pd
 from .layout import GT, Layout
 
 __all__ = ["Arm", "ARMS", "FRAMES", "APPEARANCE_SEVERITY", "frames_kind", "heldout_recording", "PAPER_KEPT",
-           "appearance_severity_on_validation", "diagnostic_arms", "drifted_prior", "predict_scene", "run_arm", "real_like_diagnostics",
-           "main"]
+           "appearance_severity_on_validation", "diagnostic_arms", "drifted_prior", "predict_scene", "run_arm",
+           "real_like_diagnostics", "main"]
 
 
 @dataclass(frozen=True)
@@ -211,7 +214,9 @@ def heldout_recording(data_root: str | Path, sid: str, recording: str, severity:
     """The scene's noisy ``recording`` (``upper`` or ``lower``) with the held-out appearance at
     ``severity`` (:func:`semmatch.sim.appearance.write_heldout_recording`), written on first use
     under ``<data_root>/real_diagnostics/appearance/<scene>-<inputs>/`` (``<recording>`` at
-    severity 1, else ``<recording>@<severity>``)."""
+    severity 1, else ``<recording>@<severity>``). The folder, the labels predicted on it and the
+    arms' cached results do not record the version of :mod:`semmatch.sim.appearance`: after a
+    change to the look, remove ``real_diagnostics/appearance`` and the ``heldout*`` caches."""
     from ..sim.appearance import write_heldout_recording
 
     layout = Layout(data_root)
