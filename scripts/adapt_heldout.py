@@ -37,17 +37,12 @@ def _figures(args, p) -> Path:
     return args.figures or Path(f"{p['figures_dir']}_adapt_heldout")
 
 
-def _quality(robot, sources, where: str) -> tuple[pd.DataFrame, pd.DataFrame]:
+def _quality(robot, quality: pd.DataFrame, sources, where: str) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """``robot_views``' coverage and agreement per source, and the per-class table, tagged ``where``."""
     from semmatch.experiments.adapt_studies import label_quality_by_class
 
-    gt = robot.views.labels
-    rows = []
-    for s in sources:
-        lab = robot.pseudo[s]
-        on = lab > 0
-        rows.append({"scenes": where, "source": s, "coverage": robot.coverage[s],
-                     "agreement": float((lab[on] == gt[on]).mean()) if on.any() else float("nan")})
-    return pd.DataFrame(rows), label_quality_by_class(robot, sources).assign(scenes=where)
+    return (quality.assign(scenes=where)[["scenes", "source", "coverage", "agreement"]],
+            label_quality_by_class(robot, sources).assign(scenes=where))
 
 
 def prepare(args, p) -> None:
@@ -59,16 +54,16 @@ def prepare(args, p) -> None:
 
     check_heldout_seeds(HELDOUT_ADAPT_SEEDS, load_model(Layout(p["data_root"]).model(p["network"])).info.get("train_config") or {})
     t = time.perf_counter()
-    robot, _ = robot_views(p["data_root"], p["network"], p["sources"], kinds=p["kinds"], seeds=HELDOUT_ADAPT_SEEDS,
+    robot, quality = robot_views(p["data_root"], p["network"], p["sources"], kinds=p["kinds"], seeds=HELDOUT_ADAPT_SEEDS,
                            n_frames=p["n_frames"], voxel_size=p["voxel_size"], fused_base=p["fused_base"], seed=p["seed"])
     args.out.mkdir(parents=True, exist_ok=True)
     tmp = args.out / "robot_views.pkl.tmp"
     tmp.write_bytes(pickle.dumps(robot))
     tmp.rename(args.out / "robot_views.pkl")
-    summary, per_class = _quality(robot, p["sources"], "held-out")
+    summary, per_class = _quality(robot, quality, p["sources"], "held-out")
     if args.in_sample_views.is_file():
-        inside, _ = pickle.loads(args.in_sample_views.read_bytes())  # our own scripts/adapt_seeds.py prepare
-        s2, c2 = _quality(inside, p["sources"], "in-sample")
+        inside, inside_quality = pickle.loads(args.in_sample_views.read_bytes())  # our own scripts/adapt_seeds.py prepare
+        s2, c2 = _quality(inside, inside_quality, p["sources"], "in-sample")
         summary, per_class = pd.concat([s2, summary], ignore_index=True), pd.concat([c2, per_class], ignore_index=True)
     else:
         print(f"{args.in_sample_views} absent: label quality of the held-out scenes only", flush=True)

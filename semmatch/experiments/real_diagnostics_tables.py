@@ -10,6 +10,7 @@ errors).
 from __future__ import annotations
 
 import json
+import re
 import textwrap
 import time
 from collections.abc import Sequence
@@ -43,29 +44,28 @@ DIFFERENCES = (
 APPEARANCE_ARMS = ("clean, true poses", "noisy, true poses")
 
 
+def _look(arm) -> float | None:
+    """The severity of a held-out-look arm at true poses (``held-out appearance xS, true poses``; no
+    ``xS``: 1), None for any other arm."""
+    m = re.fullmatch(r"held-out appearance(?: x([0-9.]+))?, true poses", str(arm))
+    return None if m is None else float(m.group(1) or 1.0)
+
+
 def _differences(arms) -> list[tuple[str, str, str]]:
     """:data:`DIFFERENCES` and, per held-out look at another severity among ``arms``, its cost at
     true poses and in the chain."""
-    import re
-
     out = list(DIFFERENCES)
     for a in arms:
-        m = re.fullmatch(r"held-out appearance x([0-9.]+), true poses", str(a))
-        if m:
-            out.append((f"held-out appearance x{m.group(1)} (true poses)", a, "noisy, true poses"))
-            out.append((f"held-out appearance x{m.group(1)} (chain)", f"chain, held-out appearance x{m.group(1)}", "chain"))
+        if _look(a) not in (None, 1.0):
+            tag = a.removeprefix("held-out appearance ").removesuffix(", true poses")
+            out.append((f"held-out appearance {tag} (true poses)", a, "noisy, true poses"))
+            out.append((f"held-out appearance {tag} (chain)", f"chain, held-out appearance {tag}", "chain"))
     return out
 
 
 def _appearance_arms(arms) -> list[str]:
     """:data:`APPEARANCE_ARMS` and the held-out-look arms at true poses among ``arms``, by severity."""
-    import re
-
-    held = {}
-    for a in dict.fromkeys(arms):
-        m = re.fullmatch(r"held-out appearance(?: x([0-9.]+))?, true poses", str(a))
-        if m:
-            held[a] = float(m.group(1) or 1.0)
+    held = {a: _look(a) for a in dict.fromkeys(arms) if _look(a) is not None}
     return [*APPEARANCE_ARMS, *sorted(held, key=held.get)]
 
 #: the paper's Mask R-CNN rows (Mean Acc.): synthetic (Table 2) and real (Table 3)
