@@ -133,26 +133,55 @@ def test_where_a_confirmatory_run_takes_its_adapted_networks(tmp_path):
 
 
 def test_the_in_home_study_runs_in_the_confirm_homes(tmp_path, monkeypatch):
-    """``--in-home``: the plan's study in the homes of the run's seeds (its kinds x seeds), after the notebooks."""
+    """``--in-home``: the plan's study in the homes of the run's first seeds (its kinds x the adaptation
+    plan's ``in_home_max_seeds`` seeds), after the notebooks and the verdicts."""
+    import semmatch.experiments.adapt_claims as adapt_claims
     import semmatch.experiments.claims as claims
     import semmatch.experiments.in_home as in_home
 
     order, seen = [], {}
     monkeypatch.setattr(confirm, "run_notebook", lambda nb, profile, **kw: order.append(nb))
     monkeypatch.setattr(claims, "judge_figures", lambda figures: order.append("verdicts"))
+    monkeypatch.setattr(adapt_claims, "judge_adaptation", lambda figures: order.append("adapt verdicts"))
 
     def fake_study(data, figures, **kw):
         order.append("in_home")
         seen.update(kw, data=Path(data), figures=Path(figures))
 
     monkeypatch.setattr(in_home, "run_in_home_study", fake_study)
-    record = confirm.run_confirm([9911, 9912], name="inhome", out_root=tmp_path, in_home=True)
+    record = confirm.run_confirm([9911, 9912, 9913, 9914], name="inhome", out_root=tmp_path, in_home=True)
     plan = in_home.load_in_home_plan()
-    assert order[-2:] == ["verdicts", "in_home"] and "01_simulate" in order
-    assert seen["homes"] == [(k, s) for s in (9911, 9912) for k in plan.kinds]
+    assert order[-3:] == ["verdicts", "adapt verdicts", "in_home"] and "01_simulate" in order
+    assert confirm.ADAPT_NOTEBOOK in order  # the shipped adapted networks are scored
+    assert adapt_claims.load_adapt_plan().in_home_max_seeds == 3
+    assert seen["homes"] == [(k, s) for s in (9911, 9912, 9913) for k in plan.kinds]
     assert seen["data"] == tmp_path / "data" / "confirm" / "inhome" / "in_home"
     assert seen["figures"] == tmp_path / "figures" / "confirm" / "inhome" / "in_home"
     assert record["in_home"] is True and "in_home" in record["wall_seconds"]
+
+
+def test_notebooks_are_added_to_an_existing_run_only(tmp_path, monkeypatch):
+    """``--notebooks``: only those notebooks, in a run of the same seeds; its first record stays."""
+    import semmatch.experiments.adapt_claims as adapt_claims
+    import semmatch.experiments.claims as claims
+
+    order = []
+    monkeypatch.setattr(confirm, "run_notebook", lambda nb, profile, **kw: order.append(nb))
+    monkeypatch.setattr(claims, "judge_figures", lambda figures: order.append("verdicts"))
+    monkeypatch.setattr(adapt_claims, "judge_adaptation", lambda figures: order.append("adapt verdicts"))
+    with pytest.raises(ValueError, match="adds to an existing confirmatory run, but .*confirm.json does not exist"):
+        confirm.run_confirm([9921], name="add", out_root=tmp_path, notebooks=[confirm.ADAPT_NOTEBOOK])
+    first = confirm.run_confirm([9921], name="add", out_root=tmp_path)
+    order.clear()
+    rec = confirm.run_confirm([9921], name="add", out_root=tmp_path, notebooks=[confirm.ADAPT_NOTEBOOK])
+    assert order == [confirm.ADAPT_NOTEBOOK, "adapt verdicts"]  # the paper's claims are not judged again
+    assert rec["wall_seconds"] == first["wall_seconds"] and rec["started"] == first["started"]
+    assert [a["notebooks"] for a in rec["additions"]] == [[confirm.ADAPT_NOTEBOOK]]
+    assert json.loads((tmp_path / "figures" / "confirm" / "add" / "confirm.json").read_text()) == rec
+    with pytest.raises(ValueError, match=r"that run used seeds \[9921\], not \[9922\]"):
+        confirm.run_confirm([9922], name="add", out_root=tmp_path, notebooks=[confirm.ADAPT_NOTEBOOK])
+    with pytest.raises(ValueError, match="unknown notebook"):
+        confirm.run_confirm([9921], name="add", out_root=tmp_path, notebooks=["99_nothing"])
 
 
 def test_the_in_home_study_needs_its_plans_profile(tmp_path):

@@ -14,8 +14,12 @@ the panoptic clustering radius of notebook 10). It writes
   SHA-256, code version, wall time per stage),
 * ``reports/confirm/<name>/`` the executed notebooks.
 
-Stage 09 (robot-view adaptation) is skipped: it fine-tunes networks, and no adapted networks are
-shipped yet. Seeds used for training, validation or development are refused
+Stage 09 (robot-view adaptation) scores the adapted networks shipped in
+``models/<profile>/adapted/`` (it is skipped where none are shipped: a confirmatory run trains
+nothing), and the adaptation claims of ``adapt_plan.yaml`` are judged on its tables
+(:func:`semmatch.experiments.adapt_claims.judge_adaptation`, ``adapt_verdicts.md``).
+``--notebooks`` runs some notebooks in an existing run (e.g. stage 09 once adapted networks are
+shipped), ``--in-home`` adds the in-home adaptation study. Seeds used for training, validation or development are refused
 (:func:`semmatch.experiments.protocol.check_confirm_seeds`). ``ship`` writes a shipped folder
 from trained checkpoints (:func:`semmatch.segment.shipping.ship_networks`).
 """
@@ -150,7 +154,8 @@ def unshipped_networks(params_file: str | os.PathLike, profile: str, data_root: 
 def run_confirm(seeds: Sequence[int], *, name: str | None = None, base_profile: str = "full",
                 allow_training: bool = False, params_file: str | os.PathLike = ROOT / "params.yaml",
                 out_root: str | os.PathLike | None = None, log_output: bool = False,
-                scheduler: str | None = None, in_home: bool = False) -> dict:
+                scheduler: str | None = None, in_home: bool = False,
+                notebooks: Sequence[str] | None = None) -> dict:
     """Run every evaluation study of ``base_profile`` on the scenes of ``seeds``.
 
     Parameters
@@ -175,7 +180,12 @@ def run_confirm(seeds: Sequence[int], *, name: str | None = None, base_profile: 
         Also run the in-home adaptation study (:func:`semmatch.experiments.in_home.run_in_home_study`,
         the committed ``in_home_plan.yaml``) in the homes of the run's scenes (its kinds x ``seeds``),
         with the shipped networks and the shipped across-homes adaptation; results in
-        ``figures/confirm/<name>/in_home/``. Only with the plan's profile (``full``).
+        ``figures/confirm/<name>/in_home/``. Only with the plan's profile (``full``). The homes
+        are those of the first ``in_home_max_seeds`` seeds (``adapt_plan.yaml``: 3, for the budget).
+    notebooks : sequence of str, optional
+        Run only these notebooks in an existing run of the same seeds and name (its data and
+        ``confirm.json`` must be there; e.g. ``09_adapt_robot_view`` once adapted networks are
+        shipped). The run's record keeps its earlier stages and lists this addition.
 
     Returns
     -------
@@ -213,6 +223,7 @@ def run_confirm(seeds: Sequence[int], *, name: str | None = None, base_profile: 
             + "; ".join(f"{n}: {why}" for n, why in missing.items())
             + f". Restore {shipped_dir}/ from git, or pass --allow-training to train them (then it does not "
               f"confirm the shipped networks)")
+    earlier = _earlier_record(where["figures_dir"], seeds, notebooks)
     for d in where.values():
         d.mkdir(parents=True, exist_ok=True)
     print(f"[confirm] {name}: profile {base_profile}, seeds {seeds} x {len(data['profiles'][base_profile]['common']['kinds'])} "
@@ -223,6 +234,8 @@ def run_confirm(seeds: Sequence[int], *, name: str | None = None, base_profile: 
     adapted_from = adapted_networks_source(ROOT / shipped_dir)
     skipped = {} if adapted_from else dict(SKIPPED)
     for nb in NOTEBOOKS:
+        if notebooks is not None and nb not in notebooks:
+            continue
         if nb in skipped:
             print(f"[confirm] {nb}: {skipped[nb]}", file=sys.stderr)
             continue
@@ -234,17 +247,18 @@ def run_confirm(seeds: Sequence[int], *, name: str | None = None, base_profile: 
         walls[nb] = round(time.perf_counter() - t, 1)
     # every claim of the analysis plan judged on this run's per-scene tables (verdicts.csv/.md)
     from ..segment.shipping import file_sha256
-    from .claims import judge_figures
+    from .adapt_claims import load_adapt_plan
 
     t = time.perf_counter()
-    judge_figures(where["figures_dir"])
+    _judge(where["figures_dir"], [nb for nb in NOTEBOOKS if nb not in skipped and (notebooks is None or nb in notebooks)])
     walls["verdicts"] = round(time.perf_counter() - t, 1)
     if in_home_plan is not None:
         from .in_home import run_in_home_study
 
         t = time.perf_counter()
-        homes = [(kind, s) for s in seeds for kind in in_home_plan.kinds]
-        print(f"[confirm] in-home study: {len(homes)} homes (seeds {seeds} x {len(in_home_plan.kinds)} kinds)",
+        home_seeds = list(seeds)[:load_adapt_plan().in_home_max_seeds]
+        homes = [(kind, s) for s in home_seeds for kind in in_home_plan.kinds]
+        print(f"[confirm] in-home study: {len(homes)} homes (seeds {home_seeds} x {len(in_home_plan.kinds)} kinds)",
               file=sys.stderr)
         jobs = int((data["profiles"][base_profile].get("common") or {}).get("jobs", 1))
         run_in_home_study(data_root / "in_home", where["figures_dir"] / "in_home", homes=homes, jobs=jobs,
@@ -261,9 +275,52 @@ def run_confirm(seeds: Sequence[int], *, name: str | None = None, base_profile: 
         "skipped": skipped, "in_home": in_home_plan is not None, "code_version": code_version(), "started": started,
         "wall_seconds": walls, "total_seconds": round(time.perf_counter() - t0, 1),
     }
+    if earlier is not None:
+        record = _with_addition(earlier, record, notebooks)
     atomic_write_text(where["figures_dir"] / "confirm.json", json.dumps(record, indent=2) + "\n")
     print(f"[confirm] {name}: done in {record['total_seconds'] / 60:.1f} min -> {dirs['figures_dir']}", file=sys.stderr)
     return record
+
+
+def _judge(figures_dir: Path, ran: Sequence[str]) -> None:
+    """The analysis plan's verdicts on the tables the notebooks that ``ran`` wrote: the paper's
+    claims (unless only stage 09 ran) and the adaptation claims (when stage 09 ran)."""
+    from .adapt_claims import judge_adaptation
+    from .claims import judge_figures
+
+    if set(ran) - {ADAPT_NOTEBOOK}:
+        judge_figures(figures_dir)
+    if ADAPT_NOTEBOOK in ran:
+        judge_adaptation(figures_dir)  # the adaptation claims (adapt_plan.yaml)
+
+
+def _with_addition(earlier: dict, record: dict, notebooks: Sequence[str] | None) -> dict:
+    """An existing run's record with this run (``notebooks`` added to it) listed under ``additions``;
+    the first record's stages, times and code version stay."""
+    addition = {k: record[k] for k in ("code_version", "started", "wall_seconds", "total_seconds",
+                                       "adapted_networks_from", "in_home")}
+    return {**earlier, "networks": record["networks"], "adapted_networks_from": record["adapted_networks_from"],
+            "skipped": {k: v for k, v in earlier.get("skipped", {}).items() if k not in (notebooks or ())},
+            "in_home": earlier.get("in_home", False) or record["in_home"],
+            "additions": [*earlier.get("additions", []), {"notebooks": list(notebooks or ()), **addition}]}
+
+
+def _earlier_record(figures_dir: Path, seeds: Sequence[int], notebooks: Sequence[str] | None) -> dict | None:
+    """The existing run's record that ``notebooks`` add to (None without ``notebooks``); ValueError
+    when there is no such run or it was made on other seeds, or a notebook name is unknown."""
+    if notebooks is None:
+        return None
+    unknown = sorted(set(notebooks) - set(NOTEBOOKS))
+    if unknown:
+        raise ValueError(f"--notebooks: unknown notebook(s) {unknown}; valid: {', '.join(NOTEBOOKS)}")
+    rec = figures_dir / "confirm.json"
+    if not rec.is_file():
+        raise ValueError(f"--notebooks adds to an existing confirmatory run, but {rec} does not exist; "
+                         f"run make confirm without --notebooks first")
+    earlier = json.loads(rec.read_text())
+    if sorted(int(s) for s in earlier.get("seeds", [])) != sorted(seeds):
+        raise ValueError(f"{rec}: that run used seeds {earlier.get('seeds')}, not {list(seeds)}")
+    return earlier
 
 
 def _refuse_study_seeds(seeds: Sequence[int]) -> None:
@@ -311,12 +368,15 @@ def add_confirm_parser(sub) -> None:
     c.add_argument("--scheduler", help="Dask scheduler address for the per-scene tasks")
     c.add_argument("--in-home", action="store_true",
                    help="also run the in-home adaptation study in the run's homes (docs/adapt.md)")
+    c.add_argument("--notebooks", nargs="+", metavar="NOTEBOOK",
+                   help="run only these notebooks in an existing run of the same seeds (e.g. 09_adapt_robot_view)")
     c.set_defaults(handler=_confirm_main)
 
 
 def _confirm_main(args) -> int:
     run_confirm(args.seeds, name=args.name, base_profile=args.base_profile, allow_training=args.allow_training,
-                params_file=args.params, log_output=not args.quiet, scheduler=args.scheduler, in_home=args.in_home)
+                params_file=args.params, log_output=not args.quiet, scheduler=args.scheduler, in_home=args.in_home,
+                notebooks=args.notebooks)
     return 0
 
 

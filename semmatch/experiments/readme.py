@@ -42,6 +42,8 @@ _SECTIONS = (
     ("adapt_height.png", "adapt_gap.md", "**The robot learns (the paper's future work, [adapt.md](adapt.md)).** The compact network fine-tuned on the robot's frames of training scenes with labels from each of the profile's sources (the full profile: `3d-neighborhood` transfer, self-training, ground truth as the ceiling; `large`: every transfer method and `fused` too), scored on the evaluation scenes' height sweep: mIoU at 0.2 m and 1.6 m, the gain at 0.2 m and the change at 1.6 m against the unadapted network (paired, 95% intervals) and the share of its viewpoint gap closed."),
     (None, "table2_adapted.md", "The adapted networks' own lower-view maps as Table 2 rows, beside the unadapted network (`lower`), transfer from the person's map and `fused`:"),
     (None, "table2_adapted_vs_transfer.md", "Does the adapted robot beat transfer on its own? Each adapted network's own map against the unadapted network, transfer (`3d-neighborhood`) and `fused`: paired per-scene differences of Mean Acc. (95% intervals):"),
+    (None, "adapt_verdicts.md", "**The adaptation claims**, judged by their plan ([analysis_plan.md](analysis_plan.md#the-adaptation-claims), `semmatch/experiments/adapt_plan.yaml`): paired per scene, 95 % t intervals, the `beats` / `similar` rules with the measure's smallest effect of interest; the share of the gap closed by its one-sided 95 % bounds against 60 %:"),
+    ("in_home/in_home.png", "in_home/in_home_comparisons.md", "**In-home adaptation** ([adapt.md](adapt.md#the-in-home-study)): the robot adapts on its first tour of a home, with labels transferred from the person's map of that home, and is scored on a second tour; paired per home, the in-home plan's comparisons (Holm over the four, per measure):"),
     ("table_panoptic.png", "table_panoptic.md", "**Panoptic transfer (the paper's future work, [panoptic.md](panoptic.md)).** Panoptic quality of the robot's map (PQ = SQ x RQ on 5 cm voxels; thing classes, stuff, all) per transfer method and upper-map source (`oracle`: ground-truth classes and instances; `gt+clustering`: ground-truth classes, instances by 3D clustering; a network: its classes, clustered instances): mean [95% interval] over the evaluation scenes. The clustering radius was chosen on the validation scenes."),
     ("fig_panoptic.png", None, "Instances in the robot's map of one evaluation scene (one colour per instance, stuff in its class colour)."),
     ("training_curves.png", "segmentation_validation.md", "Segmentation networks: training curves and validation at human height (validation scenes; the best validation checkpoint is kept)."),
@@ -269,6 +271,10 @@ def headline_markdown(figures_dir: str | Path, readme_dir: str | Path, results_d
                      f"of the paper's own differences lie inside our intervals (from `{_shown(figures_dir)}/`; "
                      "every comparison: `findings_all.md` there).\n")
         parts.append((figures_dir / "verdicts.md").read_text().strip() + "\n")
+    if (figures_dir / "adapt_verdicts.md").is_file():
+        parts.append("**The adaptation claims** (the robot fine-tuned on labels transferred from the person's map; "
+                     "their plan: `semmatch/experiments/adapt_plan.yaml`):\n")
+        parts.append((figures_dir / "adapt_verdicts.md").read_text().strip() + "\n")
     if not parts:
         parts.append(f"_No results yet: run `make repro` to fill `{_shown(figures_dir)}/`._\n")
     parts.append(f"All tables and figures: [{_rel(Path(results_doc).resolve(), readme_dir)}]"
@@ -302,8 +308,10 @@ def update_readme(readme: str | Path, figures_dir: str | Path, *, results_doc: s
         The generated results document (default ``docs/results.md`` beside the README).
     judge : bool, optional
         First judge the plan's claims on the folder's per-scene tables
-        (:func:`semmatch.experiments.claims.judge_figures`, writing ``verdicts.md`` there);
-        skipped when the folder has none.
+        (:func:`semmatch.experiments.claims.judge_figures`, writing ``verdicts.md`` there) and the
+        adaptation claims on notebook 09's tables
+        (:func:`semmatch.experiments.adapt_claims.judge_adaptation`, ``adapt_verdicts.md``); each
+        skipped when the folder has no tables for it.
     confirmatory_dir : path, optional
         A confirmatory run's figures folder (:func:`confirmatory_run`): the README's headline and
         ``docs/results_confirmatory.md`` come from it as ``make confirm`` left it (its verdicts
@@ -317,12 +325,14 @@ def update_readme(readme: str | Path, figures_dir: str | Path, *, results_doc: s
     readme, figures_dir = Path(readme), Path(figures_dir)
     results_doc = readme.parent / "docs" / "results.md" if results_doc is None else Path(results_doc)
     if judge:  # a confirmatory run was judged once, by make confirm: its record is not rewritten
+        from .adapt_claims import judge_adaptation
         from .claims import judge_figures
 
-        try:
-            judge_figures(figures_dir)
-        except FileNotFoundError:
-            pass  # no per-scene tables yet: no verdicts
+        for judge_run in (judge_figures, judge_adaptation):
+            try:
+                judge_run(figures_dir)
+            except FileNotFoundError:
+                pass  # no per-scene tables yet: no verdicts
     note = "<!-- Generated by `python -m semmatch.experiments readme` (run by `make repro`): do not edit. -->\n\n"
     docs = {results_doc: note + results_markdown(figures_dir, results_doc.parent).replace("## Results", "# Results", 1)}
     if confirmatory_dir is not None:
