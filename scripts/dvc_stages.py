@@ -94,8 +94,9 @@ stages = {
             f"profiles.{P}.adapt_robot_view"],
     outs=[f"data/{P}/adapted"],
     figs=[*tbl("adapt_label_quality", "validation_adapt_recipe", "adapt_height_per_scene", "adapt_height", "adapt_gap",
-               "adapt_gap_bounds", "table2_adapted_per_scene", "table2_adapted", "table2_adapted_vs_transfer"),
-          "adapt_height.png", "adapt_change_high.png"]),
+               "adapt_gap_bounds", "table2_adapted_per_scene", "table2_adapted", "table2_adapted_vs_transfer",
+               "adapt_claims"),
+          "adapt_verdicts.md", "adapt_height.png", "adapt_change_high.png"]),
  "panoptic": dict(
     nb="10_panoptic", deps=[f"data/{P}/scenes", f"data/{P}/upper", f"data/{P}/lower_maps"],
     params=["profile", *common("methods", "voxel_size", "eval_voxel_size"), f"profiles.{P}.panoptic"],
@@ -134,7 +135,8 @@ def with_overrides(params):
 
 
 #: data files a module reads at run time: a stage that runs the module depends on them too
-MODULE_DATA = {"semmatch/experiments/analysis_plan.py": ["semmatch/experiments/analysis_plan.yaml"]}
+MODULE_DATA = {"semmatch/experiments/analysis_plan.py": ["semmatch/experiments/analysis_plan.yaml"],
+               "semmatch/experiments/adapt_claims.py": ["semmatch/experiments/adapt_plan.yaml"]}
 
 out = {"stages": {}}
 for name, st in stages.items():

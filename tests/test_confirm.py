@@ -142,7 +142,6 @@ def test_the_in_home_study_runs_in_the_confirm_homes(tmp_path, monkeypatch):
     order, seen = [], {}
     monkeypatch.setattr(confirm, "run_notebook", lambda nb, profile, **kw: order.append(nb))
     monkeypatch.setattr(claims, "judge_figures", lambda figures: order.append("verdicts"))
-    monkeypatch.setattr(adapt_claims, "judge_adaptation", lambda figures: order.append("adapt verdicts"))
 
     def fake_study(data, figures, **kw):
         order.append("in_home")
@@ -151,7 +150,7 @@ def test_the_in_home_study_runs_in_the_confirm_homes(tmp_path, monkeypatch):
     monkeypatch.setattr(in_home, "run_in_home_study", fake_study)
     record = confirm.run_confirm([9911, 9912, 9913, 9914], name="inhome", out_root=tmp_path, in_home=True)
     plan = in_home.load_in_home_plan()
-    assert order[-3:] == ["verdicts", "adapt verdicts", "in_home"] and "01_simulate" in order
+    assert order[-2:] == ["verdicts", "in_home"] and "01_simulate" in order
     assert confirm.ADAPT_NOTEBOOK in order  # the shipped adapted networks are scored
     assert adapt_claims.load_adapt_plan().in_home_max_seeds == 3
     assert seen["homes"] == [(k, s) for s in (9911, 9912, 9913) for k in plan.kinds]
@@ -162,19 +161,17 @@ def test_the_in_home_study_runs_in_the_confirm_homes(tmp_path, monkeypatch):
 
 def test_notebooks_are_added_to_an_existing_run_only(tmp_path, monkeypatch):
     """``--notebooks``: only those notebooks, in a run of the same seeds; its first record stays."""
-    import semmatch.experiments.adapt_claims as adapt_claims
     import semmatch.experiments.claims as claims
 
     order = []
     monkeypatch.setattr(confirm, "run_notebook", lambda nb, profile, **kw: order.append(nb))
     monkeypatch.setattr(claims, "judge_figures", lambda figures: order.append("verdicts"))
-    monkeypatch.setattr(adapt_claims, "judge_adaptation", lambda figures: order.append("adapt verdicts"))
     with pytest.raises(ValueError, match="adds to an existing confirmatory run, but .*confirm.json does not exist"):
         confirm.run_confirm([9921], name="add", out_root=tmp_path, notebooks=[confirm.ADAPT_NOTEBOOK])
     first = confirm.run_confirm([9921], name="add", out_root=tmp_path)
     order.clear()
     rec = confirm.run_confirm([9921], name="add", out_root=tmp_path, notebooks=[confirm.ADAPT_NOTEBOOK])
-    assert order == [confirm.ADAPT_NOTEBOOK, "adapt verdicts"]  # the paper's claims are not judged again
+    assert order == [confirm.ADAPT_NOTEBOOK]  # it judges its own claims; the paper's are not judged again
     assert rec["wall_seconds"] == first["wall_seconds"] and rec["started"] == first["started"]
     assert [a["notebooks"] for a in rec["additions"]] == [[confirm.ADAPT_NOTEBOOK]]
     assert json.loads((tmp_path / "figures" / "confirm" / "add" / "confirm.json").read_text()) == rec

@@ -16,7 +16,7 @@ the panoptic clustering radius of notebook 10). It writes
 
 Stage 09 (robot-view adaptation) scores the adapted networks shipped in
 ``models/<profile>/adapted/`` (it is skipped where none are shipped: a confirmatory run trains
-nothing), and the adaptation claims of ``adapt_plan.yaml`` are judged on its tables
+nothing) and judges the adaptation claims of ``adapt_plan.yaml`` on its tables
 (:func:`semmatch.experiments.adapt_claims.judge_adaptation`, ``adapt_verdicts.md``).
 ``--notebooks`` runs some notebooks in an existing run (e.g. stage 09 once adapted networks are
 shipped), ``--in-home`` adds the in-home adaptation study. Seeds used for training, validation or development are refused
@@ -283,15 +283,12 @@ def run_confirm(seeds: Sequence[int], *, name: str | None = None, base_profile: 
 
 
 def _judge(figures_dir: Path, ran: Sequence[str]) -> None:
-    """The analysis plan's verdicts on the tables the notebooks that ``ran`` wrote: the paper's
-    claims (unless only stage 09 ran) and the adaptation claims (when stage 09 ran)."""
-    from .adapt_claims import judge_adaptation
+    """The analysis plan's verdicts on the paper's claims, unless only stage 09 ran (it judges
+    the adaptation claims itself: ``adapt_verdicts.md``)."""
     from .claims import judge_figures
 
     if set(ran) - {ADAPT_NOTEBOOK}:
         judge_figures(figures_dir)
-    if ADAPT_NOTEBOOK in ran:
-        judge_adaptation(figures_dir)  # the adaptation claims (adapt_plan.yaml)
 
 
 def _with_addition(earlier: dict, record: dict, notebooks: Sequence[str] | None) -> dict:
