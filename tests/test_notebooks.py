@@ -57,7 +57,7 @@ def test_smoke_run_writes_every_table_and_figure(smoke_run):
                  "fig3_height.png", "table3_real.md", "findings_real.md", "trajectory_error.csv",
                  "fig4_qualitative.png", "routes.png", "misregistration.png", "validation_flip.csv",
                  "validation_odometry_gate.csv", "findings_height.md", "adapt_label_quality.md",
-                 "validation_adapt_recipe.md", "adapt_gap.md", "table2_adapted.md",
+                 "validation_adapt_recipe.md", "adapt_gap.md", "table2_adapted.md", "adapt_verdicts.md",
                  # the analysis plan's verdict tables, speed claims and the depth-noise study
                  "verdicts_synthetic.csv", "verdicts_height.csv", "verdicts_real.csv", "claims_speed.csv",
                  "depth_noise.csv", "depth_noise.png", "claims_depth_noise.csv"):
@@ -71,6 +71,12 @@ def test_smoke_run_writes_every_table_and_figure(smoke_run):
     assert {"claim", "verdict", "reference", "p_holds", "paper_diff"} <= set(claims.columns)
     assert set(claims["reference"]) == {"fusion", "mesh"}  # every verdict under both references
     assert "upper" in set(pd.read_csv(fig / "table3_per_scene.csv")["method"])  # C16's rows
+    # notebook 09 judges every adaptation claim of its plan (adapt_plan.yaml)
+    from semmatch.experiments.adapt_claims import load_adapt_plan
+
+    adapt = pd.read_csv(fig / "adapt_claims.csv")
+    assert adapt["claim"].tolist() == [c.id for c in load_adapt_plan().claims]
+    assert set(adapt["verdict"]) <= {"holds", "does not hold", "equivalent", "inconclusive", "not judged"}
     # the smoke scene shows transfer working: the person's map supports most robot pixels, and the
     # transfer rows are not zero
     support = pd.read_csv(fig / "support_per_scene.csv")

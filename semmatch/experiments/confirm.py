@@ -278,7 +278,7 @@ def run_confirm(seeds: Sequence[int], *, name: str | None = None, base_profile: 
     if earlier is not None:
         record = _with_addition(earlier, record, notebooks)
     atomic_write_text(where["figures_dir"] / "confirm.json", json.dumps(record, indent=2) + "\n")
-    print(f"[confirm] {name}: done in {record['total_seconds'] / 60:.1f} min -> {dirs['figures_dir']}", file=sys.stderr)
+    print(f"[confirm] {name}: done in {(time.perf_counter() - t0) / 60:.1f} min -> {dirs['figures_dir']}", file=sys.stderr)
     return record
 
 

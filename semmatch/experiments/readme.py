@@ -264,8 +264,10 @@ def headline_markdown(figures_dir: str | Path, readme_dir: str | Path, results_d
     parts = []
     run = _confirm_record(figures_dir)
     if run:
+        later = (" The plan of what was added later (the adaptation claims, `adapt_plan.yaml`) was committed before "
+                 "that addition ran." if run.get("additions") else "")
         parts.append(f"**{_confirm_sentence(run)}** The analysis plan was committed before these scenes "
-                     "existed; nothing was chosen on them.\n")
+                     f"existed; nothing was chosen on them.{later}\n")
     if (figures_dir / "table2_synthetic.png").is_file():
         parts.append("**Table 2 (synthetic)**: lower-view semantic reconstructions of the robot's own tour, "
                      "mean and 95 % interval over the evaluation scenes (`fused`: transferred labels where the "
