@@ -179,6 +179,11 @@ def test_notebooks_are_added_to_an_existing_run_only(tmp_path, monkeypatch):
         confirm.run_confirm([9922], name="add", out_root=tmp_path, notebooks=[confirm.ADAPT_NOTEBOOK])
     with pytest.raises(ValueError, match="unknown notebook"):
         confirm.run_confirm([9921], name="add", out_root=tmp_path, notebooks=["99_nothing"])
+    made_with = tmp_path / "data" / "confirm" / "add" / "params.yaml"
+    made_with.write_text(made_with.read_text() + "# edited since\n")
+    with pytest.raises(ValueError, match="differ from those the run was made with"):
+        confirm.run_confirm([9921], name="add", out_root=tmp_path, notebooks=[confirm.ADAPT_NOTEBOOK])
+    assert made_with.read_text().endswith("# edited since\n")  # the run's own parameters stay
 
 
 def test_the_in_home_study_needs_its_plans_profile(tmp_path):

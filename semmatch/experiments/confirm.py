@@ -213,8 +213,14 @@ def run_confirm(seeds: Sequence[int], *, name: str | None = None, base_profile: 
     where = {k: ROOT / v for k, v in dirs.items()}  # an absolute out_root stays as it is
     data_root = where["data_root"]
     in_home_plan = _check_in_home(base_profile) if in_home else None
+    earlier = _earlier_record(where["figures_dir"], seeds, notebooks)
+    before = (data_root / "params.yaml").read_text() if earlier and (data_root / "params.yaml").is_file() else None
     params = write_confirm_params(seeds, data_root / "params.yaml", base_profile=base_profile,
                                   params_file=params_file)
+    if before is not None and params.read_text() != before:  # an addition runs with the run's own parameters
+        atomic_write_text(params, before)
+        raise ValueError(f"{params}: the parameters this code writes differ from those the run was made with; "
+                         f"an addition (--notebooks) must use the run's parameters: make a new run instead")
     shipped_dir = Path("models") / base_profile
     missing = unshipped_networks(params, base_profile, dirs["data_root"], ROOT / shipped_dir)
     if missing and not allow_training:
@@ -223,7 +229,6 @@ def run_confirm(seeds: Sequence[int], *, name: str | None = None, base_profile: 
             + "; ".join(f"{n}: {why}" for n, why in missing.items())
             + f". Restore {shipped_dir}/ from git, or pass --allow-training to train them (then it does not "
               f"confirm the shipped networks)")
-    earlier = _earlier_record(where["figures_dir"], seeds, notebooks)
     for d in where.values():
         d.mkdir(parents=True, exist_ok=True)
     print(f"[confirm] {name}: profile {base_profile}, seeds {seeds} x {len(data['profiles'][base_profile]['common']['kinds'])} "
