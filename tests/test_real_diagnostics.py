@@ -81,7 +81,7 @@ def test_study_reproduces_table3_chain_and_pairs_the_arms(tiny_root, tmp_path, o
     assert draws == {("clean, true poses", 1.0): 1, ("noisy, true poses", 1.0): 1, ("chain", 1.0): 2,
                      ("person visual-only", 1.0): 2, ("chain", 0.0): 1, ("held-out appearance, true poses", 1.0): 1}
     # the held-out look: the noisy recording's depth, labels and poses, other RGB
-    looks = list((tiny_root / "real_diagnostics" / "appearance").glob(f"{SCENE}-*/lower"))
+    looks = list((tiny_root / "real_diagnostics" / "appearance").glob(f"{SCENE}-*/lower-look*"))
     assert len(looks) == 1
     noisy, held = read_sequence(tiny_root / "scenes" / "eval" / SCENE / "lower_noisy"), read_sequence(looks[0])
     assert json.loads((looks[0] / "meta.json").read_text())["appearance"]["seed"] == 3
@@ -148,6 +148,17 @@ def test_study_reproduces_table3_chain_and_pairs_the_arms(tiny_root, tmp_path, o
             real_like_diagnostics(tiny_root, networks=["noisy"], arms=arms[:1], draws=1, progress=False, **kw)
     finally:
         (tiny_root / "models" / "noisy.pt").unlink()
+    # a change to the look's code: the held-out arm renders, predicts and scores again; the others are reused
+    import semmatch.experiments.real_diagnostics as rd
+
+    monkeypatch.setattr(rd, "look_digest", lambda: "0ther000")
+    held_arm = [a for a in arms if a.frames.startswith("heldout")]
+    with pytest.raises(pytest.fail.Exception, match="recomputed"):
+        real_like_diagnostics(tiny_root, networks=["noisy"], arms=held_arm, draws=1, progress=False, **kw)
+    assert list((tiny_root / "real_diagnostics" / "appearance").glob(f"{SCENE}-*/lower-look0ther000"))
+    noisy_arm = [a for a in arms if a.frames == "noisy" and a.poses == "true"]
+    assert real_like_diagnostics(tiny_root, networks=["noisy"], arms=noisy_arm, draws=1, progress=False,
+                                 **kw)["tasks"]["reused"].all()
 
 
 def test_cli_writes_the_tables_and_figure(tiny_root, tmp_path, oracle_network, capsys):
@@ -192,7 +203,7 @@ def test_the_appearance_severity_is_chosen_on_validation_scenes(tmp_path, oracle
     assert table.loc[0, "kept"] == pytest.approx(1.0) and table["scenes"].eq(1).all()
     assert table["chosen"].sum() == 1 and chosen in (0.5, 1.0)
     assert table.loc[table["chosen"], "frames"].item() == f"{chosen:g}"
-    assert (root / "real_diagnostics" / "appearance_validation").is_dir()
+    assert [p.name for p in (root / "real_diagnostics").glob("appearance_validation-look*")]  # keyed by the look
     assert main(["--data", str(root), "--figures", str(tmp_path / "fig"), "--networks", "noisy", "--choose-severity"]) == 0
     assert (tmp_path / "fig" / "appearance_severity_validation.md").is_file()
     assert "chosen severity" in capsys.readouterr().out

@@ -23,8 +23,10 @@ time, on the same scenes, paired per scene:
   (issue 36 item 5). The same two arms run with that look blended into the training look at
   :data:`APPEARANCE_SEVERITY` (``x0.35``), the severity at which the robot's network loses what
   the paper's lost on real images, chosen on the validation scenes
-  (:func:`appearance_severity_on_validation`). The recordings are written once per scene under
-  ``<data_root>/real_diagnostics/appearance/`` (:func:`heldout_recording`).
+  (:func:`semmatch.experiments.appearance_severity.appearance_severity_on_validation`). The
+  recordings are written once per scene under ``<data_root>/real_diagnostics/appearance/``
+  (:func:`heldout_recording`); they and every cache made from them (labels, poses, the arms'
+  results) are keyed by the look's code (:func:`semmatch.experiments.appearance_severity.look_digest`).
 
 Arms with estimated poses run in ``draws`` draws: draw ``d`` regenerates each recording's prior
 with :func:`semmatch.sim.noise.estimated_poses` from the recording's own noise settings and the
@@ -62,6 +64,12 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from .appearance_severity import (
+    APPEARANCE_SEVERITY,
+    PAPER_KEPT,
+    appearance_severity_on_validation,
+    look_digest,
+)
 from .layout import GT, Layout
 
 __all__ = ["Arm", "ARMS", "FRAMES", "APPEARANCE_SEVERITY", "frames_kind", "heldout_recording", "PAPER_KEPT",
@@ -104,11 +112,6 @@ class Arm:
         """Folder name of the arm's work."""
         return f"{self.name.replace(' ', '_').replace(',', '')}_drift{self.drift:g}"
 
-
-#: the severity of the paper-sized appearance gap, chosen on the validation scenes: the level at which
-#: the compact network's robot map keeps the share of its clean-frame Mean Acc. that the paper's
-#: lower view kept on real data (0.590 / 0.766), :func:`appearance_severity_on_validation`
-APPEARANCE_SEVERITY = 0.35
 
 #: the arms at the simulator's drift (module documentation)
 ARMS = (
@@ -205,22 +208,32 @@ def _inputs_digest(data_root: str | Path, sid: str, networks: Sequence[str]) -> 
     return hashlib.sha256("/".join(parts).encode()).hexdigest()[:12]
 
 
+def _look_tag(frames: str) -> str:
+    """What a held-out-look cache is keyed on besides its inputs: ``-look<digest>`` over the code
+    that renders the look (:func:`semmatch.experiments.appearance_severity.look_digest`), so that
+    a change to the look renders, predicts and scores again; empty for clean and noisy frames."""
+    return "-look" + look_digest() if frames_kind(frames)[0] == "heldout" else ""
+
+
 def _labels_folder(data_root: str | Path, sid: str, frames: str, recording: str, network: str, digest: str) -> Path:
-    """Where a network's labels of a scene's recording (clean or noisy frames) are kept for every arm."""
-    return Path(data_root) / "real_diagnostics" / "labels" / f"{sid}-{digest}" / frames / f"{recording}_{network}"
+    """Where a network's labels of a scene's recording (clean, noisy or held-out-look frames) are
+    kept for every arm."""
+    return (Path(data_root) / "real_diagnostics" / "labels" / f"{sid}-{digest}" / f"{frames}{_look_tag(frames)}"
+            / f"{recording}_{network}")
 
 
 def heldout_recording(data_root: str | Path, sid: str, recording: str, severity: float = 1.0) -> Path:
     """The scene's noisy ``recording`` (``upper`` or ``lower``) with the held-out appearance at
     ``severity`` (:func:`semmatch.sim.appearance.write_heldout_recording`), written on first use
     under ``<data_root>/real_diagnostics/appearance/<scene>-<inputs>/`` (``<recording>`` at
-    severity 1, else ``<recording>@<severity>``). The folder, the labels predicted on it and the
-    arms' cached results do not record the version of :mod:`semmatch.sim.appearance`: after a
-    change to the look, remove ``real_diagnostics/appearance`` and the ``heldout*`` caches."""
+    severity 1, else ``<recording>@<severity>``, then the look's code digest, :func:`_look_tag`).
+    The labels predicted on it, the poses estimated from it and the arms' cached results carry the
+    same digest, so a change to the look's code makes them again."""
     from ..sim.appearance import write_heldout_recording
 
     layout = Layout(data_root)
     name = recording if float(severity) == 1.0 else f"{recording}@{float(severity):g}"
+    name += _look_tag("heldout")
     out = Path(data_root) / "real_diagnostics" / "appearance" / f"{sid}-{_inputs_digest(data_root, sid, ())}" / name
     if not out.is_dir():
         try:
@@ -309,7 +322,7 @@ def run_arm(data_root: str, networks: tuple[str, ...], methods: tuple[str, ...],
     poses_dir = Path(data_root) / "real_diagnostics" / "poses" / f"{sid}-{_inputs_digest(data_root, sid, ())}"
     settings = dict(arm=arm.name, frames=arm.frames, poses=arm.poses, person_prior=arm.person_prior,
                     drift=arm.drift, draw=draw, networks=list(networks), methods=list(methods),
-                    inputs=_inputs_digest(data_root, sid, networks),
+                    inputs=_inputs_digest(data_root, sid, networks) + _look_tag(arm.frames),
                     **{k: (list(v) if isinstance(v, tuple) else v) for k, v in o.items()})
     done = work / "result.json"
     if done.is_file():
@@ -337,7 +350,7 @@ def run_arm(data_root: str, networks: tuple[str, ...], methods: tuple[str, ...],
                 if prior is not None:
                     traj.append(tag | trajectory_row(sid, name, "prior", prior, true[name]))
                 spec = f"drift{arm.drift:g}_d{draw}" if prior is not None else "visual"
-                cache = poses_dir / f"{arm.frames}_{name}_{spec}_{gate_name(o['tol'])}.txt"
+                cache = poses_dir / f"{arm.frames}{_look_tag(arm.frames)}_{name}_{spec}_{gate_name(o['tol'])}.txt"
                 cache.parent.mkdir(parents=True, exist_ok=True)
                 est[name] = cached_odometry(frames, cache, prior=prior, prior_tolerance=o["tol"], progress=False)
                 traj.append(tag | trajectory_row(sid, name, "estimated", est[name], true[name]))
@@ -354,99 +367,6 @@ def run_arm(data_root: str, networks: tuple[str, ...], methods: tuple[str, ...],
                   registration=[tag | {k: float(reg[k]) for k in keep}])
     atomic_write_text(done, json.dumps(dict(settings=settings, result=result), indent=1))
     return dict(result, reused=False)
-
-
-#: the paper's lower view on real data as a share of its synthetic score (Mask R-CNN, Tables 2 and 3)
-PAPER_KEPT = 0.590 / 0.766
-
-
-def _severity_scene(data_root: str, network: str, levels: tuple[float, ...], voxel_size: float,
-                    eval_voxel_size: float, sid: str) -> list[dict]:
-    """Mean Acc. of ``network``'s map of one validation scene's robot frames (true poses): clean,
-    Kinect-like and with the held-out look at each level (a task of
-    :func:`appearance_severity_on_validation`)."""
-    from ..evaluate.metrics import compare
-    from ..fusion import reconstruct_many
-    from ..io import read_sequence, read_tum
-    from ..segment import predict_sequence
-    from ..sim.appearance import write_heldout_recording
-    from .real_poses import PosedSequence
-    from .synthetic import eval_grid_origin, reference_grid
-
-    layout = Layout(data_root)
-    sd = layout.scenes / "val" / sid
-    work = Path(data_root) / "real_diagnostics" / "appearance_validation" / sid
-    model = layout.load_network(network)
-    true = read_tum(sd / "lower_noisy" / "poses_gt.txt")[1]
-    recordings = {"clean": sd / "lower", "noisy": sd / "lower_noisy"}
-    for level in levels:
-        out = work / f"lower@{level:g}"
-        if not out.is_dir():
-            write_heldout_recording(sd / "lower_noisy", out, severity=level)
-        recordings[f"{level:g}"] = out
-    rows = []
-    for name, folder in recordings.items():
-        seq = PosedSequence(read_sequence(folder).load(), true)
-        labels = predict_sequence(model, seq, work / f"labels_{network}_{name}", progress=False)
-        ref, pred = reconstruct_many(seq, [None, labels], voxel_size)
-        sc = compare(reference_grid(ref, eval_voxel_size), pred, voxel_size=eval_voxel_size,
-                     grid_origin=eval_grid_origin(eval_voxel_size))
-        rows.append(dict(scene=sid, frames=name, mean_acc=float(sc["mean_acc"])))
-    return rows
-
-
-def appearance_severity_on_validation(data_root: str | Path, network: str = "compact", *,
-                                      levels: Sequence[float] = (0.25, 0.3, 0.35, 0.4, 0.45, 0.5, 0.75, 1.0), voxel_size: float = 0.04,
-                                      eval_voxel_size: float = 0.05, jobs: int = 1, progress: bool = True
-                                      ) -> tuple[pd.DataFrame, float]:
-    """Choose the appearance severity of a paper-sized gap on the **validation** scenes.
-
-    Per validation scene, the network labels the robot's frames (clean, Kinect-like, and with the
-    held-out look at each level), they are fused at the true poses and scored against the frames
-    fused with ground-truth labels. The chosen level is the one at which the mean over scenes
-    keeps the share of the clean score closest to the paper's (:data:`PAPER_KEPT`, 0.77).
-
-    Parameters
-    ----------
-    data_root : path
-        A profile's data folder (``scenes/val`` with noisy robot recordings, ``models``).
-    network : str
-    levels : sequence of float
-        Severities to try. The default is the coarse grid 0.25 / 0.5 / 0.75 / 1 and, between 0.25
-        and 0.5, where the coarse grid's first run (2026-11-27, full profile) put the paper's share
-        (0.83 and 0.69 kept), steps of 0.05.
-    voxel_size, eval_voxel_size : float
-        Fusion and evaluation voxels (Table 3's).
-    jobs : int
-        Scenes in parallel (:func:`semmatch.engine.map_tasks`).
-    progress : bool
-
-    Returns
-    -------
-    table : DataFrame
-        frames (``clean``, ``noisy`` or the level), mean_acc (mean over scenes), kept (share of
-        the clean mean), scenes, chosen.
-    severity : float
-        The chosen level.
-    """
-    from ..engine import map_tasks
-
-    layout = Layout(data_root)
-    scenes = [sd.name for sd in layout.scene_dirs("val") if (sd / "lower_noisy").is_dir()]
-    if not scenes:
-        raise FileNotFoundError(f"{layout.scenes / 'val'}: no validation scene with a noisy robot recording")
-    fn = functools.partial(_severity_scene, str(data_root), network, tuple(float(v) for v in levels),
-                           float(voxel_size), float(eval_voxel_size))
-    rows = [r for rs in map_tasks(fn, scenes, jobs=jobs, desc="appearance severity (validation)", progress=progress)
-            for r in rs]
-    per = pd.DataFrame(rows)
-    table = per.groupby("frames", sort=False)["mean_acc"].mean().reset_index()
-    table["kept"] = table["mean_acc"] / float(table.loc[table["frames"] == "clean", "mean_acc"].iloc[0])
-    table["scenes"] = len(scenes)
-    levels_only = table[~table["frames"].isin(["clean", "noisy"])]
-    best = levels_only.loc[(levels_only["kept"] - PAPER_KEPT).abs().idxmin(), "frames"]
-    table["chosen"] = table["frames"] == best
-    return table, float(best)
 
 
 def _task_order(task: tuple[Arm, int, str]) -> int:
