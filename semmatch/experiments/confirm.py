@@ -252,12 +252,12 @@ def run_confirm(seeds: Sequence[int], *, name: str | None = None, base_profile: 
         walls[nb] = round(time.perf_counter() - t, 1)
     # every claim of the analysis plan judged on this run's per-scene tables (verdicts.csv/.md)
     from ..segment.shipping import file_sha256
-    from .adapt_claims import load_adapt_plan
 
     t = time.perf_counter()
     _judge(where["figures_dir"], [nb for nb in NOTEBOOKS if nb not in skipped and (notebooks is None or nb in notebooks)])
     walls["verdicts"] = round(time.perf_counter() - t, 1)
     if in_home_plan is not None:
+        from .adapt_claims import load_adapt_plan
         from .in_home import run_in_home_study
 
         t = time.perf_counter()
