@@ -182,30 +182,41 @@ def _dead_pid() -> int:
 
 
 def test_stale_temporary_folders_are_swept_live_ones_kept(base, tmp_path):
+    """Temporary folders of dead writers of this machine are swept, with or without the host in
+    their name; those of a live writer or of another machine stay."""
+    from semmatch.io.outputs import HOST_TAG
+
     dead = _dead_pid()
     out = tmp_path / "p"
-    stale = [tmp_path / f".p.{dead}-abc123.partial", tmp_path / f".p.probs.{dead}-x_y9.partial"]
+    stale = [tmp_path / f".p.{dead}-abc123.partial", tmp_path / f".p.probs.{dead}-x_y9.partial",
+             tmp_path / f".p.{HOST_TAG}_{dead}-abc124.partial"]
     live = tmp_path / f".p.{os.getppid()}-live00.partial"
-    for d in (*stale, live):
+    # a writer on another machine sharing the folder: its process id means nothing here
+    other = tmp_path / f".p.{HOST_TAG}x_{dead}-abc125.partial"
+    for d in (*stale, live, other):
         d.mkdir()
         (d / "000000.npy").write_bytes(b"x" * 100)
     assert main(["predict", str(base / "low"), "--model", "noisy:0.1", "--probs", "--out", str(out), "--quiet"]) == 0
     assert not any(d.exists() for d in stale)
-    assert live.exists()
+    assert live.exists() and other.exists()
     assert sorted(p.name for p in out.iterdir()) == [".semmatch-output", "000000.png", "000001.png", "000002.png",
                                                      "000003.png", "probs"]
 
 
 def test_stale_temporary_files_of_atomic_writes_are_swept_live_ones_kept(tmp_path):
-    """A SIGKILLed writer leaves ``.NAME.PID-RANDOM.tmp.EXT``; the next process that writes into
-    the folder removes it and any other dead writer's (not those of a live writer, nor other files)."""
+    """A SIGKILLed writer leaves ``.NAME.HOST_PID-RANDOM.tmp.EXT``; the next process that writes into
+    the folder removes it and any other dead writer's of this machine (not those of a live writer,
+    of another machine, nor other files; names without a host, as before 2026-11-27, are this
+    machine's)."""
     from semmatch.io import atomic_write_text
+    from semmatch.io.outputs import HOST_TAG
 
     dead = _dead_pid()
     stale = [tmp_path / f".map.{dead}-0123abcd.tmp.ply", tmp_path / f".other.{dead}-0123abcd.tmp",
-             tmp_path / f".a.b.{dead}-89abcdef.tmp.png"]
+             tmp_path / f".a.b.{dead}-89abcdef.tmp.png", tmp_path / f".map.{HOST_TAG}_{dead}-0123abce.tmp.ply"]
     live = tmp_path / f".map.{os.getppid()}-89abcdef.tmp.ply"
-    keep = [tmp_path / f".map.{dead}-xyz.tmp.ply", tmp_path / "map.1234-0123abcd.tmp.ply", tmp_path / ".hidden"]
+    keep = [tmp_path / f".map.{dead}-xyz.tmp.ply", tmp_path / "map.1234-0123abcd.tmp.ply", tmp_path / ".hidden",
+            tmp_path / f".map.other{HOST_TAG}_{dead}-0123abcf.tmp.ply"]  # another machine's writer
     for f in (*stale, live, *keep):
         f.write_bytes(b"partial")
     atomic_write_text(tmp_path / "map.ply", "ply\n")

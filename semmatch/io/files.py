@@ -18,6 +18,8 @@ from collections.abc import Iterator
 from collections.abc import Sequence as _SequenceABC
 from pathlib import Path
 
+from .outputs import writer_alive, writer_tag
+
 __all__ = ['atomic_path', 'atomic_write_text', 'save_figure', 'write_json', 'OUTPUT_MARKER', 'output_kind', 'check_output_dir', 'replace_output_dir']
 
 PathLike = str | os.PathLike
@@ -30,7 +32,7 @@ def atomic_path(path: PathLike) -> Iterator[Path]:
 
     The temporary file keeps the suffix of ``path`` so that libraries choosing a format by
     extension (OpenCV, Open3D, matplotlib) still work. On error it is removed; its name carries
-    the writer's process id, so the temporary files of a killed writer are removed by the next
+    the writer's machine and process id, so the temporary files of a killed writer are removed by the next
     process that writes into the same folder.
     """
     path = Path(path)
@@ -38,7 +40,7 @@ def atomic_path(path: PathLike) -> Iterator[Path]:
         raise ValueError(f"{path}: is a folder; give the name of the file to write")
     path.parent.mkdir(parents=True, exist_ok=True)
     _sweep_stale_files(path.parent)
-    tmp = path.with_name(f".{path.stem}.{os.getpid()}-{uuid.uuid4().hex[:8]}.tmp{path.suffix}")
+    tmp = path.with_name(f".{path.stem}.{writer_tag()}-{uuid.uuid4().hex[:8]}.tmp{path.suffix}")
     try:
         yield tmp
         os.replace(tmp, path)
@@ -51,15 +53,14 @@ def atomic_path(path: PathLike) -> Iterator[Path]:
             tmp.unlink()
 
 
-_TEMP_FILE = re.compile(r"^\..+\.(?P<pid>\d+)-[0-9a-f]{8}\.tmp(\.[^.]*)?$")
+_TEMP_FILE = re.compile(r"^\..+\.(?:(?P<host>[A-Za-z0-9]+)_)?(?P<pid>\d+)-[0-9a-f]{8}\.tmp(\.[^.]*)?$")
 _SWEPT: set[str] = set()  # folders this process has swept
 
 
 def _sweep_stale_files(folder: Path) -> list[Path]:
     """Remove the temporary files of :func:`atomic_path` in ``folder`` whose writer has ended (a
-    SIGKILL runs no clean-up; those of live writers stay). Once per folder and process: the
-    first atomic write into a folder lists it, later ones do not."""
-    from .outputs import _alive
+    SIGKILL runs no clean-up; those of live writers, and of other machines, stay). Once per folder
+    and process: the first atomic write into a folder lists it, later ones do not."""
 
     key = os.path.abspath(folder)
     if key in _SWEPT:
@@ -68,7 +69,7 @@ def _sweep_stale_files(folder: Path) -> list[Path]:
     with os.scandir(folder) as entries:
         for e in entries:
             m = _TEMP_FILE.match(e.name) if e.name.startswith(".") else None
-            if m and not _alive(int(m["pid"])) and e.is_file(follow_symlinks=False):
+            if m and not writer_alive(int(m["pid"]), m["host"]) and e.is_file(follow_symlinks=False):
                 Path(e.path).unlink(missing_ok=True)
                 gone.append(Path(e.path))
     _SWEPT.add(key)

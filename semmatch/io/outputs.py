@@ -25,12 +25,13 @@ import os
 import re
 import shutil
 import signal
+import socket
 import tempfile
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 
 __all__ = ["declare_paths", "check_paths", "check_cli_paths", "temp_dir", "sweep_stale",
-           "terminate_as_interrupt", "Terminated"]
+           "terminate_as_interrupt", "Terminated", "writer_tag", "writer_alive", "HOST_TAG"]
 
 PathLike = str | os.PathLike
 
@@ -113,22 +114,28 @@ def check_cli_paths(args: argparse.Namespace) -> None:
 
 
 # ----------------------------------------------------------------------------- temporary folders
-_TEMP = re.compile(r"\.(?P<pid>\d+)-[0-9a-z_]+\.partial$")
+#: This machine in temporary names: the letters and digits of its host name (at most 24). A process
+#: id means something only on the machine that gave it, and an output folder may lie on a file
+#: system that several machines share (a cluster's workers, docs/cluster.md).
+HOST_TAG = re.sub(r"[^A-Za-z0-9]", "", socket.gethostname())[:24] or "host"
+
+#: ``.NAME[.TAG].HOST_PID-RANDOM.partial`` (``HOST_`` absent in names written before 2026-11-27).
+_TEMP = re.compile(r"\.(?:(?P<host>[A-Za-z0-9]+)_)?(?P<pid>\d+)-[0-9a-z_]+\.partial$")
 
 
-def temp_dir(path: PathLike, tag: str = "") -> Path:
-    """A new temporary folder beside ``path``: ``.NAME[.TAG].PID-RANDOM.partial``.
+def writer_tag() -> str:
+    """``HOST_PID``: the writer of a temporary file or folder, as its name carries it."""
+    return f"{HOST_TAG}_{os.getpid()}"
 
-    The process id lets :func:`sweep_stale` tell the folders of a killed writer from those of a
-    live one.
+
+def writer_alive(pid: int, host: str | None = None) -> bool:
+    """Whether the writer ``pid`` of machine ``host`` may still be running.
+
+    A writer on another machine always may: its process id means nothing here, so only that
+    machine sweeps its temporary files. ``host`` None (a name without a host) means this machine.
     """
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    prefix = f".{path.name}.{tag + '.' if tag else ''}{os.getpid()}-"
-    return Path(tempfile.mkdtemp(prefix=prefix, suffix=".partial", dir=path.parent))
-
-
-def _alive(pid: int) -> bool:
+    if host is not None and host != HOST_TAG:
+        return True
     if pid == os.getpid():
         return True
     try:
@@ -140,8 +147,21 @@ def _alive(pid: int) -> bool:
     return True
 
 
+def temp_dir(path: PathLike, tag: str = "") -> Path:
+    """A new temporary folder beside ``path``: ``.NAME[.TAG].HOST_PID-RANDOM.partial``.
+
+    The machine and process id let :func:`sweep_stale` tell the folders of a killed writer from
+    those of a live one, also where several machines write into one shared folder.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    prefix = f".{path.name}.{tag + '.' if tag else ''}{writer_tag()}-"
+    return Path(tempfile.mkdtemp(prefix=prefix, suffix=".partial", dir=path.parent))
+
+
 def sweep_stale(path: PathLike) -> list[Path]:
-    """Remove the temporary folders (:func:`temp_dir`) beside ``path`` whose process has ended.
+    """Remove the temporary folders (:func:`temp_dir`) beside ``path`` whose process has ended
+    (this machine's writers only: :func:`writer_alive`).
 
     Returns
     -------
@@ -152,7 +172,7 @@ def sweep_stale(path: PathLike) -> list[Path]:
     gone = []
     for tmp in path.parent.glob(f".{glob_escape(path.name)}.*.partial"):
         m = _TEMP.search(tmp.name)
-        if m and not _alive(int(m["pid"])):
+        if m and not writer_alive(int(m["pid"]), m["host"]):
             shutil.rmtree(tmp, ignore_errors=True)
             gone.append(tmp)
     return gone
