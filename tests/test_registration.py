@@ -119,3 +119,20 @@ def test_rigid_perturbation_series_share_axis_and_direction():
         rigid_perturbation(-0.1, 0.0, center=c, seed=0)
     with pytest.raises(ValueError, match="3-vector"):
         rigid_perturbation(0.1, 0.0, center=[0, 0], seed=0)
+
+
+def test_failed_ransac_restarts_are_no_agreement(two_views, monkeypatch):
+    """Restarts whose RANSAC finds no transform (identity, fitness 0) all start their ICP from the
+    identity and end together; they must not read as restarts agreeing on a solution."""
+    import open3d as o3d
+
+    class Failed:
+        transformation = np.eye(4)
+        fitness = 0.0
+
+    lower, upper = two_views
+    monkeypatch.setattr(o3d.pipelines.registration, "registration_ransac_based_on_feature_matching",
+                        lambda *a, **k: Failed())
+    r = register_maps(lower, upper, voxel_size=0.1, seed=0, restarts=3)
+    assert [c["global_fitness"] for c in r.candidates] == [0.0, 0.0, 0.0]
+    assert r.agreement == 0

@@ -69,7 +69,10 @@ class Registration:
         RANSAC runs made (seeds ``seed .. seed + restarts - 1``).
     agreement : int
         How many of them ended, after the ICP at ``voxel_size``, within ``2 * voxel_size`` and 2
-        degrees of the kept one (itself included).
+        degrees of the kept one (itself included), counting only restarts whose RANSAC found a
+        transform (fitness > 0): restarts that found none all start their ICP from the identity
+        and would agree with each other by construction. 0 when the kept transform comes from
+        such restarts only (before 2026-11-27 they counted, so a failure could read as agreement).
     candidates : list of dict
         Per restart: ``seed``, ``global_fitness`` (RANSAC), ``coarse_fitness``, ``coarse_rmse``
         (ICP at ``voxel_size``), ``fitness``, ``inlier_rmse``, ``transform`` (after the finest
@@ -284,7 +287,7 @@ def _register(source: SemanticMap, target: SemanticMap, *, voxel_size: float, se
             same = dict(coarse_transform=c["coarse_transform"], transform=T, fitness=fit, inlier_rmse=rmse,
                         first=c, members=0)
             refined.append(same)
-        same["members"] += 1
+        same["members"] += c["global_fitness"] > 0  # a failed RANSAC (identity, fitness 0) is no vote
         c.update(transform=same["transform"], fitness=same["fitness"], inlier_rmse=same["inlier_rmse"])
     best = max(refined, key=lambda r: (round(r["fitness"], 6), -r["inlier_rmse"]))
     T, fit, rmse, agreement = best["transform"], best["fitness"], best["inlier_rmse"], best["members"]
