@@ -135,16 +135,8 @@ def test_3d_slic_labels_unchanged_on_rendered_frames(monkeypatch):
     index = MapIndex(scene.to_semantic_map(), voxel_size=0.04)
     new = [transfer_frame("3d-slic", f, index) for f in frames]
 
-    def old(grid, mask, *, n_segments, compactness, max_num_iter):
-        return skimage_slic(
-            grid,
-            n_segments=n_segments,
-            compactness=compactness,
-            max_num_iter=max_num_iter,
-            mask=mask,
-            channel_axis=-1,
-            start_label=1,
-        )
+    def old(grid, mask, **params):
+        return skimage_slic(grid, mask=mask, channel_axis=-1, start_label=1, **params)
 
     monkeypatch.setattr(methods, "mask_slic", old)
     for f, a in zip(frames, new):
