@@ -447,3 +447,22 @@ def test_a_network_whose_config_differs_from_the_shipped_one_is_trained(shipped_
     (shipped / "recipe.json").write_text(json.dumps({"flip": {}}))
     with pytest.raises(ValueError, match="no flip choice for compact"):
         shipping.apply_shipped_recipe(tmp_path / "data", shipped, ["compact"])
+
+
+def test_rendered_and_cached_views_are_the_same_training_data(views, tmp_path):
+    """The views cache stores depth as float16; rendered views carry depth at that precision, so a
+    run that renders and a run that reads the cache train on the same arrays and record the same
+    ``views_sha256`` (before 2026-11-27 a fresh clone's retraining recorded another digest than
+    the shipped manifests, from the same views)."""
+    from semmatch.segment.data import cached_views
+    from semmatch.segment.training import views_digest
+
+    tr, _ = views
+    made = cached_views(tmp_path, {"k": 1}, lambda: tr)
+    again = cached_views(tmp_path, {"k": 1}, lambda: pytest.fail("the cache was not used"))
+    for a, b in ((made, again), (tr, again)):
+        for name in ("rgb", "depth", "labels", "scene", "height"):
+            x, y = getattr(a, name), getattr(b, name)
+            assert x.dtype == y.dtype and np.array_equal(x, y), name
+    assert views_digest(tr) == views_digest(again)
+    assert (tr.depth > 0).any() and np.array_equal(tr.depth, tr.depth.astype(np.float16).astype(np.float32))

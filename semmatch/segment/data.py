@@ -41,7 +41,8 @@ class Views:
     Attributes
     ----------
     rgb : uint8 (N,H,W,3)
-    depth : float32 (N,H,W), metres, 0 = no hit
+    depth : float32 (N,H,W), metres, 0 = no hit; at float16 precision (as :meth:`save` stores it,
+        so that rendered and cached views are the same arrays)
     labels : uint8 (N,H,W)
     scene : int64 (N,)
         Index of the view's scene in the list it was rendered from.
@@ -207,7 +208,10 @@ def render_views(
     for si in range(len(parts)):  # copied scene by scene, each part freed once copied
         prgb, pdepth, plabels, pheight = parts[si]
         n = len(prgb)
-        rgb[k:k + n], depth[k:k + n], labels[k:k + n], height[k:k + n] = prgb, pdepth, plabels, pheight
+        # depth at the precision the views cache stores (float16): rendered and cached views are
+        # then the same arrays, and so is their digest (a checkpoint's views_sha256)
+        rgb[k:k + n], labels[k:k + n], height[k:k + n] = prgb, plabels, pheight
+        depth[k:k + n] = np.asarray(pdepth, np.float32).astype(np.float16)
         scene_idx[k:k + n] = si
         k += n
         parts[si] = None
