@@ -28,10 +28,12 @@ __all__ = ["APPEARANCE_SEVERITY", "PAPER_KEPT", "appearance_severity_on_validati
 APPEARANCE_SEVERITY = 0.35
 
 
+@functools.cache
 def look_digest() -> str:
     """8 hex digits over the code that renders the held-out look (:mod:`semmatch.sim.appearance`,
     ``materials``, ``render``): a change to any of them changes the key of every cache made from
-    held-out-look frames (recordings, labels, poses, the arms' results)."""
+    held-out-look frames (recordings, labels, poses, the arms' results). Computed once per process
+    (every cache path of every arm asks for it; the code does not change during a run)."""
     from ..adapt.finetune import file_digest
     from ..sim import appearance, materials, render
 
