@@ -5,13 +5,16 @@
 every voxel with every centre, which made a sixth of ``3d-slic``'s time (6.5 of 39 ms a frame,
 docs/speed.md). :func:`mask_slic` runs the steps of scikit-image's ``slic`` for a masked
 three-channel 3D grid (scikit-image 0.26: normalisation, CIELAB, seeding, the two SLIC passes of
-its compiled kernel, connectivity) and replaces only that search: the voxels are grouped in cells
-of about twice the centres' spacing, a centre is tested for a cell's voxels only when its distance to the cell's
-box can beat the farthest corner of the best centre, and the tested centres are compared in index
-order with ``vq``'s arithmetic (float64 squared differences summed over the axes in order, strict
-``<``). Every centre left out is strictly farther (bounds taken with a relative margin of 1e-9),
-so the seeds, and with them the supervoxels, are bit-identical to scikit-image's
-(``tests/test_mask_slic.py`` compares with ``slic`` itself on random grids and on rendered frames).
+its compiled kernel, connectivity) with two changes. It converts to CIELAB only the occupied
+voxels (the only ones the seeding and the masked SLIC passes read). And it replaces that search:
+the voxels are grouped in cells of about twice the centres' spacing, a centre is tested for a
+cell's voxels only when its distance to the cell's box can beat the farthest corner of the best
+centre, and the tested centres are compared in index order with ``vq``'s arithmetic (float64
+squared differences summed over the axes in order, strict ``<``). Every centre left out is
+strictly farther (bounds taken with a relative margin of 1e-9), so the seeds are bit-identical to
+``kmeans2``'s. The CIELAB product on fewer rows could in principle round differently
+(:func:`_lab_values`); ``tests/test_mask_slic.py`` compares the supervoxels with ``slic``'s own
+on random grids and on rendered frames, and they are identical.
 
 The compiled kernels are scikit-image's private ``_slic_cython`` and
 ``_enforce_label_connectivity_cython``; where they cannot be imported (another scikit-image), the
