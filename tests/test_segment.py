@@ -389,6 +389,7 @@ def _copy_shipped(shipped_tiny, tmp_path):
 
 def test_a_shipped_network_of_the_same_config_is_used_without_training(shipped_tiny, tmp_path, monkeypatch):
     import json
+    from dataclasses import replace
 
     from semmatch.segment import shipping, training
     from semmatch.segment.training import views_digest
@@ -419,7 +420,87 @@ def test_a_shipped_network_of_the_same_config_is_used_without_training(shipped_t
     lines = []
     _, from_shipped = shipping.provide_networks({"compact": cfg}, shipped_dir=shipped, retrain=True,
                                                 views={0: small}, log=lines.append)
-    assert from_shipped == [] and trained == [cfg] and "retraining" in lines[-1]
+    threads = manifest["trained_on"]["torch_threads"]  # a CPU run's thread count is kept (see below)
+    assert from_shipped == [] and trained == [replace(cfg, threads=threads)] and "retraining" in lines[-1]
+
+
+def test_weights_digest_ignores_when_and_where_a_network_was_trained(shipped_tiny, tmp_path):
+    import json
+
+    import torch
+
+    from semmatch.segment import shipping
+
+    small, shipped = _copy_shipped(shipped_tiny, tmp_path)
+    manifest = json.loads((shipped / "compact.json").read_text())
+    digest = shipping.weights_sha256(shipped / "compact.pt")
+    assert manifest["weights_sha256"] == digest
+    ckpt = torch.load(shipped / "compact.pt", weights_only=True)
+    ckpt["finished_at"], ckpt["train_seconds"] = "2000-01-01T00:00:00Z", 1.0  # another run, same weights
+    torch.save(ckpt, tmp_path / "again.pt")
+    assert shipping.file_sha256(tmp_path / "again.pt") != manifest["checkpoint_sha256"]
+    assert shipping.weights_sha256(tmp_path / "again.pt") == digest
+    name = sorted(ckpt["state_dict"])[0]
+    ckpt["state_dict"][name] = ckpt["state_dict"][name].clone()
+    ckpt["state_dict"][name].view(-1)[0] += 1e-6  # one weight moves
+    torch.save(ckpt, tmp_path / "moved.pt")
+    assert shipping.weights_sha256(tmp_path / "moved.pt") != digest
+
+
+@pytest.mark.parametrize("network", ["compact", "strong"])
+def test_the_committed_manifests_describe_their_checkpoints(network):
+    import json
+
+    from semmatch.segment import shipping
+
+    folder = Path(__file__).resolve().parents[1] / "models" / "full"
+    manifest = json.loads((folder / f"{network}.json").read_text())
+    assert manifest["checkpoint_sha256"] == shipping.file_sha256(folder / f"{network}.pt")
+    assert manifest["weights_sha256"] == shipping.weights_sha256(folder / f"{network}.pt")
+
+
+def test_retraining_uses_the_shipped_cpu_runs_threads_and_reports_the_same_weights(shipped_tiny, tmp_path):
+    import json
+    from dataclasses import replace
+
+    import torch
+
+    from semmatch.segment import shipping
+
+    small, shipped = _copy_shipped(shipped_tiny, tmp_path)
+    manifest = json.loads((shipped / "compact.json").read_text())
+    assert manifest["trained_on"]["device"] == "cpu"
+    threads = manifest["trained_on"]["torch_threads"]
+    cfg = _config(tmp_path, out=str(tmp_path / "data" / "models" / "compact.pt"), steps=2, eval_every=2, device="cpu")
+    got, found, why = shipping.shipped_run(cfg, shipped)
+    assert got.threads == threads and found["weights_sha256"] == manifest["weights_sha256"] and "thread" in why
+    assert shipping.shipped_run(replace(cfg, threads=3), shipped)[0].threads == 3  # its own count stays
+    assert shipping.shipped_run(replace(cfg, steps=1), shipped)[1:] == (None, "")  # another recipe: nothing
+    assert shipping.shipped_run(cfg, None) == (cfg, None, "")
+    gpu = dict(manifest, trained_on=dict(manifest["trained_on"], device="cuda"))
+    (shipped / "compact.json").write_text(json.dumps(gpu))
+    got, found, why = shipping.shipped_run(cfg, shipped)
+    assert got.threads is None and found is not None and why == ""  # a GPU run is compared with, not copied
+    (shipped / "compact.json").write_text(json.dumps(manifest))
+    # the real retraining: the shipped run's thread count gives its weights again, and the
+    # process keeps its own thread count afterwards
+    before = torch.get_num_threads()
+    torch.set_num_threads(threads + 1)
+    try:
+        lines = []
+        ckpts, _ = shipping.provide_networks({"compact": cfg}, shipped_dir=shipped, retrain=True,
+                                             views={0: small}, log=lines.append)
+        assert torch.get_num_threads() == threads + 1
+    finally:
+        torch.set_num_threads(before)
+    assert "the same weights as the shipped network" in lines[-1], lines
+    assert shipping.weights_sha256(ckpts["compact"]) == manifest["weights_sha256"]
+    moved = dict(manifest, weights_sha256="0" * 64)
+    (shipped / "compact.json").write_text(json.dumps(moved))
+    lines = []
+    shipping.provide_networks({"compact": cfg}, shipped_dir=shipped, retrain=True, views={0: small},
+                              log=lines.append)
+    assert "other weights than the shipped network" in lines[-1], lines
 
 
 def test_a_network_whose_config_differs_from_the_shipped_one_is_trained(shipped_tiny, tmp_path):

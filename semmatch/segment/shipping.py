@@ -2,12 +2,15 @@
 
 A shipped folder holds, per network, ``<name>.pt`` (the checkpoint, loaded with
 ``weights_only=True``) and ``<name>.json`` (its manifest: training configuration, SHA-256 of the
-training data and of the checkpoint, training time, where it was trained, validation scores,
-date), plus ``recipe.json`` (the test-time flip choice made on the validation sweeps).
+training data, of the checkpoint file and of its weights, training time, where it was trained,
+validation scores, date), plus ``recipe.json`` (the test-time flip choice made on the validation sweeps).
 
 Notebook 02 (:func:`provide_networks`) uses a shipped checkpoint when its training
 configuration equals the one the profile asks for, and trains otherwise; ``make repro TRAIN=1``
-(``SEMMATCH_TRAIN=1``) trains every network. ``python -m semmatch.experiments ship`` writes a
+(``SEMMATCH_TRAIN=1``) trains every network, a network shipped from a CPU run with that run's
+torch thread count (the thread count sets the order of the floating-point sums, and one thread
+reproduces a one-thread run's weights bit for bit), and says whether the weights came out the
+same as the shipped ones (:func:`weights_sha256`). ``python -m semmatch.experiments ship`` writes a
 shipped folder from trained checkpoints.
 """
 
@@ -24,8 +27,8 @@ from pathlib import Path
 from ..io import atomic_path, atomic_write_text
 
 __all__ = [
-    "MANIFEST_FORMAT", "file_sha256", "network_manifest", "ship_networks", "shipped_checkpoint",
-    "install_checkpoint", "provide_networks", "apply_shipped_recipe",
+    "MANIFEST_FORMAT", "file_sha256", "weights_sha256", "network_manifest", "ship_networks", "shipped_checkpoint",
+    "install_checkpoint", "provide_networks", "shipped_run", "apply_shipped_recipe",
 ]
 
 #: the ``format`` entry of a manifest
@@ -47,6 +50,34 @@ def file_sha256(path: str | os.PathLike) -> str:
     return h.hexdigest()
 
 
+def weights_sha256(checkpoint: str | os.PathLike) -> str:
+    """SHA-256 (hex) of a checkpoint's weights: every tensor of its ``state_dict`` in key order,
+    each with its name, dtype and shape.
+
+    A checkpoint file also stores when, where and how long its network was trained, so two runs
+    that learn the same weights write different files (:func:`file_sha256`); this digest is the
+    same for them.
+
+    Parameters
+    ----------
+    checkpoint : path
+        A checkpoint written by :func:`semmatch.segment.train` (loaded with ``weights_only=True``).
+
+    Returns
+    -------
+    str
+    """
+    import torch
+
+    state = torch.load(checkpoint, map_location="cpu", weights_only=True)["state_dict"]
+    h = hashlib.sha256()
+    for name in sorted(state):
+        t = state[name].detach().cpu().contiguous()
+        h.update(f"{name}|{t.dtype}|{tuple(t.shape)}|".encode())
+        h.update(t.reshape(-1).view(torch.uint8).numpy().tobytes())
+    return h.hexdigest()
+
+
 def network_manifest(checkpoint: str | os.PathLike, *, code_version: str | None = None) -> dict:
     """The manifest of a trained checkpoint (what :func:`ship_networks` writes beside it).
 
@@ -60,7 +91,8 @@ def network_manifest(checkpoint: str | os.PathLike, *, code_version: str | None 
     Returns
     -------
     dict
-        ``format``, ``network``, ``checkpoint``, ``checkpoint_sha256``, ``size_bytes``,
+        ``format``, ``network``, ``checkpoint``, ``checkpoint_sha256``, ``weights_sha256``,
+        ``size_bytes``,
         ``train_config``, ``training_data`` (``views_sha256`` and what it hashes),
         ``code_version``, ``train_seconds``, ``trained_on`` (device, CPU/GPU model, threads,
         load average), ``trained_at`` (UTC), ``validation`` (best step and its scores).
@@ -84,6 +116,7 @@ def network_manifest(checkpoint: str | os.PathLike, *, code_version: str | None 
         "network": path.stem,
         "checkpoint": path.name,
         "checkpoint_sha256": file_sha256(path),
+        "weights_sha256": weights_sha256(path),
         "size_bytes": path.stat().st_size,
         "train_config": info["train_config"],
         "training_data": {"views_sha256": info["views_sha256"], "hashed": DATA_HASH_NOTE},
@@ -225,7 +258,10 @@ def provide_networks(configs: Mapping, *, shipped_dir: str | os.PathLike | None,
     shipped_dir : path or None
         The shipped folder (``models/<profile>``); None: train (or reuse ``config.out``).
     retrain : bool
-        Train every network (``make repro TRAIN=1``); ``shipped_dir`` is ignored.
+        Train every network (``make repro TRAIN=1``). A network whose shipped copy has the same
+        configuration and was trained on the CPU is retrained with that run's torch thread count
+        when training on the CPU too (unless its config sets ``threads``), and the log says
+        whether the retrained weights equal the shipped ones (:func:`shipped_run`).
     jobs : int, optional
         Scenes rendered in parallel when views must be rendered
         (:func:`~semmatch.segment.training.build_views`).
@@ -254,18 +290,75 @@ def provide_networks(configs: Mapping, *, shipped_dir: str | os.PathLike | None,
         return views[cfg.seed]
 
     for net, cfg in configs.items():
-        src, why = (None, "retraining (TRAIN=1)") if retrain else shipped_checkpoint(cfg, shipped_dir)
+        manifest = None
+        if retrain:
+            cfg, manifest, why = shipped_run(cfg, shipped_dir)
+            src, why = None, f"retraining (TRAIN=1){why}"
+        else:
+            src, why = shipped_checkpoint(cfg, shipped_dir)
         t0 = time.perf_counter()
         if src is not None:  # copied to cfg.out (unless that already holds the same bytes) instead of training
             checkpoints[net] = install_checkpoint(src, cfg.out)
-        else:
-            checkpoints[net] = train_or_load(cfg, retrain=retrain, views=lambda cfg=cfg: views_of(cfg))
-        if src is not None:
             shipped.append(net)
             log(f"{net}: shipped network {src}")
-        else:
-            log(f"{net}: {checkpoints[net]} ({why}; {time.perf_counter() - t0:.0f} s)")
+            continue
+        checkpoints[net] = train_or_load(cfg, retrain=retrain, views=lambda cfg=cfg: views_of(cfg))
+        if manifest is not None:
+            same = manifest.get("weights_sha256") == weights_sha256(checkpoints[net])
+            ran = manifest.get("trained_on") or {}
+            why += ("; the same weights as the shipped network" if same else
+                    f"; other weights than the shipped network (trained on {ran.get('device', '?')} with "
+                    f"{ran.get('torch_threads', '?')} torch threads)")
+        log(f"{net}: {checkpoints[net]} ({why}; {time.perf_counter() - t0:.0f} s)")
     return checkpoints, shipped
+
+
+def shipped_run(config, shipped_dir: str | os.PathLike | None) -> tuple:
+    """How to retrain a shipped network so that its weights can come out the same.
+
+    The thread count of a CPU training sets the order of its floating-point sums, and the rounding
+    differences grow over the steps; one thread reproduces a one-thread run's weights bit for
+    bit. A GPU run's weights cannot be reproduced on the CPU.
+
+    Parameters
+    ----------
+    config : TrainConfig
+        The network's configuration (``config.out`` names the network).
+    shipped_dir : path or None
+        The shipped folder.
+
+    Returns
+    -------
+    (TrainConfig, dict or None, str)
+        ``config``, with the shipped run's ``threads`` when the shipped network has the same
+        configuration, was trained on the CPU and this one trains on the CPU with no thread count
+        of its own; the shipped manifest (None: no shipped network of this configuration); and
+        what was done, for a log line ("" when nothing).
+
+    Raises
+    ------
+    ValueError
+        The shipped manifest is not valid JSON.
+    """
+    from dataclasses import replace
+
+    from .training import config_differences, config_record, resolve_device
+
+    path = Path(shipped_dir) / Path(config.out).with_suffix(".json").name if shipped_dir else None
+    if path is None or not path.is_file():
+        return config, None, ""
+    try:
+        manifest = json.loads(path.read_text())
+    except json.JSONDecodeError as e:
+        raise ValueError(f"{path}: not valid JSON ({e})") from None
+    if config_differences(manifest.get("train_config") or {}, config_record(config)):
+        return config, None, ""
+    ran = manifest.get("trained_on") or {}
+    threads = ran.get("torch_threads")
+    if (config.threads is None and ran.get("device") == "cpu" and isinstance(threads, int) and threads > 0
+            and resolve_device(config.device).type == "cpu"):
+        return replace(config, threads=threads), manifest, f", {threads} torch thread(s) as the shipped run"
+    return config, manifest, ""
 
 
 def apply_shipped_recipe(data_root: str | os.PathLike, shipped_dir: str | os.PathLike,

@@ -273,7 +273,11 @@ def _config_record(config: TrainConfig) -> dict:
     return _plain(asdict(replace(config, progress=False)))
 
 
-#: config fields that do not change the trained weights (ignored when matching checkpoints);
+#: config fields that are not part of the training recipe (ignored when matching checkpoints):
+#: ``threads`` and ``device`` change only the order of the floating-point sums, but rounding
+#: differences grow over the steps, so the learned weights differ (a one-thread CPU run
+#: reproduces a one-thread CPU run's weights exactly; ``shipping.provide_networks`` retrains with
+#: the shipped run's threads);
 #: ``eval_seeds`` is only checked for disjointness, so a network serves any evaluation scenes
 #: (a confirmatory run's too) that its training and validation scenes leave apart
 _NOT_IDENTITY = ("out", "progress", "threads", "cache_dir", "device", "eval_seeds")
@@ -282,8 +286,9 @@ _NOT_IDENTITY = ("out", "progress", "threads", "cache_dir", "device", "eval_seed
 def config_differences(stored: dict, wanted: dict) -> list[str]:
     """The training-configuration entries in which two ``train_config`` records differ.
 
-    Fields that do not change the trained weights (output path, progress, threads, cache,
-    device) are ignored.
+    Fields that are not part of the training recipe (output path, progress, threads, cache,
+    device, evaluation seeds) are ignored; threads and device still change the learned weights
+    through the rounding of their sums (:data:`_NOT_IDENTITY`).
 
     Parameters
     ----------

@@ -301,10 +301,24 @@ def train(config: TrainConfig, *, views: tuple[D.Views, D.Views] | None = None) 
         ``categories`` (:func:`semmatch.labels.table_fingerprint`), ``metrics`` (best
         validation scores), ``history`` (per evaluation: step, train loss, val mIoU/accuracy,
         learning rate, seconds), ``train_config``, ``class_weights``, ``n_parameters``.
+
+    Notes
+    -----
+    ``config.threads`` holds for the training only: the process's torch thread count is restored
+    afterwards (so that a one-thread training does not slow what runs after it).
     """
     config.validate()
+    before = torch.get_num_threads()
     if config.threads:
         torch.set_num_threads(int(config.threads))
+    try:
+        return _train(config, views)
+    finally:
+        torch.set_num_threads(before)
+
+
+def _train(config: TrainConfig, views: tuple[D.Views, D.Views] | None) -> Path:
+    """:func:`train` on the thread count already set."""
     device = resolve_device(config.device)
     if device.type == "cuda":
         os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")
