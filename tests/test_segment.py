@@ -501,6 +501,12 @@ def test_retraining_uses_the_shipped_cpu_runs_threads_and_reports_the_same_weigh
     shipping.provide_networks({"compact": cfg}, shipped_dir=shipped, retrain=True, views={0: small},
                               log=lines.append)
     assert "other weights than the shipped network" in lines[-1], lines
+    del moved["weights_sha256"]  # a manifest from before the weights digest
+    (shipped / "compact.json").write_text(json.dumps(moved))
+    lines = []
+    shipping.provide_networks({"compact": cfg}, shipped_dir=shipped, retrain=True, views={0: small},
+                              log=lines.append)
+    assert "no weights digest" in lines[-1], lines
 
 
 def test_a_network_whose_config_differs_from_the_shipped_one_is_trained(shipped_tiny, tmp_path):

@@ -303,8 +303,10 @@ def provide_networks(configs: Mapping, *, shipped_dir: str | os.PathLike | None,
             log(f"{net}: shipped network {src}")
             continue
         checkpoints[net] = train_or_load(cfg, retrain=retrain, views=lambda cfg=cfg: views_of(cfg))
-        if manifest is not None:
-            same = manifest.get("weights_sha256") == weights_sha256(checkpoints[net])
+        if manifest is not None and not manifest.get("weights_sha256"):
+            why += "; the shipped manifest has no weights digest to compare with"
+        elif manifest is not None:
+            same = manifest["weights_sha256"] == weights_sha256(checkpoints[net])
             ran = manifest.get("trained_on") or {}
             why += ("; the same weights as the shipped network" if same else
                     f"; other weights than the shipped network (trained on {ran.get('device', '?')} with "
