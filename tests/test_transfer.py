@@ -471,6 +471,44 @@ def test_bench_transfer_json(capsys):
     assert fused["methods"]["3d-neighborhood"]["fps"] > 0 and 0 < fused["methods"]["3d-neighborhood"]["coverage"] < 1
 
 
+def test_rate_spread_counts_the_runs_where_every_method_reached_the_target():
+    from semmatch.cli.bench.transfer import rate_spread, sensor_rate_fps
+
+    def run(a, b, ref=4.0):
+        return {"methods": {"2d-slic": {"cpu_fps": a}, "dbscan": {"cpu_fps": b}, "3d-neighborhood (exact)":
+                            {"cpu_fps": 1.0}}, "reference": {"cpu_fps": ref}}
+
+    runs = [run(29.0, 35.0), run(31.0, 33.0), run(30.0, 28.0, 5.0)]
+    got = rate_spread(runs, ["2d-slic", "dbscan"], 30.0)
+    assert got["runs_all_at_target"] == 1  # the slow variant is not a method that must reach it
+    assert got["spread"]["2d-slic"] == {"median": 30.0, "min": 29.0, "max": 31.0, "runs_at_target": 2}
+    assert got["spread"]["dbscan"]["runs_at_target"] == 2 and got["spread"]["dbscan"]["median"] == 33.0
+    assert got["spread"]["reference (closest point)"]["max"] == 5.0
+    assert rate_spread(runs, ["dbscan"], 34.0)["runs_all_at_target"] == 1
+    assert sensor_rate_fps() == 30.0  # the analysis plan's P3
+
+
+@pytest.mark.slow
+def test_bench_transfer_repeat_reports_the_spread(capsys):
+    import json
+
+    from semmatch.cli import main
+
+    args = ["bench", "transfer", "--frames", "1", "--methods", "3d-neighborhood", "--map", "mesh", "--repeat", "2"]
+    assert main([*args, "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    mesh = out["maps"]["mesh"]
+    assert out["repeat"] == 2 and out["target_fps"] == 30.0 and len(mesh["runs"]) == 2
+    rates = [r["3d-neighborhood"] for r in mesh["runs"]]
+    spread = mesh["spread"]["3d-neighborhood"]
+    assert spread["min"] == min(rates) and spread["max"] == max(rates) and spread["runs_at_target"] <= 2
+    assert mesh["runs_all_at_target"] == sum(r >= 30.0 for r in rates)
+    assert out["methods"]["3d-neighborhood"]["cpu_fps"] == rates[0]  # the main table is the first run
+    assert main(args) == 0
+    assert "runs with every method at >= 30 CPU FPS" in capsys.readouterr().out
+    assert main(["bench", "transfer", "--repeat", "0"]) == 2
+
+
 def test_time_methods_reports_cpu_and_wall_rates_on_one_thread(frames, index):
     """The timing behind ``bench transfer`` and Table 1: the rate from the CPU time of the
     method, the wall rate and the load beside it, on one OpenCV / BLAS / torch thread, restored
