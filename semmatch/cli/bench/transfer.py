@@ -120,7 +120,7 @@ def rate_spread(runs: list[dict], methods, target: float) -> dict:
     return {"spread": spread, "runs_all_at_target": int(every)}
 
 
-def _time_map(semantic_map, frames, methods, repeat: int = 1, target: float = 30.0) -> dict:
+def _time_map(semantic_map, frames, methods, repeat: int, target: float) -> dict:
     """Index one map and time every method against it ``repeat`` times in a row
     (:func:`semmatch.transfer.benchmark.time_methods`); the first run's timings, with the
     spread over the runs (:func:`rate_spread`) when ``repeat > 1``."""
