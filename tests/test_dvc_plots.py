@@ -65,6 +65,26 @@ def _marks(dom: str, div: str, role: str) -> list[tuple[str, str]]:
     return out
 
 
+def _bar_size(path: str) -> tuple[float, float]:
+    """(width, height) of a vega bar path ``M x,y h W v H h -W Z`` (0, 0 when it is not one)."""
+    m = re.fullmatch(r"M-?[\d.e+-]+,-?[\d.e+-]+h(-?[\d.e+-]+)v(-?[\d.e+-]+)h-?[\d.e+-]+Z", path)
+    return (abs(float(m.group(1))), abs(float(m.group(2)))) if m else (0.0, 0.0)
+
+
+def _tick_labels(dom: str, div: str) -> list[str]:
+    """The numeric axis labels drawn inside the plot ``div``."""
+    start = dom.index(f'id="{div}"')
+    end = dom.find('<div id="', start + 10)
+    part = dom[start:end if end > 0 else len(dom)]
+    return [t for t in re.findall(r"<text[^>]*>([^<]*)</text>", part) if re.fullmatch(r"-?[\d.,]+%?", t)]
+
+
+def test_bar_size_reads_vega_paths():
+    assert _bar_size("M3.6,99.7h64.8v140.2h-64.8Z") == (64.8, 140.2)
+    assert _bar_size("M3.6,0h64.8v0h-64.8Z") == (64.8, 0.0)
+    assert _bar_size("M0,0L1,1") == (0.0, 0.0)
+
+
 def _xs_increase(path: str) -> bool:
     """True when the x coordinates of an SVG polyline (M/L commands) never go back."""
     xs = [float(x) for x in re.findall(r"[ML](-?[\d.]+),", path)]
@@ -102,5 +122,10 @@ def test_dvc_plots_page_draws_one_mark_per_series(tmp_path):
         bars = _marks(dom, div, "bar")
         assert len(bars) == len(pd.read_csv(FIGURES / name)), name
         assert all(d and "NaN" not in d for d, _ in bars), name
+        # drawn, not only present: a log axis with bars from 0 gave five bars of height 0 and no ticks
+        assert all(min(_bar_size(d)) > 1.0 for d, _ in bars), f"{name}: a bar of no visible size: {bars}"
+    for div in ("figures_full_table1_speed_csv", "figures_full_support_per_scene_csv",
+                "figures_full_fig3_height_csv", "figures_full_misregistration_csv"):
+        assert len(set(_tick_labels(dom, div))) >= 3, f"{div}: no numeric axis ticks drawn"
     routes = {c for _, c in _marks(dom, "figures_full_support_per_scene_csv", "bar")}
     assert len(routes) == pd.read_csv(FIGURES / "support_per_scene.csv")["route"].nunique()
