@@ -9,7 +9,6 @@ from semmatch.fusion import (
     SemanticTSDF,
     check_depth_units,
     extract,
-    fuse,
     fuse_sequence,
     reconstruct,
     reconstruct_many,
@@ -114,11 +113,6 @@ def test_labels_from_folder_and_outputs(tmp_path, room_frames):
     with pytest.raises(ValueError, match="5 images for 6 frames"):
         write_labels_folder(tmp_path / "short", [np.zeros(INTR.shape, np.uint8)] * 5)
         reconstruct(read_sequence(seq_dir), labels=tmp_path / "short")
-    # the old name: the same function, for one release, with a warning that names the new one
-    with pytest.warns(DeprecationWarning, match=r"semmatch\.fusion\.fuse is deprecated: call semmatch\.fusion\.fuse_sequence"):
-        old = extract(fuse(read_sequence(seq_dir), labels=tmp_path / "sofa", voxel_size=VS))
-    assert np.array_equal(old.points, m.points) and np.array_equal(old.labels, m.labels)
-    assert fuse.__name__ == "fuse" and "fuse_sequence" in fuse.__doc__
 
 
 def _same_map(a, b) -> bool:

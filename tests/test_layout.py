@@ -1,14 +1,13 @@
 """The package's layout and import graph: few loose top-level modules, no import circles between
-its parts or its modules, old import paths kept only as deprecation shims that nothing of ours
-uses, and the sizes (no function over 80 lines of code, no module over 600 lines without a
+its parts or its modules, the old flat import paths gone and named nowhere, and the sizes (no function over 80 lines of code, no module over 600 lines without a
 stated reason at its top).
 
 The graph is read statically (``ast``) from every module of ``semmatch``, counting imports
 anywhere in a module (also those inside functions, which run only when called), but not those
 for type annotations only (``if TYPE_CHECKING:``), which never run. A *unit* is a
 top-level part: a subpackage (``semmatch.transfer``) or a loose module (``semmatch.geometry``).
-A *shim* is a module kept at an old path for one release: its body is a docstring and the call
-``_moved_module(__name__, "<new path>")`` (:func:`semmatch._moved_module`), nothing else.
+The flat module paths of earlier versions (:data:`REMOVED`) were deprecation shims for one
+release and are gone.
 """
 
 from __future__ import annotations
@@ -24,8 +23,17 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "semmatch"
-#: at most this many loose modules directly under semmatch/ (shims, __init__ and __main__ aside)
+#: at most this many loose modules directly under semmatch/ (__init__ and __main__ aside)
 MAX_LOOSE = 10
+#: old flat module paths (deprecated for one release, then removed) -> where the module lives now
+REMOVED = {
+    "semmatch.dbscan": "semmatch.transfer.dbscan", "semmatch.metrics": "semmatch.evaluate.metrics",
+    "semmatch.odometry": "semmatch.poses.odometry", "semmatch.planes": "semmatch.transfer.planes",
+    "semmatch.pose_graph": "semmatch.poses.pose_graph", "semmatch.recordings": "semmatch.io.recordings",
+    "semmatch.reference": "semmatch.evaluate.reference", "semmatch.registration": "semmatch.poses.registration",
+    "semmatch.rgbd_odometry": "semmatch.poses.rgbd_odometry", "semmatch.stats": "semmatch.evaluate.stats",
+    "semmatch.trajectory_metrics": "semmatch.poses.trajectory_metrics",
+}
 
 
 def _modules() -> dict[str, tuple[Path, bool]]:
@@ -39,24 +47,6 @@ def _modules() -> dict[str, tuple[Path, bool]]:
 
 
 MODULES = _modules()
-
-
-def shim_target(path: Path) -> str | None:
-    """The new module path a shim aliases, or None when ``path`` is not a shim."""
-    body = ast.parse(path.read_text()).body
-    if body and isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant):
-        body = body[1:]  # the docstring
-    if (len(body) == 2 and isinstance(body[0], ast.ImportFrom) and body[0].module == "semmatch"
-            and [a.name for a in body[0].names] == ["_moved_module"]
-            and isinstance(body[1], ast.Expr) and isinstance(call := body[1].value, ast.Call)
-            and isinstance(call.func, ast.Name) and call.func.id == "_moved_module" and len(call.args) == 2
-            and isinstance(call.args[0], ast.Name) and call.args[0].id == "__name__"
-            and isinstance(call.args[1], ast.Constant) and isinstance(call.args[1].value, str)):
-        return call.args[1].value
-    return None
-
-
-SHIMS = {m: t for m, (f, _) in MODULES.items() if (t := shim_target(f)) is not None}
 
 
 def _resolve(name: str) -> str | None:
@@ -153,16 +143,15 @@ def _unit(module: str) -> str:
     return ".".join(module.split(".")[:2])
 
 
-def test_shims_alias_existing_modules_and_nothing_else():
-    assert SHIMS, "no deprecation shim found: the old import paths must stay one release"
-    for old, new in SHIMS.items():
-        assert new in MODULES and new not in SHIMS, f"{old} aliases {new}, which is not a module of ours"
-        assert new.rpartition(".")[2] == old.rpartition(".")[2], f"{old} -> {new}: a move keeps the name"
+def test_old_flat_paths_are_gone_and_their_modules_live_on():
+    for old, new in REMOVED.items():
+        assert old not in MODULES, f"{old} is back: the flat paths were removed after one release as shims"
+        assert new in MODULES, f"{new} (the home of the old {old}) is not a module of ours"
 
 
 def test_at_most_ten_loose_top_level_modules():
     loose = sorted(m for m, (_, is_pkg) in MODULES.items()
-                   if m.count(".") == 1 and not is_pkg and m not in SHIMS and m != "semmatch.__main__")
+                   if m.count(".") == 1 and not is_pkg and m != "semmatch.__main__")
     assert len(loose) <= MAX_LOOSE, f"{len(loose)} loose top-level modules (at most {MAX_LOOSE}): {loose}"
 
 
@@ -194,7 +183,7 @@ def _code_files():
     this = Path(__file__).resolve()
     for folder in ("semmatch", "tests", "scripts"):
         for f in sorted((ROOT / folder).rglob("*.py")):
-            if f.resolve() != this and f.relative_to(ROOT).with_suffix("").as_posix().replace("/", ".") not in SHIMS:
+            if f.resolve() != this:
                 yield f.relative_to(ROOT).as_posix(), f.read_text()
     for f in sorted((ROOT / "notebooks").glob("*.ipynb")):
         cells = json.loads(f.read_text())["cells"]
@@ -203,9 +192,9 @@ def _code_files():
 
 
 def test_nothing_of_ours_uses_an_old_import_path():
-    """Package, tests, scripts and notebooks name the new paths only (imports, patch targets,
-    docstrings); the old ones are for users' code, for one release."""
-    old = re.compile(r"\b(" + "|".join(re.escape(s) for s in sorted(SHIMS)) + r")\b(?!\.py)")
+    """Package, tests, scripts and notebooks name the current paths only (imports, patch targets,
+    docstrings): an old flat path would fail to import."""
+    old = re.compile(r"\b(" + "|".join(re.escape(s) for s in sorted(REMOVED)) + r")\b(?!\.py)")
     found = [f"{name}: {m.group(1)}" for name, text in _code_files() for m in old.finditer(text)]
     assert not found, "old import paths in use:\n" + "\n".join(found)
 
@@ -215,36 +204,17 @@ def _run(code: str) -> subprocess.CompletedProcess:
 
 
 @pytest.mark.slow
-def test_every_module_imports_without_a_shim():
-    """Importing every module of semmatch (not a shim) loads no shim: a DeprecationWarning from
-    one is an error here."""
-    names = sorted(m for m in MODULES if m not in SHIMS and not m.endswith("__main__"))
+def test_every_module_imports():
+    """Every module of semmatch imports (optional third-party packages aside)."""
+    names = sorted(m for m in MODULES if not m.endswith("__main__"))
     code = (
-        "import importlib, warnings\n"
-        "warnings.filterwarnings('error', r'semmatch\\.\\S+ has moved to', DeprecationWarning)\n"
+        "import importlib\n"
         f"for name in {names!r}:\n"
         "    try:\n"
         "        importlib.import_module(name)\n"
         "    except ModuleNotFoundError as e:\n"
         "        if (e.name or 'semmatch').startswith('semmatch'):\n"
         "            raise\n"  # an optional third-party package (habitat_sim, detectron2) is fine
-    )
-    run = _run(code)
-    assert run.returncode == 0, run.stderr[-3000:]
-
-
-def test_old_import_paths_warn_and_give_the_new_module():
-    code = (
-        "import importlib, sys, warnings\n"
-        "import semmatch\n"
-        f"for old, new in {sorted(SHIMS.items())!r}:\n"
-        "    with warnings.catch_warnings(record=True) as w:\n"
-        "        warnings.simplefilter('always')\n"
-        "        mod = importlib.import_module(old)\n"
-        "    assert mod is sys.modules[new] is sys.modules[old], old\n"
-        "    msgs = [str(x.message) for x in w if issubclass(x.category, DeprecationWarning)]\n"
-        "    assert any(m.startswith(f'{old} has moved to {new}') for m in msgs), (old, msgs)\n"
-        "    assert all(x.filename != semmatch.__file__ for x in w), old\n"  # the importer's line, not ours
     )
     run = _run(code)
     assert run.returncode == 0, run.stderr[-3000:]

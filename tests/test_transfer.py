@@ -17,9 +17,7 @@ from semmatch.transfer import (
     METHODS,
     MapIndex,
     as_map_index,
-    fuse,
     fuse_with_probabilities,
-    prepare,
     superpixels,
     transfer,
     transfer_frame,
@@ -170,14 +168,6 @@ def test_map_is_indexed_once(frames, gt_map):
         as_map_index(idx, max_distance=0.3)
 
 
-def test_prepare_is_a_deprecated_name_of_as_map_index(gt_map):
-    idx = as_map_index(gt_map, **FAST)
-    with pytest.warns(DeprecationWarning, match="as_map_index"):
-        assert prepare(gt_map, **FAST) is idx
-    with pytest.warns(DeprecationWarning):
-        assert prepare(idx) is idx
-
-
 # ----------------------------------------------------------------------------- bad input
 def test_bad_input(frames, index):
     f = frames[0]
@@ -319,11 +309,6 @@ def test_fuse_with_probabilities_takes_the_network_argmax_only_where_it_decides(
     assert (all_kept == 1).all()
     with pytest.raises(ValueError, match="NaN"):
         fuse_with_probabilities(labels, np.full((40, 50, 21), np.nan, np.float32))
-    # the old name: the same function, for one release, with a warning that names the new one
-    with pytest.warns(DeprecationWarning, match=r"semmatch\.transfer\.fuse is deprecated: call "
-                                                r"semmatch\.transfer\.fuse_with_probabilities"):
-        old = fuse(labels, probs, purity=purity, min_purity=0.5)
-    assert np.array_equal(old, fuse_with_probabilities(labels, probs, purity=purity, min_purity=0.5))
 
 
 def test_fused_method(frames, index):

@@ -3,8 +3,7 @@
 :mod:`~semmatch.fusion.tsdf` holds the volume (:class:`SemanticTSDF`: Open3D's voxel-block TSDF
 with one log-evidence channel per category, a Bayesian label update per surface point);
 :mod:`~semmatch.fusion.reconstruction` the drivers that fuse a whole sequence with it
-(:func:`fuse_sequence`, :func:`extract`, :func:`reconstruct`, :func:`reconstruct_many`; ``fuse``
-is the deprecated old name of :func:`fuse_sequence`, for one release). Every public
+(:func:`fuse_sequence`, :func:`extract`, :func:`reconstruct`, :func:`reconstruct_many`). Every public
 name is importable from ``semmatch.fusion`` itself; :func:`check_depth_units` (from
 :mod:`semmatch.io`) and :func:`default_device` (from :mod:`semmatch.engine`) are re-exported
 here as before.
@@ -12,8 +11,8 @@ here as before.
 
 from ..engine import default_device
 from ..io import DEPTH_UNIT_RANGE, check_depth_units  # noqa: F401 (DEPTH_UNIT_RANGE: as before)
-from .reconstruction import extract, fuse, fuse_sequence, reconstruct, reconstruct_many
+from .reconstruction import extract, fuse_sequence, reconstruct, reconstruct_many
 from .tsdf import EvidencePixels, SemanticTSDF
 
-__all__ = ["SemanticTSDF", "EvidencePixels", "fuse_sequence", "fuse", "extract", "reconstruct", "reconstruct_many", "check_depth_units",
-           "default_device"]
+__all__ = ["SemanticTSDF", "EvidencePixels", "fuse_sequence", "extract", "reconstruct", "reconstruct_many",
+           "check_depth_units", "default_device"]

@@ -17,11 +17,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import _renamed_function
 from ..io import Frame, SemanticMap, read_label_image, read_labels_folder, write_map
 from .tsdf import SemanticTSDF
 
-__all__ = ["fuse_sequence", "fuse", "extract", "reconstruct", "reconstruct_many"]
+__all__ = ["fuse_sequence", "extract", "reconstruct", "reconstruct_many"]
 
 
 def _label_source(labels, n: int | None) -> Iterator[np.ndarray | None] | None:
@@ -152,7 +151,6 @@ def fuse_sequence(
 
 
 #: the old name of :func:`fuse_sequence` (deprecated; one release)
-fuse = _renamed_function(fuse_sequence, "semmatch.fusion.fuse", "semmatch.fusion.fuse_sequence")
 
 
 def reconstruct(

@@ -12,8 +12,8 @@ plus ``fused`` (transferred labels + a network's probabilities) and
 a method (the CLI, the benchmark and the notebooks pick it up).
 """
 
-from .fused import fuse, fuse_labels, fuse_with_probabilities, write_fused_labels
-from .index import DEFAULT_MAX_DISTANCE, MapIndex, as_map_index, index_cache_dir, load_index, prepare
+from .fused import fuse_labels, fuse_with_probabilities, write_fused_labels
+from .index import DEFAULT_MAX_DISTANCE, MapIndex, as_map_index, index_cache_dir, load_index
 from .registry import (
     ALL_METHODS,
     METHODS,
@@ -44,11 +44,9 @@ __all__ = [
     "load_index",
     "index_cache_dir",
     "as_map_index",
-    "prepare",
     "DEFAULT_MAX_DISTANCE",
     "method_params",
     "fuse_with_probabilities",
-    "fuse",
     "fuse_labels",
     "write_fused_labels",
     "superpixels",

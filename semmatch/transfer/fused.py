@@ -7,10 +7,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import _renamed_function
 from ..labels import NUM_CLASSES
 
-__all__ = ["fuse_with_probabilities", "fuse", "fuse_labels", "write_fused_labels"]
+__all__ = ["fuse_with_probabilities", "fuse_labels", "write_fused_labels"]
 
 
 def fuse_with_probabilities(
@@ -76,7 +75,6 @@ def fuse_with_probabilities(
 
 
 #: the old name of :func:`fuse_with_probabilities` (deprecated; one release)
-fuse = _renamed_function(fuse_with_probabilities, "semmatch.transfer.fuse", "semmatch.transfer.fuse_with_probabilities")
 
 
 def fuse_labels(transferred: np.ndarray, predicted: np.ndarray) -> np.ndarray:

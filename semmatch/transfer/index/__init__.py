@@ -29,8 +29,6 @@ map object).
 
 from __future__ import annotations
 
-import warnings
-
 from ...geometry import MAX_MESH_SAMPLES, sample_mesh
 from ...io import SemanticMap
 from .cache import (
@@ -44,7 +42,7 @@ from .cache import (
 from .label_grid import BLOCK, MAX_INDEX_SAMPLES, MAX_TABLE_BLOCKS
 from .queries import DEFAULT_MAX_DISTANCE, DENSE_LOOKUP_VOXELS, MapIndex
 
-__all__ = ["MapIndex", "as_map_index", "prepare", "load_index", "index_cache_dir", "index_cache_path", "sample_mesh",
+__all__ = ["MapIndex", "as_map_index", "load_index", "index_cache_dir", "index_cache_path", "sample_mesh",
            "DEFAULT_MAX_DISTANCE", "NO_CACHE_ENV", "CACHE_DIR_ENV", "INDEX_CACHE_VERSION", "BLOCK",
            "MAX_MESH_SAMPLES", "MAX_INDEX_SAMPLES", "MAX_TABLE_BLOCKS", "DENSE_LOOKUP_VOXELS"]
 
@@ -100,24 +98,3 @@ def as_map_index(
     _LAST[:] = [(key, semantic_map, index)]
     return index
 
-
-def prepare(
-    semantic_map: SemanticMap | MapIndex,
-    *,
-    max_distance: float | None = None,
-    **index_params,
-) -> MapIndex:
-    """Deprecated name of :func:`as_map_index` (same arguments, same index); goes in the next release.
-
-    Parameters
-    ----------
-    semantic_map, max_distance, **index_params
-        As :func:`as_map_index`.
-
-    Returns
-    -------
-    MapIndex
-    """
-    warnings.warn("semmatch.transfer.prepare is deprecated: call semmatch.transfer.as_map_index (the same "
-                  "function under a name that says what it returns)", DeprecationWarning, stacklevel=2)
-    return as_map_index(semantic_map, max_distance=max_distance, **index_params)

@@ -1,5 +1,0 @@
-"""Deprecated alias of :mod:`semmatch.transfer.planes` (moved there; this path goes in the next release)."""
-
-from semmatch import _moved_module
-
-_moved_module(__name__, "semmatch.transfer.planes")
