@@ -21,6 +21,8 @@ __all__ = [
     "ALL_OTHERS",
     "TOP_HEIGHT",
     "PLAN_FILE",
+    "PLAN_V2_FILE",
+    "RULES",
     "FRAMES_REFERENCE",
     "Claim",
     "AnalysisPlan",
@@ -43,6 +45,10 @@ ALL_OTHERS = "<all others>"
 TOP_HEIGHT = "<top height>"
 #: the analysis plan read by :func:`load_analysis_plan`
 PLAN_FILE = Path(__file__).with_name("analysis_plan.yaml")
+#: the second analysis plan (issue 52: minimum-effect, intersection-union and "refuted" rules)
+PLAN_V2_FILE = Path(__file__).with_name("analysis_plan_v2.yaml")
+#: the verdict rules a plan can declare (``rules:`` in its YAML; v1's plan has none: ``v1``)
+RULES = ("v1", "v2")
 
 _DATA = {"synthetic": "table2", "real-like": "table3", "height sweep": "fig3", "depth noise": "noise"}
 _KINDS = ("beats", "best", "worst", "similar")
@@ -129,6 +135,11 @@ class AnalysisPlan:
     secondary_references : tuple of str
     route : str
     speed_claims : tuple of dict
+    rules : str
+        The verdict rules (:data:`RULES`): ``v1`` (Holm-adjusted tests, the half-count claim rule)
+        or ``v2`` (minimum-effect test, intersection-union, ``refuted``, kind clusters).
+    version : int
+        The plan's ``plan_version``.
     raw : dict
         The whole YAML document.
     """
@@ -143,6 +154,8 @@ class AnalysisPlan:
     secondary_references: tuple[str, ...] = ("mesh",)
     route: str = "own"
     speed_claims: tuple[dict, ...] = ()
+    rules: str = "v1"
+    version: int = 1
     raw: dict = field(default_factory=dict, compare=False, repr=False)
 
     @property
@@ -150,15 +163,34 @@ class AnalysisPlan:
         """The primary reference, then the secondary ones."""
         return (self.primary_reference, *self.secondary_references)
 
+    @property
+    def one_network_interval(self) -> str:
+        """The interval method for tables with one network per architecture (v2's ``one_network_interval``;
+        the plan's ``interval`` in a v1 plan)."""
+        return str(self.raw.get("inference", {}).get("one_network_interval", self.interval))
+
 
 def _level(v: object) -> str | float:
     return float(v) if isinstance(v, int | float) else str(v)
 
 
+def _carried_over(data: dict, source: str) -> tuple[Claim, ...]:
+    """The claims a plan carries over from another plan file (``claims_carried_over: {from, ids}``)."""
+    spec = data.get("claims_carried_over")
+    if not spec:
+        return ()
+    other = load_analysis_plan(Path(source).with_name(str(spec["from"])))
+    by_id = {c.id: c for c in other.claims}
+    unknown = [i for i in spec["ids"] if str(i) not in by_id]
+    if unknown:
+        raise ValueError(f"{source}: claims_carried_over names claims {unknown} that {spec['from']} does not have")
+    return tuple(by_id[str(i)] for i in spec["ids"])
+
+
 def _parse_plan(data: dict, source: str) -> AnalysisPlan:
     try:
         inf, refs = data["inference"], data["references"]
-        claims = tuple(
+        claims = _carried_over(data, source) + tuple(
             Claim(id=str(c["id"]), statement=str(c["statement"]), section=str(c["section"]), data=c["data"],
                   kind=c["kind"], subjects=tuple(_level(v) for v in c["subjects"]),
                   others=tuple(_level(v) for v in c["others"]), measure=c.get("measure", "mean_acc"),
@@ -170,10 +202,13 @@ def _parse_plan(data: dict, source: str) -> AnalysisPlan:
             interval=str(inf["interval"]), confidence=float(inf["confidence"]), alpha=float(inf["alpha"]),
             min_scenes=int(inf["min_scenes"]), primary_reference=str(refs["primary"]),
             secondary_references=tuple(str(r) for r in refs.get("secondary", ())), route=str(data["route"]),
-            speed_claims=tuple(data.get("speed_claims", ())), raw=data,
+            speed_claims=tuple(data.get("speed_claims", ())), rules=str(data.get("rules", "v1")),
+            version=int(data.get("plan_version", 1)), raw=data,
         )
     except (KeyError, TypeError) as e:
         raise ValueError(f"{source}: not a valid analysis plan ({type(e).__name__}: {e})") from e
+    if plan.rules not in RULES:
+        raise ValueError(f"{source}: rules must be one of {RULES}, got {plan.rules!r}")
     ids = [c.id for c in plan.claims]
     if len(set(ids)) != len(ids):
         raise ValueError(f"{source}: claim ids repeat: {sorted({i for i in ids if ids.count(i) > 1})}")

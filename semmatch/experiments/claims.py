@@ -37,6 +37,7 @@ from .analysis_plan import (
     FRAMES_REFERENCE,
     MEASURE_LABELS,
     PLAN_FILE,
+    PLAN_V2_FILE,
     TOP_HEIGHT,
     VERDICTS,
     AnalysisPlan,
@@ -67,12 +68,25 @@ __all__ = [
     "judge_speed_claims",
     "claims_markdown",
     "judge_figures",
+    "PLAN_V2_FILE",
+    "COMPARISON_VERDICTS_V2",
+    "CLAIM_VERDICTS_V2",
+    "comparison_verdict_v2",
+    "claim_rule_v2",
+    "bench_speed_table",
     "support_regression",
     "per_kind_means",
 ]
 
 _GT = "ground truth"
-_BASELINES = ("lower", "upper")
+# rows a claim may name besides the configured transfer methods (never part of "<all others>")
+_BASELINES = ("lower", "upper", "fused")
+#: the v2 rules' comparison verdicts (``against``: significantly in the wrong direction)
+COMPARISON_VERDICTS_V2 = ("holds", "against", "equivalent", "inconclusive")
+#: the v2 rules' claim verdicts
+CLAIM_VERDICTS_V2 = ("holds", "refuted", "equivalent", "inconclusive")
+#: the column of per-scene tables naming the network's training seed (several networks per architecture)
+NETWORK_COLUMN = "training_seed"
 
 
 def _level_name(level: str | float) -> str:
@@ -87,11 +101,11 @@ def _per_scene(df: pd.DataFrame, level_col: str, measure: str, route: str | None
         raise ValueError(f"check_claims: a per-scene frame needs the columns {need}; {missing} missing")
     if "route" in df.columns and route is not None:
         df = df[(df["route"] == route) | df["route"].isna()]
-    keep = need + (["reference"] if "reference" in df.columns else [])
-    df = df[keep].copy()
+    extra = [c for c in ("reference", NETWORK_COLUMN) if c in df.columns]
+    df = df[need + extra].copy()
     if level_col == "height":
         df["height"] = df["height"].astype(np.float64).round(3)
-    key = ["scene", "model", level_col] + (["reference"] if "reference" in df.columns else [])
+    key = ["scene", "model", level_col] + extra
     dup = df.duplicated(key)
     if dup.any():
         raise ValueError(
@@ -137,23 +151,91 @@ def _paper_diff(claim: Claim, model: str, first: str | float, second: str | floa
 
 
 def _compare(x: np.ndarray, y: np.ndarray, strata: list[str], *, sesoi: float, plan: AnalysisPlan,
-             seed: int) -> dict | None:
-    """Mean paired difference, its interval and the raw one-sided p-values (None: no pair)."""
+             seed: int, networks: Sequence | None = None) -> dict | None:
+    """Mean paired difference, its interval and the raw one-sided p-values (None: no pair).
+
+    Under a v2 plan also the one-sided p-value beyond the nearer margin without doubling
+    (``p_beyond1``), the interval method used and the kind-cluster sensitivity (``cluster_*``:
+    the same numbers over the kinds' mean differences)."""
     keep = ~(np.isnan(x) | np.isnan(y))
     n = int(keep.sum())
     if n == 0:
         return None
     d = (x - y)[keep]
     g = [s for s, k in zip(strata, keep) if k]
+    nets = None if networks is None else [v for v, k in zip(networks, keep) if k]
     nan = dict(lo=np.nan, hi=np.nan, df=np.nan, p_pos=np.nan, p_neg=np.nan, p_eq=np.nan, p_beyond=np.nan)
+    if plan.rules == "v2":
+        nan.update(p_beyond1=np.nan, cluster_diff=np.nan, cluster_lo=np.nan, cluster_hi=np.nan, cluster_p_neg=np.nan,
+                   cluster_p_beyond1=np.nan)
     if n < plan.min_scenes:
         return dict(diff=float(d.mean()), scenes=n, **nan)
+    if plan.rules == "v2":
+        return _compare_v2(d, g, nets, sesoi=sesoi, plan=plan, seed=seed)
     est = stratified_estimate(d, g if plan.interval == "stratified-t" else None)
     _, lo, hi = interval(d, g, method=plan.interval, confidence=plan.confidence, seed=seed)
     p = lambda null, alt: t_test_pvalue(est, null, alt)  # noqa: E731
     return dict(diff=est.mean, lo=lo, hi=hi, scenes=n, df=est.df, p_pos=p(0.0, "greater"), p_neg=p(0.0, "less"),
                 p_eq=max(p(-sesoi, "greater"), p(sesoi, "less")),
                 p_beyond=min(1.0, 2 * min(p(sesoi, "greater"), p(-sesoi, "less"))))
+
+
+def _t_tests(d: np.ndarray, *, sesoi: float, confidence: float) -> dict:
+    """One-sample t interval over ``d`` and the one-sided t p-values the rules read."""
+    est = stratified_estimate(d)
+    _, lo, hi = interval(d, None, method="t", confidence=confidence)
+    p = lambda null, alt: t_test_pvalue(est, null, alt)  # noqa: E731
+    up, down = p(sesoi, "greater"), p(-sesoi, "less")
+    return dict(diff=est.mean, lo=lo, hi=hi, df=est.df, p_pos=p(0.0, "greater"), p_neg=p(0.0, "less"),
+                p_eq=max(p(-sesoi, "greater"), p(sesoi, "less")), p_beyond=min(1.0, 2 * min(up, down)),
+                p_beyond1=min(up, down))
+
+
+def _bootstrap_tests(d: np.ndarray, strata: list[str], networks: list, *, sesoi: float, plan: AnalysisPlan,
+                     seed: int) -> dict:
+    """The two-level bootstrap's percentile interval and one-sided p-values ((1 + count) / (B + 1))."""
+    from ..evaluate import stats
+
+    boot = getattr(stats, "two_level_bootstrap", None)
+    if boot is None:
+        raise ValueError("check_claims: these per-scene tables hold several networks per architecture (column "
+                         f"{NETWORK_COLUMN!r}); the v2 plan's interval needs semmatch.evaluate.stats.two_level_bootstrap, "
+                         "which this code does not have")
+    inf = plan.raw.get("inference", {})
+    means = np.asarray(boot(d, networks=np.asarray(networks), strata=np.asarray(strata),
+                            n_resamples=int(inf.get("n_resamples", 10000)), seed=int(inf.get("seed", seed))),
+                       dtype=np.float64).ravel()
+    if means.size < 2:
+        raise ValueError("check_claims: two_level_bootstrap must return the resampled means (one per resample)")
+    frame = pd.DataFrame({"d": d, "n": networks})
+    diff = float(frame.groupby("n")["d"].mean().mean())
+    a = (1.0 - plan.confidence) / 2
+    lo, hi = np.quantile(means, [a, 1.0 - a])
+    p = lambda count: (1.0 + count) / (means.size + 1.0)  # noqa: E731
+    up, down = p(np.sum(means <= sesoi)), p(np.sum(means >= -sesoi))
+    return dict(diff=diff, lo=float(lo), hi=float(hi), df=np.nan, p_pos=p(np.sum(means <= 0)),
+                p_neg=p(np.sum(means >= 0)), p_eq=max(p(np.sum(means <= -sesoi)), p(np.sum(means >= sesoi))),
+                p_beyond=min(1.0, 2 * min(up, down)), p_beyond1=min(up, down))
+
+
+def _compare_v2(d: np.ndarray, strata: list[str], networks: list | None, *, sesoi: float, plan: AnalysisPlan,
+                seed: int) -> dict:
+    """:func:`_compare` under the v2 plan: the plan's interval (the two-level bootstrap over several
+    networks, else ``one_network_interval``) and the kind-cluster sensitivity (t over the kind means)."""
+    several = networks is not None and len(set(networks)) > 1
+    if several:
+        out = _bootstrap_tests(d, strata, networks, sesoi=sesoi, plan=plan, seed=seed)
+        method = f"two-level bootstrap ({len(set(networks))} networks)"
+    elif plan.one_network_interval == "t":
+        out, method = _t_tests(d, sesoi=sesoi, confidence=plan.confidence), "t over scenes (one network)"
+    else:
+        raise ValueError(f"check_claims: one_network_interval {plan.one_network_interval!r} is not supported by the "
+                         "v2 rules (only 't')")
+    kind_means = pd.Series(d).groupby(np.asarray(strata)).mean().to_numpy()
+    cl = _t_tests(kind_means, sesoi=sesoi, confidence=plan.confidence) if len(kind_means) >= 2 else \
+        dict(diff=float(kind_means.mean()), lo=np.nan, hi=np.nan, p_neg=np.nan, p_beyond1=np.nan)
+    return dict(out, scenes=len(d), interval_method=method, cluster_diff=cl["diff"], cluster_lo=cl["lo"],
+                cluster_hi=cl["hi"], cluster_p_neg=cl["p_neg"], cluster_p_beyond1=cl["p_beyond1"])
 
 
 def _comparison_verdict(kind: str, holds: float, against: float, equivalent: float, alpha: float) -> str:
@@ -165,6 +247,78 @@ def _comparison_verdict(kind: str, holds: float, against: float, equivalent: flo
     if equivalent <= alpha:
         return "equivalent"
     return "holds" if holds <= alpha else "does not hold" if against <= alpha else "inconclusive"
+
+
+def comparison_verdict_v2(kind: str, lo: float, hi: float, p_against: float, *, sesoi: float, alpha: float) -> str:
+    """One comparison's verdict under the v2 rules (:data:`COMPARISON_VERDICTS_V2`).
+
+    Parameters
+    ----------
+    kind : str
+        The claim's kind (``beats``, ``best``, ``worst`` read as beats; ``similar``).
+    lo, hi : float
+        The two-sided interval of the difference as the claim states it (positive supports a
+        beats claim); NaN: not tested.
+    p_against : float
+        The Holm-adjusted (within the family) one-sided p-value of the wrong direction: ``A - B < 0``
+        (beats) or ``|A - B| > sesoi`` beyond the nearer margin (similar).
+    sesoi : float
+        The smallest effect size of interest of the measure.
+    alpha : float
+        The one-sided level (0.025 in the v2 plan: the bounds of the two-sided 95 % interval).
+
+    Returns
+    -------
+    str
+        ``against`` if ``p_against <= alpha``; else ``holds`` if ``lo > sesoi`` (beats: the
+        minimum-effect test) or ``-sesoi < lo`` and ``hi < sesoi`` (similar: TOST); else
+        ``equivalent`` (beats) if the interval lies inside ``(-sesoi, sesoi)``; else ``inconclusive``.
+    """
+    if np.isnan(lo) or np.isnan(hi):
+        return "inconclusive"
+    if not np.isnan(p_against) and p_against <= alpha:
+        return "against"
+    inside = -sesoi < lo and hi < sesoi
+    if kind == "similar":
+        return "holds" if inside else "inconclusive"
+    return "holds" if lo > sesoi else "equivalent" if inside else "inconclusive"
+
+
+def claim_rule_v2(verdicts: Sequence[str], kind: str) -> str:
+    """A claim's verdict from its comparisons' v2 verdicts (:data:`CLAIM_VERDICTS_V2`).
+
+    ``refuted`` if any comparison is ``against``; ``holds`` if every comparison holds (the
+    intersection-union test: each at the plan's level, no adjustment); ``equivalent`` if every
+    comparison of a beats/best/worst claim is equivalent; else ``inconclusive``.
+    """
+    v = list(verdicts)
+    if not v:
+        return "inconclusive"
+    if "against" in v:
+        return "refuted"
+    if all(x == "holds" for x in v):
+        return "holds"
+    if kind != "similar" and all(x == "equivalent" for x in v):
+        return "equivalent"
+    return "inconclusive"
+
+
+def _judge_family_v2(fam: pd.DataFrame, kind: str, sesoi: float, alpha: float) -> pd.DataFrame:
+    """The v2 columns of one family: Holm only in the wrong direction, the verdict, the minimum-effect
+    flag and the kind-cluster verdict."""
+    similar = kind == "similar"
+    fam = fam.copy()
+    fam["p_holds"] = fam["p_eq"] if similar else fam["p_pos"]  # unadjusted: intersection-union
+    fam["p_against"] = holm(fam["p_beyond1"] if similar else fam["p_neg"])
+    fam["p_equivalent"] = fam["p_eq"]
+    fam["verdict"] = [comparison_verdict_v2(kind, lo, hi, pa, sesoi=sesoi, alpha=alpha)
+                      for lo, hi, pa in zip(fam["lo"], fam["hi"], fam["p_against"])]
+    fam["min_effect"] = fam["lo"] > sesoi if not similar else (fam["lo"] > -sesoi) & (fam["hi"] < sesoi)
+    fam["beyond_zero"] = fam["lo"] > 0
+    cluster_against = holm(fam["cluster_p_beyond1"] if similar else fam["cluster_p_neg"])
+    fam["verdict_cluster"] = [comparison_verdict_v2(kind, lo, hi, pa, sesoi=sesoi, alpha=alpha)
+                              for lo, hi, pa in zip(fam["cluster_lo"], fam["cluster_hi"], cluster_against)]
+    return fam
 
 
 def check_claims(
@@ -217,7 +371,13 @@ def check_claims(
         ``diff`` is the mean paired difference as written in ``comparison`` (positive supports a
         beats/best/worst claim), ``lo``/``hi`` its interval; the p-values are Holm-adjusted within
         the claim and reference; ``paper_diff`` is the paper's own difference (NaN where it has
-        none) and ``paper_in_ci`` whether it lies in ``[lo, hi]``.
+        none) and ``paper_in_ci`` whether it lies in ``[lo, hi]``. Under a v2 plan (``rules: v2``)
+        ``p_holds`` / ``p_equivalent`` are unadjusted (intersection-union), ``p_against`` is
+        Holm-adjusted in the wrong direction, ``verdict`` is :func:`comparison_verdict_v2`'s, and
+        ``interval_method``, ``min_effect`` (the bound beyond the SESOI), ``beyond_zero``,
+        ``cluster_diff`` / ``cluster_lo`` / ``cluster_hi`` (t over the kind means) and
+        ``verdict_cluster`` follow. Rows may carry a ``training_seed`` column (several networks
+        per architecture: the v2 plan's two-level bootstrap).
     """
     plan = load_analysis_plan() if plan is None else plan
     claims = plan.claims if claims is None else claims
@@ -243,9 +403,12 @@ def check_claims(
             for model in dref["model"].unique():
                 if (claim.models == "networks" and model == _GT) or (claim.models == "ground truth" and model != _GT):
                     continue
-                wide = dref[dref["model"] == model].pivot(index="scene", columns=level_col, values=claim.measure)
+                index = ["scene", NETWORK_COLUMN] if NETWORK_COLUMN in dref.columns else "scene"
+                wide = dref[dref["model"] == model].pivot(index=index, columns=level_col, values=claim.measure)
                 wide = wide.dropna(axis=1, how="all")
-                strata = [scene_kind(s) for s in wide.index]
+                scenes = wide.index.get_level_values("scene")
+                strata = [scene_kind(s) for s in scenes]
+                networks = list(wide.index.get_level_values(NETWORK_COLUMN)) if index != "scene" else None
                 if heights:
                     available = sorted(float(h) for h in wide.columns)
                     top = available[-1] if available else None
@@ -262,7 +425,7 @@ def check_claims(
                             continue
                         first, second = (b, a) if claim.kind == "worst" else (a, b)
                         c = _compare(wide[first].to_numpy(dtype=np.float64), wide[second].to_numpy(dtype=np.float64),
-                                     strata, sesoi=sesoi, plan=plan, seed=seed)
+                                     strata, sesoi=sesoi, plan=plan, seed=seed, networks=networks)
                         if c is None:
                             continue
                         family.append(dict(
@@ -273,6 +436,9 @@ def check_claims(
             if not family:
                 continue
             fam = pd.DataFrame(family)
+            if plan.rules == "v2":
+                rows.extend(_judge_family_v2(fam, claim.kind, sesoi, plan.alpha).to_dict("records"))
+                continue
             similar = claim.kind == "similar"
             fam["p_holds"] = holm(fam["p_eq"] if similar else fam["p_pos"])
             fam["p_against"] = holm(fam["p_beyond"] if similar else fam["p_neg"])
@@ -282,6 +448,9 @@ def check_claims(
             rows.extend(fam.to_dict("records"))
     cols = ["claim", "statement", "section", "data", "role", "kind", "reference", "model", "measure", "comparison",
             "diff", "lo", "hi", "scenes", "df", "p_holds", "p_against", "p_equivalent", "verdict", "paper_diff"]
+    if plan.rules == "v2":
+        cols += ["interval_method", "min_effect", "beyond_zero", "cluster_diff", "cluster_lo", "cluster_hi",
+                 "verdict_cluster"]
     out = pd.DataFrame(rows, columns=cols)
     inside = (out["paper_diff"] >= out["lo"]) & (out["paper_diff"] <= out["hi"])
     out["paper_in_ci"] = np.where(out["paper_diff"].isna() | out["lo"].isna(), None, inside)
@@ -316,18 +485,28 @@ def claim_verdicts(comparisons: pd.DataFrame) -> pd.DataFrame:
         ``counts`` the comparisons' verdicts (e.g. ``"4 holds, 1 inconclusive"``), ``paper_in_ci``
         how many of the comparisons with a paper value have it inside our interval (``"2 of 5"``).
     """
+    v2 = "verdict_cluster" in comparisons.columns
+    labels = COMPARISON_VERDICTS_V2 if v2 else VERDICTS
     rows = []
     for (cid, ref), g in comparisons.groupby(["claim", "reference"], sort=False):
         counts = g["verdict"].value_counts()
         with_paper = g["paper_in_ci"].dropna()
-        rows.append(dict(
+        kind = g["kind"].iloc[0]
+        row = dict(
             claim=cid, statement=g["statement"].iloc[0], data=g["data"].iloc[0], role=g["role"].iloc[0],
-            reference=ref, verdict=_claim_rule(list(g["verdict"]), g["kind"].iloc[0]), comparisons=len(g),
-            counts=", ".join(f"{int(counts[v])} {v}" for v in VERDICTS if v in counts),
+            reference=ref, verdict=(claim_rule_v2 if v2 else _claim_rule)(list(g["verdict"]), kind),
+            comparisons=len(g), counts=", ".join(f"{int(counts[v])} {v}" for v in labels if v in counts),
             paper_in_ci=f"{int(with_paper.astype(bool).sum())} of {len(with_paper)}" if len(with_paper) else "-",
-        ))
-    return pd.DataFrame(rows, columns=["claim", "statement", "data", "role", "reference", "verdict", "comparisons",
-                                       "counts", "paper_in_ci"])
+        )
+        if v2:
+            row["verdict_cluster"] = claim_rule_v2(list(g["verdict_cluster"]), kind)
+            beyond = f"{int(g['min_effect'].sum())} of {len(g)}"
+            row["min_effect"] = f"{beyond} within ±SESOI" if kind == "similar" else \
+                f"{beyond} beyond SESOI ({int(g['beyond_zero'].sum())} beyond 0)"
+            row["interval"] = ", ".join(dict.fromkeys(g["interval_method"].dropna()))
+        rows.append(row)
+    cols = ["claim", "statement", "data", "role", "reference", "verdict", "comparisons", "counts", "paper_in_ci"]
+    return pd.DataFrame(rows, columns=cols + (["verdict_cluster", "min_effect", "interval"] if v2 else []))
 
 
 def verdict_table(comparisons: pd.DataFrame, *, plan: AnalysisPlan | None = None,
@@ -367,8 +546,40 @@ def verdict_table(comparisons: pd.DataFrame, *, plan: AnalysisPlan | None = None
             row[f"verdict_{ref}"] = sec["verdict"].iloc[0] if len(sec) else "-"
         row["counts"] = primary["counts"].iloc[0] if len(primary) else "-"
         row["paper_in_ci"] = primary["paper_in_ci"].iloc[0] if len(primary) else "-"
+        for col in ("min_effect", "verdict_cluster", "interval"):  # the v2 rules' columns
+            if col in per.columns:
+                row[col] = primary[col].iloc[0] if len(primary) else "-"
         rows.append(row)
     return pd.DataFrame(rows)
+
+
+def bench_speed_table(bench: dict, *, map_name: str = "fused") -> pd.DataFrame:
+    """Each method's median and lowest CPU rate from ``semmatch bench transfer --repeat N --json``.
+
+    Parameters
+    ----------
+    bench : dict
+        The benchmark's JSON record (``maps -> NAME -> spread -> method -> {median, min, max}``).
+    map_name : str, optional
+        The map timed (``fused``: the v2 plan's).
+
+    Returns
+    -------
+    DataFrame
+        ``method, median, min, max`` (the reference workload left out).
+
+    Raises
+    ------
+    ValueError
+        If the record has no spread over repeated runs for ``map_name``.
+    """
+    spread = (bench.get("maps", {}).get(map_name) or {}).get("spread")
+    if not spread:
+        raise ValueError(f"bench_speed_table: the record has no spread over repeated runs for map {map_name!r} "
+                         "(run semmatch bench transfer --map fused --repeat 5 --json)")
+    rows = [dict(method=m, median=float(v["median"]), min=float(v["min"]), max=float(v["max"]))
+            for m, v in spread.items() if not m.startswith("reference")]
+    return pd.DataFrame(rows, columns=["method", "median", "min", "max"])
 
 
 def judge_speed_claims(table1: pd.DataFrame, *, plan: AnalysisPlan | None = None) -> pd.DataFrame:
@@ -378,7 +589,9 @@ def judge_speed_claims(table1: pd.DataFrame, *, plan: AnalysisPlan | None = None
     ----------
     table1 : DataFrame
         ``method`` and ``fps`` (frames per second of each transfer method; a ``cpu_fps`` column,
-        the rate from the method's CPU time on one core, is used instead when present).
+        the rate from the method's CPU time on one core, is used instead when present). Under a
+        v2 plan: ``method``, ``median`` and ``min`` (:func:`bench_speed_table`); a table without
+        them (Table 1) is not judged.
     plan : AnalysisPlan, optional
         Default the committed plan.
 
@@ -388,17 +601,30 @@ def judge_speed_claims(table1: pd.DataFrame, *, plan: AnalysisPlan | None = None
         ``claim, statement, section, role, rule, evidence, verdict``.
     """
     plan = load_analysis_plan() if plan is None else plan
-    col = "cpu_fps" if "cpu_fps" in table1.columns else "fps"
+    v2 = plan.rules == "v2"
+    col = "median" if v2 else "cpu_fps" if "cpu_fps" in table1.columns else "fps"
+    if v2 and not {"method", "median", "min"} <= set(table1.columns):
+        return pd.DataFrame([dict(claim=c["id"], statement=c["statement"], section=c["section"],
+                                  role=c.get("role", "primary"), rule=c["rule"],
+                                  evidence="no bench transfer --repeat record (Table 1 is descriptive under v2)",
+                                  verdict="not judged") for c in plan.speed_claims])
     if "method" not in table1.columns or col not in table1.columns:
         raise ValueError(f"judge_speed_claims: Table 1 needs the columns 'method' and '{col}'")
     fps = dict(zip(table1["method"], table1[col].astype(float)))
+    lowest = dict(zip(table1["method"], table1["min"].astype(float))) if v2 else fps
     rows = []
     for c in plan.speed_claims:
         if "min_fps" in c:
-            slow = {m: f for m, f in fps.items() if f < float(c["min_fps"])}
+            need = float(c.get("median_fps", c["min_fps"]))
+            slow = {m for m, f in fps.items() if f < need}
+            if "median_fps" in c:
+                slow |= {m for m, f in lowest.items() if f < float(c["min_fps"])}
             ok = not slow
             evidence = (f"slowest {min(fps, key=fps.get)} {min(fps.values()):.1f} FPS" if fps else "no rows")
-            evidence += "" if ok else f"; below {c['min_fps']}: {', '.join(sorted(slow))}"
+            if v2 and fps:
+                evidence += f" (median; lowest run of any method {min(lowest.values()):.1f})"
+            evidence += "" if ok else f"; below {c.get('median_fps', c['min_fps']) if v2 else c['min_fps']}" + \
+                (" (median) or the lowest run" if "median_fps" in c else "") + f": {', '.join(sorted(slow))}"
         else:
             slowest = [m for m in c["slowest"] if m in fps]
             rest = [f for m, f in fps.items() if m not in c["slowest"]]
@@ -447,14 +673,15 @@ def claims_markdown(df: pd.DataFrame, *, digits: int = 3, plan: AnalysisPlan | N
                                                     zip(df["diff"], df["lo"], df["hi"])],
         "scenes": df["scenes"],
         "p (Holm)": [("-" if pd.isna(a) else f"{a:.3f}") for a in
-                     np.where(df["verdict"] == "does not hold", df["p_against"],
+                     np.where(df["verdict"].isin(["does not hold", "against"]), df["p_against"],
                               np.where(df["verdict"] == "equivalent", df["p_equivalent"], df["p_holds"]))],
         "verdict": df["verdict"],
         "paper": [fmt(v) for v in df["paper_diff"]],
         "paper in CI": df["paper_in_ci"].map(lambda v: "-" if v is None or pd.isna(v) else ("yes" if v else "no")),
     })
     counts = claims["verdict"].value_counts()
-    summary = ", ".join(f"{int(counts[v])} {v}" for v in (*VERDICTS, "not judged (no data)") if v in counts)
+    summary = ", ".join(f"{int(counts[v])} {v}" for v in (*VERDICTS, "refuted", "not judged (no data)", "not judged")
+                        if v in counts)
     legend = df.drop_duplicates("claim")[["claim", "statement", "section", "data"]]
     lines = [claims.to_markdown(index=False), "", f"Claims judged: {len(claims)} ({summary}).", "",
              comps.to_markdown(index=False), "", f"Comparisons: {len(df)}.", ""]
