@@ -198,8 +198,8 @@ def _bootstrap_tests(d: np.ndarray, strata: list[str], networks: list, *, sesoi:
 
     boot = getattr(stats, "two_level_bootstrap", None)
     if boot is None:
-        raise ValueError("check_claims: these per-scene tables hold several networks per architecture (column "
-                         f"{NETWORK_COLUMN!r}); the v2 plan's interval needs semmatch.evaluate.stats.two_level_bootstrap, "
+        raise ValueError("check_claims: these per-scene tables hold several networks per architecture (training or fine-tuning "
+                         f"seeds, e.g. column {NETWORK_COLUMN!r}); the v2 plan's interval needs semmatch.evaluate.stats.two_level_bootstrap, "
                          "which this code does not have")
     inf = plan.raw.get("inference", {})
     means = np.asarray(boot(d, networks=np.asarray(networks), strata=np.asarray(strata),
