@@ -10,16 +10,9 @@ import pandas as pd
 import pytest
 
 from semmatch.experiments.analysis_plan import PLAN_FILE, PLAN_V2_FILE, load_analysis_plan
-from semmatch.experiments.claims import (
-    _judge_family_v2,
-    check_claims,
-    claim_rule_v2,
-    claim_verdicts,
-    comparison_verdict_v2,
-    judge_figures,
-    judge_speed_claims,
-)
+from semmatch.experiments.claims import check_claims, claim_verdicts, judge_figures, judge_speed_claims
 from semmatch.experiments.plan_order import PLAN_DOC, files_before_plan
+from semmatch.experiments.rules_v2 import _judge_family_v2, claim_rule_v2, comparison_verdict_v2
 
 ROOT = Path(__file__).resolve().parents[1]
 RUN = ROOT / "figures" / "confirm" / "seeds-8001-8006"

@@ -102,8 +102,9 @@ def rejudge_in_home(figures_dir: str | Path, *, plan: AnalysisPlan) -> pd.DataFr
 
     A family is one measure's comparisons (as the in-home plan's); the rules are the plan's
     (:func:`~semmatch.experiments.claims.comparison_verdict_v2` under v2)."""
-    from .claims import _compare, _judge_family_v2
+    from .claims import _compare
     from .in_home import in_home_comparisons, load_in_home_plan
+    from .rules_v2 import _judge_family_v2
 
     csv = Path(figures_dir) / "in_home" / "in_home_per_home.csv"
     if not csv.is_file():
