@@ -9,7 +9,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from semmatch.experiments.analysis_plan import PLAN_FILE, PLAN_V2_FILE, load_analysis_plan
+from semmatch.experiments.analysis_plan import PLAN_FILE, PLAN_V2_FILE, load_analysis_plan, plan_for_seeds
 from semmatch.experiments.claims import check_claims, claim_verdicts, judge_figures, judge_speed_claims
 from semmatch.experiments.plan_order import PLAN_DOC, files_before_plan
 from semmatch.experiments.rules_v2 import _judge_family_v2, claim_rule_v2, comparison_verdict_v2
@@ -29,6 +29,17 @@ def _family(rows: list[tuple[float, float, float, float]], **cluster) -> pd.Data
     fam["cluster_p_neg"] = cluster.get("p_neg", fam["p_neg"])
     fam["cluster_p_beyond1"] = 0.5
     return fam
+
+
+def test_plan_v2_carries_v1_claims_and_picks_its_seeds():
+    v1 = load_analysis_plan(PLAN_FILE)
+    assert V2.rules == "v2" and v1.rules == "v1" and V2.alpha == 0.025
+    assert {c.id: c for c in V2.claims if c.id.startswith("C")} == {c.id: c for c in v1.claims}
+    assert {"F1", "F1-real", "F2", "F2-real"} <= {c.id for c in V2.claims}
+    assert plan_for_seeds(range(8101, 8107)).rules == "v2"
+    assert plan_for_seeds(range(8001, 8007)).rules == "v1"
+    with pytest.raises(ValueError, match="mix"):
+        plan_for_seeds([8101, 8001])
 
 
 def test_holds_below_sesoi_is_not_holds():

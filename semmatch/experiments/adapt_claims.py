@@ -229,12 +229,14 @@ def _judge_one(table: pd.DataFrame, claim: AdaptClaim, plan: AdaptPlan, ap) -> d
         return {**head, "comparison": comparison, "verdict": "not judged", "note": "no scene with both"}
     similar = claim.kind == "similar"
     if ap.rules == "v2":  # a family of one comparison: Holm is the raw p-value
-        p_against = c["p_beyond1"] if similar else c["p_neg"]
+        side = "p_beyond1" if similar else "p_neg"
+        rule = lambda lo, hi, p: claim_rule_v2([comparison_verdict_v2(  # noqa: E731
+            claim.kind, lo, hi, p, sesoi=sesoi, alpha=ap.alpha)], claim.kind)
         return {**head, "comparison": comparison, "diff": c["diff"], "lo": c["lo"], "hi": c["hi"],
-                "scenes": c["scenes"], "p_holds": c["p_eq"] if similar else c["p_pos"], "p_against": p_against,
-                "p_equivalent": c["p_eq"],
-                "verdict": claim_rule_v2([comparison_verdict_v2(claim.kind, c["lo"], c["hi"], p_against,
-                                                                sesoi=sesoi, alpha=ap.alpha)], claim.kind),
+                "scenes": c["scenes"], "p_holds": c["p_eq"] if similar else c["p_pos"], "p_against": c[side],
+                "p_equivalent": c["p_eq"], "verdict": rule(c["lo"], c["hi"], c[side]),
+                "min_effect": (-sesoi < c["lo"] and c["hi"] < sesoi) if similar else c["lo"] > sesoi,
+                "verdict_cluster": rule(c["cluster_lo"], c["cluster_hi"], c[f"cluster_{side}"]),
                 "note": f"{c['interval_method']}; sesoi {sesoi:g}; v2 rules"}
     p_holds = holm([c["p_eq"] if similar else c["p_pos"]])[0]
     p_against = holm([c["p_beyond"] if similar else c["p_neg"]])[0]
@@ -266,7 +268,11 @@ def check_adaptation_claims(tables: dict[str, pd.DataFrame | None], *, plan: Ada
     DataFrame
         ``claim, statement, role, data, kind, measure, comparison, diff, lo, hi, scenes, p_holds,
         p_against, p_equivalent, verdict, note``; for ``share`` claims ``diff`` is the share and
-        ``lo`` / ``hi`` its one-sided bounds.
+        ``lo`` / ``hi`` its one-sided bounds. Under a v2 analysis plan (``rules: v2``): the v2
+        verdicts (``refuted`` for a comparison against the claim; the share at one-sided
+        ``1 - alpha``, on the mean over fine-tuning seeds when the table has a ``seed`` column, the
+        other claims by the two-level bootstrap over those seeds) with ``min_effect`` and
+        ``verdict_cluster`` after ``verdict``.
     """
     from .analysis_plan import load_analysis_plan
 
@@ -283,6 +289,8 @@ def check_adaptation_claims(tables: dict[str, pd.DataFrame | None], *, plan: Ada
         rows.append(_judge_one(table, claim, plan, ap))
     cols = ["claim", "statement", "role", "data", "kind", "measure", "comparison", "diff", "lo", "hi", "scenes",
             "p_holds", "p_against", "p_equivalent", "verdict", "note"]
+    if ap.rules == "v2":  # the minimum-effect and kind-cluster columns beside the verdict
+        cols[cols.index("verdict") + 1:cols.index("verdict") + 1] = ["min_effect", "verdict_cluster"]
     return pd.DataFrame(rows).reindex(columns=cols)
 
 

@@ -9,6 +9,7 @@ effect size of interest (SESOI) per measure, the multiplicity rule and the verdi
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
@@ -27,6 +28,7 @@ __all__ = [
     "Claim",
     "AnalysisPlan",
     "load_analysis_plan",
+    "plan_for_seeds",
     "CLAIMS",
 ]
 
@@ -247,6 +249,24 @@ def load_analysis_plan(path: str | Path | None = None) -> AnalysisPlan:
     """
     p = Path(path) if path is not None else PLAN_FILE
     return _load_cached(str(p.resolve()), p.stat().st_mtime)
+
+
+def plan_for_seeds(seeds: Sequence[int]) -> AnalysisPlan:
+    """The plan a confirmatory run of ``seeds`` is judged by: v2 (:data:`PLAN_V2_FILE`) for its
+    confirmatory seeds (8101-8106), else v1 (:data:`PLAN_FILE`: the first run's and readers' runs).
+
+    Raises
+    ------
+    ValueError
+        If ``seeds`` mixes v2's confirmatory seeds with others.
+    """
+    v2 = load_analysis_plan(PLAN_V2_FILE)
+    mine = {int(s) for s in v2.raw["scenes"]["confirmatory_seeds"]}
+    given = {int(s) for s in seeds}
+    if given & mine and not given <= mine:
+        raise ValueError(f"{PLAN_V2_FILE.name}: seeds {sorted(given)} mix the v2 plan's confirmatory seeds "
+                         f"{sorted(mine)} with others; run them apart")
+    return v2 if given and given <= mine else load_analysis_plan(PLAN_FILE)
 
 
 #: The comparative claims of the analysis plan (the paper's §4-5 and the abstract's summary of

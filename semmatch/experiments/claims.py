@@ -463,7 +463,7 @@ def claims_markdown(df: pd.DataFrame, *, digits: int = 3, plan: AnalysisPlan | N
         f"difference [{plan.confidence:.0%} CI]": [f"{fmt(d)} [{fmt(lo)}, {fmt(hi)}]" for d, lo, hi in
                                                     zip(df["diff"], df["lo"], df["hi"])],
         "scenes": df["scenes"],
-        "p (Holm)": [("-" if pd.isna(a) else f"{a:.3f}") for a in
+        "p (Holm)" if plan.rules == "v1" else "p (against: Holm)": [("-" if pd.isna(a) else f"{a:.3f}") for a in
                      np.where(df["verdict"].isin(["does not hold", "against"]), df["p_against"],
                               np.where(df["verdict"] == "equivalent", df["p_equivalent"], df["p_holds"]))],
         "verdict": df["verdict"],

@@ -31,6 +31,10 @@ def _interval(d: float, lo: float, hi: float) -> str:
     return "-" if pd.isna(d) else f"{d:+.3f}" + ("" if pd.isna(lo) else f" [{lo:+.3f}, {hi:+.3f}]")
 
 
+def _yes_no(v: object) -> str:
+    return "-" if v is None or (isinstance(v, float) and np.isnan(v)) else "yes" if bool(v) else "no"
+
+
 def rejudge_claims(figures_dir: str | Path, *, plan: AnalysisPlan, baseline: AnalysisPlan | None = None
                    ) -> tuple[pd.DataFrame, pd.DataFrame]:
     """The paper's claims (and the plan's other claims) of one run under ``plan``, beside ``baseline``'s.
@@ -175,19 +179,31 @@ def rejudge_markdown(figures_dir: str | Path, *, rules: str = "v2", command: str
     lines += ["Verdicts: " + ", ".join(f"{int(n)} {v}" for v, n in counts.items()) + ".", ""]
     adapt = rejudge_adaptation(figures_dir, plan=plan)
     if adapt is not None:
+        before = rejudge_adaptation(figures_dir, plan=load_analysis_plan(PLAN_FILE))
+        adapt["verdict_before"] = adapt["claim"].map(dict(zip(before["claim"], before["verdict"])))
         lines += ["## Adaptation claims", "",
                   "The share claims (A3, A3-self, A3-gt) on the per-scene mean over the fine-tuning seeds the run "
                   "scored (`adapt_seeds/`), with one-sided 97.5 % Fieller bounds under v2; the other claims on the "
-                  "shipped fine-tuning seed (the only one notebook 09 scored on this run).", "",
+                  "shipped fine-tuning seed (the only one notebook 09 scored on this run). `verdict (v1)`: the same "
+                  "tables under the v1 rules (for A3 on the seed mean, so it differs from the published "
+                  "shipped-seed verdict).", "",
                   pd.DataFrame({"claim": adapt["claim"], "role": adapt["role"], "comparison": adapt["comparison"],
                                 "measure": adapt["measure"],
                                 "difference": [(f"{d:.0%} (>= {lo:.0%}, <= {hi:.0%})" if k == "share" else
                                                 _interval(d, lo, hi)) if not pd.isna(d) else "-" for d, lo, hi, k in
                                                zip(adapt["diff"], adapt["lo"], adapt["hi"], adapt["kind"])],
-                                "seeds": adapt["seeds"], "verdict": adapt["verdict"]}).to_markdown(index=False), ""]
+                                "seeds": adapt["seeds"], "verdict (v1)": adapt["verdict_before"],
+                                "verdict": adapt["verdict"],
+                                **({"beyond SESOI": adapt["min_effect"].map(_yes_no),
+                                    "verdict_cluster": adapt["verdict_cluster"].fillna("-")} if v2 else {})}
+                               ).to_markdown(index=False), ""]
     home = rejudge_in_home(figures_dir, plan=plan)
     if home is not None:
-        cols = ["measure", "role", "comparison", "homes", "verdict"] + (["verdict_cluster"] if v2 else [])
+        home = home.assign(min_effect=home["min_effect"].map(_yes_no)) if v2 else home
+        before = rejudge_in_home(figures_dir, plan=load_analysis_plan(PLAN_FILE))
+        home["verdict (v1)"] = before["verdict"].to_numpy()  # the same comparisons in the same order
+        cols = ["measure", "role", "comparison", "homes", "verdict (v1)", "verdict"] + \
+            (["min_effect", "verdict_cluster"] if v2 else [])
         lines += ["## In-home study", "", "The in-home plan's comparisons (a family per measure).", "",
                   home.assign(difference=[_interval(d, lo, hi) for d, lo, hi in zip(home["diff"], home["lo"],
                                                                                       home["hi"])])
@@ -198,7 +214,7 @@ def rejudge_markdown(figures_dir: str | Path, *, rules: str = "v2", command: str
         "difference [95 % CI]": [_interval(d, lo, hi) for d, lo, hi in zip(comps["diff"], comps["lo"], comps["hi"])],
         "verdict (v1)": comps["verdict_before"].fillna("-"), "verdict": comps["verdict"]})
     if v2:
-        comps_shown["beyond SESOI"] = comps["min_effect"].map({True: "yes", False: "no"})
+        comps_shown["beyond SESOI"] = comps["min_effect"].map(_yes_no)
         comps_shown["kind clusters [95 % CI]"] = [_interval(d, lo, hi) for d, lo, hi in
                                                   zip(comps["cluster_diff"], comps["cluster_lo"], comps["cluster_hi"])]
         comps_shown["verdict_cluster"] = comps["verdict_cluster"]
