@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import subprocess
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pandas as pd
@@ -124,14 +125,24 @@ def test_several_networks_need_the_two_level_bootstrap(monkeypatch):
         with pytest.raises(ValueError, match="two_level_bootstrap"):
             check_claims(df, methods=["3d-neighborhood"], plan=V2, claims=claims)
 
-    def fake(values, *, networks, strata, n_resamples, seed):  # the contract: one resampled mean per resample
-        assert len(values) == len(networks) == len(strata) == 36 and n_resamples == 10000
-        return np.random.default_rng(seed).normal(np.mean(values), 0.005, n_resamples)
+    def fake(values, networks, scenes, strata, *, confidence, n_resamples, seed):
+        # the contract: two-sided bounds lo/hi and one-sided lower/upper at `confidence`, a fixed
+        # draw for a fixed seed (here a normal around the mean, sd 0.005)
+        assert len(values) == len(networks) == len(scenes) == len(strata) == 36 and n_resamples == 10000
+        means = np.random.default_rng(seed).normal(np.mean(values), 0.005, n_resamples)
+        a = 1.0 - confidence
+        lo, hi, lower, upper = np.quantile(means, [a / 2, 1 - a / 2, a, 1 - a])
+        return SimpleNamespace(mean=float(np.mean(values)), lo=lo, hi=hi, lower=lower, upper=upper)
 
     monkeypatch.setattr(stats, "two_level_bootstrap", fake, raising=False)
     out = check_claims(df, methods=["3d-neighborhood"], plan=V2, claims=claims)
     assert out["interval_method"].iloc[0] == "two-level bootstrap (3 networks)"
     assert out["verdict"].iloc[0] == "holds" and out["lo"].iloc[0] > 0.02
+    assert out["p_against"].iloc[0] == 1.0  # no resample below 0: the bound never excludes it
+    # the same networks, now worse than lower: refuted through the bound-derived p-value and Holm
+    flipped = df.assign(mean_acc=np.where(df["method"] == "lower", df["mean_acc"] + 0.12, df["mean_acc"]))
+    out = check_claims(flipped, methods=["3d-neighborhood"], plan=V2, claims=claims)
+    assert out["verdict"].iloc[0] == "against" and out["p_against"].iloc[0] < 0.001
 
 
 def test_speed_v2_reads_bench_medians():

@@ -224,7 +224,8 @@ def _judge_one(table: pd.DataFrame, claim: AdaptClaim, plan: AdaptPlan, ap) -> d
     kinds = [str(s).rsplit("_", 1)[0] for s in scenes]
     sesoi = float(ap.sesoi[claim.measure])
     c = _compare(pair["a"].to_numpy(np.float64), pair["b"].to_numpy(np.float64), kinds, sesoi=sesoi, plan=ap,
-                 seed=0, networks=list(pair.index.get_level_values(SEED_COLUMN)) if by_seed else None)
+                 seed=0, networks=list(pair.index.get_level_values(SEED_COLUMN)) if by_seed else None,
+                 scenes=list(scenes))
     if c is None:
         return {**head, "comparison": comparison, "verdict": "not judged", "note": "no scene with both"}
     similar = claim.kind == "similar"

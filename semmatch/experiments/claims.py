@@ -155,7 +155,7 @@ def _paper_diff(claim: Claim, model: str, first: str | float, second: str | floa
 
 
 def _compare(x: np.ndarray, y: np.ndarray, strata: list[str], *, sesoi: float, plan: AnalysisPlan,
-             seed: int, networks: Sequence | None = None) -> dict | None:
+             seed: int, networks: Sequence | None = None, scenes: Sequence | None = None) -> dict | None:
     """Mean paired difference, its interval and the raw one-sided p-values (None: no pair).
 
     Under a v2 plan also the one-sided p-value beyond the nearer margin without doubling
@@ -168,6 +168,7 @@ def _compare(x: np.ndarray, y: np.ndarray, strata: list[str], *, sesoi: float, p
     d = (x - y)[keep]
     g = [s for s, k in zip(strata, keep) if k]
     nets = None if networks is None else [v for v, k in zip(networks, keep) if k]
+    names = None if scenes is None else [v for v, k in zip(scenes, keep) if k]
     nan = dict(lo=np.nan, hi=np.nan, df=np.nan, p_pos=np.nan, p_neg=np.nan, p_eq=np.nan, p_beyond=np.nan)
     if plan.rules == "v2":
         nan.update(p_beyond1=np.nan, cluster_diff=np.nan, cluster_lo=np.nan, cluster_hi=np.nan, cluster_p_neg=np.nan,
@@ -175,7 +176,7 @@ def _compare(x: np.ndarray, y: np.ndarray, strata: list[str], *, sesoi: float, p
     if n < plan.min_scenes:
         return dict(diff=float(d.mean()), scenes=n, **nan)
     if plan.rules == "v2":
-        return _compare_v2(d, g, nets, sesoi=sesoi, plan=plan, seed=seed)
+        return _compare_v2(d, g, nets, names, sesoi=sesoi, plan=plan, seed=seed)
     est = stratified_estimate(d, g if plan.interval == "stratified-t" else None)
     _, lo, hi = interval(d, g, method=plan.interval, confidence=plan.confidence, seed=seed)
     p = lambda null, alt: t_test_pvalue(est, null, alt)  # noqa: E731
@@ -299,7 +300,8 @@ def check_claims(
                             continue
                         first, second = (b, a) if claim.kind == "worst" else (a, b)
                         c = _compare(wide[first].to_numpy(dtype=np.float64), wide[second].to_numpy(dtype=np.float64),
-                                     strata, sesoi=sesoi, plan=plan, seed=seed, networks=networks)
+                                     strata, sesoi=sesoi, plan=plan, seed=seed, networks=networks,
+                                     scenes=list(scenes))
                         if c is None:
                             continue
                         family.append(dict(

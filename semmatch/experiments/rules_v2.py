@@ -44,40 +44,50 @@ def _t_tests(d: np.ndarray, *, sesoi: float, confidence: float) -> dict:
                 p_beyond1=min(up, down))
 
 
-def _bootstrap_tests(d: np.ndarray, strata: list[str], networks: list, *, sesoi: float, plan: AnalysisPlan,
-                     seed: int) -> dict:
-    """The two-level bootstrap's percentile interval and one-sided p-values ((1 + count) / (B + 1))."""
+def _bound_pvalue(rejects, n_resamples: int, steps: int = 14) -> float:
+    """The smallest level ``a`` at which ``rejects(a)`` (monotone in ``a``) holds, by bisection."""
+    lo, hi = 1.0 / (n_resamples + 1.0), 1.0 - 1.0 / (n_resamples + 1.0)
+    if rejects(lo):
+        return lo
+    if not rejects(hi):
+        return 1.0
+    for _ in range(steps):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (lo, mid) if rejects(mid) else (mid, hi)
+    return hi
+
+
+def _bootstrap_tests(d: np.ndarray, strata: list[str], networks: list, scenes: list, *, sesoi: float,
+                     plan: AnalysisPlan, seed: int) -> dict:
+    """The two-level bootstrap's two-sided percentile interval and the one-sided p-values the rules
+    read: ``p_neg`` (mean < 0) and ``p_beyond1`` (beyond the nearer margin), each the smallest level
+    whose one-sided bound (the same resamples: a fixed seed) excludes the null. ``p_pos`` / ``p_eq``
+    are not computed (the rules read the interval for them)."""
     from ..evaluate import stats
 
     boot = getattr(stats, "two_level_bootstrap", None)
     if boot is None:
-        raise ValueError("check_claims: these per-scene tables hold several networks per architecture (training or fine-tuning "
-                         f"seeds, e.g. column {NETWORK_COLUMN!r}); the v2 plan's interval needs semmatch.evaluate.stats.two_level_bootstrap, "
-                         "which this code does not have")
+        raise ValueError("check_claims: these per-scene tables hold several networks per architecture (training "
+                         f"or fine-tuning seeds, e.g. column {NETWORK_COLUMN!r}); the v2 plan's interval needs "
+                         "semmatch.evaluate.stats.two_level_bootstrap, which this code does not have")
     inf = plan.raw.get("inference", {})
-    means = np.asarray(boot(d, networks=np.asarray(networks), strata=np.asarray(strata),
-                            n_resamples=int(inf.get("n_resamples", 10000)), seed=int(inf.get("seed", seed))),
-                       dtype=np.float64).ravel()
-    if means.size < 2:
-        raise ValueError("check_claims: two_level_bootstrap must return the resampled means (one per resample)")
-    frame = pd.DataFrame({"d": d, "n": networks})
-    diff = float(frame.groupby("n")["d"].mean().mean())
-    a = (1.0 - plan.confidence) / 2
-    lo, hi = np.quantile(means, [a, 1.0 - a])
-    p = lambda count: (1.0 + count) / (means.size + 1.0)  # noqa: E731
-    up, down = p(np.sum(means <= sesoi)), p(np.sum(means >= -sesoi))
-    return dict(diff=diff, lo=float(lo), hi=float(hi), df=np.nan, p_pos=p(np.sum(means <= 0)),
-                p_neg=p(np.sum(means >= 0)), p_eq=max(p(np.sum(means <= -sesoi)), p(np.sum(means >= sesoi))),
-                p_beyond=min(1.0, 2 * min(up, down)), p_beyond1=min(up, down))
+    n, seed = int(inf.get("n_resamples", 10000)), int(inf.get("seed", seed))
+    args = (np.asarray(d, np.float64), np.asarray(networks), np.asarray(scenes), np.asarray(strata))
+    run = lambda confidence: boot(*args, confidence=confidence, n_resamples=n, seed=seed)  # noqa: E731
+    main = run(plan.confidence)
+    below = lambda null: _bound_pvalue(lambda a: run(1.0 - a).upper < null, n)  # noqa: E731
+    above = lambda null: _bound_pvalue(lambda a: run(1.0 - a).lower > null, n)  # noqa: E731
+    return dict(diff=float(main.mean), lo=float(main.lo), hi=float(main.hi), df=np.nan, p_pos=np.nan,
+                p_neg=below(0.0), p_eq=np.nan, p_beyond=np.nan, p_beyond1=min(above(sesoi), below(-sesoi)))
 
 
-def _compare_v2(d: np.ndarray, strata: list[str], networks: list | None, *, sesoi: float, plan: AnalysisPlan,
-                seed: int) -> dict:
+def _compare_v2(d: np.ndarray, strata: list[str], networks: list | None, scenes: list | None, *, sesoi: float,
+                plan: AnalysisPlan, seed: int) -> dict:
     """:func:`_compare` under the v2 plan: the plan's interval (the two-level bootstrap over several
     networks, else ``one_network_interval``) and the kind-cluster sensitivity (t over the kind means)."""
     several = networks is not None and len(set(networks)) > 1
     if several:
-        out = _bootstrap_tests(d, strata, networks, sesoi=sesoi, plan=plan, seed=seed)
+        out = _bootstrap_tests(d, strata, networks, scenes, sesoi=sesoi, plan=plan, seed=seed)
         method = f"two-level bootstrap ({len(set(networks))} networks)"
     elif plan.one_network_interval == "t":
         out, method = _t_tests(d, sesoi=sesoi, confidence=plan.confidence), "t over scenes (one network)"
