@@ -86,7 +86,7 @@ def test_cluster_sensitivity_is_reported_not_deciding():
     fam = _judge_family_v2(_family([(0.05, 0.03, 0.07, 0.999)], lo=np.array([-0.01]), hi=np.array([0.11])),
                            "beats", 0.02, 0.025)
     fam = fam.assign(claim="X", reference="fusion", statement="s", data="synthetic", role="primary", kind="beats",
-                     paper_in_ci=None, interval_method="t over scenes (one network)")
+                     paper_in_ci=None, interval_method="t over scenes (one network); provisional")
     row = claim_verdicts(fam).iloc[0]
     assert row["verdict"] == "holds" and row["verdict_cluster"] == "inconclusive"
     assert row["min_effect"].startswith("1 of 1 beyond SESOI")
@@ -110,7 +110,7 @@ def test_check_claims_v2_on_synthetic_scenes():
     assert by.loc["C1", "verdict"] == "holds" and bool(by.loc["C1", "min_effect"])
     assert by.loc["F1", "verdict"] in ("equivalent", "inconclusive") and not by.loc["F1", "min_effect"]
     assert {"cluster_lo", "cluster_hi", "verdict_cluster", "interval_method"} <= set(out.columns)
-    assert out["interval_method"].eq("t over scenes (one network)").all()
+    assert out["interval_method"].eq("t over scenes (one network); provisional").all()
 
 
 def test_several_networks_need_the_two_level_bootstrap(monkeypatch):

@@ -171,7 +171,7 @@ def rejudge_markdown(figures_dir: str | Path, *, rules: str = "v2", command: str
                   "under the `mesh` reference; `min_effect` how many comparisons have the lower end of the "
                   "two-sided 95 % interval beyond the SESOI (0.02); `verdict_cluster` the same rules on the "
                   "t interval over the four kind means (3 df); `interval` the method (this run has one network "
-                  "per architecture: v2's one-network interval, conditional on that network). Claims F1-F2-real "
+                  "per architecture: v2's one-network interval, conditional on that network, so `provisional`). Claims F1-F2-real "
                   "are new in v2 and were not in the v1 plan: on this run they are exploratory.", ""]
     shown = claims.rename(columns={"verdict_before": "verdict (v1)"}).drop(columns=["statement"]).fillna("-")
     lines += ["## Claims", "", shown.to_markdown(index=False), ""]
