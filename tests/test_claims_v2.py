@@ -145,6 +145,27 @@ def test_several_networks_need_the_two_level_bootstrap(monkeypatch):
     assert out["verdict"].iloc[0] == "against" and out["p_against"].iloc[0] < 0.001
 
 
+def test_judge_figures_v2_on_several_networks(tmp_path, monkeypatch):
+    from semmatch.evaluate import stats
+
+    def fake(values, networks, scenes, strata, *, confidence, n_resamples, seed):
+        a = 1.0 - confidence
+        m = float(np.mean(values))
+        return SimpleNamespace(mean=m, lo=m - 0.01 * (1 - a), hi=m + 0.01 * (1 - a), lower=m - 0.01, upper=m + 0.01)
+
+    monkeypatch.setattr(stats, "two_level_bootstrap", fake, raising=False)
+    rows = [dict(scene=f"{kind}_{9000 + s}", route="own", reference="fusion", model="compact", method=m,
+                 training_seed=n, mean_acc=0.7 + 0.05 * (m == "fused") + 0.001 * (s + n), color_acc=0.8,
+                 jaccard=0.6, sorensen=0.7)
+            for kind in KINDS for s in range(3) for n in range(3) for m in ("lower", "upper", "3d-neighborhood", "fused")]
+    pd.DataFrame(rows).to_csv(tmp_path / "table2_per_scene.csv", index=False)
+    pd.DataFrame({"scene": sorted({r["scene"] for r in rows}), "route": "own",
+                  "support": np.linspace(0.5, 0.9, 12)}).to_csv(tmp_path / "support_per_scene.csv", index=False)
+    table = judge_figures(tmp_path, plan=V2).set_index("claim")
+    assert table.loc["F1", "verdict"] == "holds" and "two-level bootstrap (3 networks)" in table.loc["F1", "interval"]
+    assert (tmp_path / "secondary_s1_support.csv").is_file()
+
+
 def test_speed_v2_reads_bench_medians():
     table = pd.DataFrame({"method": ["2d-slic", "3d-slic", "dbscan", "3d-neighborhood"],
                           "median": [37.0, 40.0, 41.0, 300.0], "min": [29.5, 35.0, 36.0, 280.0]})

@@ -482,6 +482,15 @@ def claims_markdown(df: pd.DataFrame, *, digits: int = 3, plan: AnalysisPlan | N
     return "\n".join(lines) + "\n"
 
 
+def _network_mean(per_scene: pd.DataFrame) -> pd.DataFrame:
+    """Per-scene rows averaged over the networks of an architecture (``training_seed``), for the
+    secondary analyses that read one value per scene; a table without that column as it is."""
+    if NETWORK_COLUMN not in per_scene.columns:
+        return per_scene
+    keys = [c for c in per_scene.columns if c != NETWORK_COLUMN and not pd.api.types.is_numeric_dtype(per_scene[c])]
+    return per_scene.drop(columns=NETWORK_COLUMN).groupby(keys, sort=False, dropna=False).mean().reset_index()
+
+
 def judge_figures(figures_dir: str | Path, out_dir: str | Path | None = None, *,
                   methods: Sequence[str] | None = None, plan: AnalysisPlan | None = None) -> pd.DataFrame:
     """Every claim of the plan judged on the per-scene tables of one run, in one verdict table.
@@ -540,8 +549,8 @@ def judge_figures(figures_dir: str | Path, out_dir: str | Path | None = None, *,
     # declared secondary analyses: S1 (C1 against support), S3 (per-kind means)
     support_csv = figures_dir / "support_per_scene.csv"
     if read["table2_per_scene"] is not None and support_csv.is_file():
-        save_table(support_regression(read["table2_per_scene"], pd.read_csv(support_csv), plan=plan), out_dir,
-                   "secondary_s1_support")
+        save_table(support_regression(_network_mean(read["table2_per_scene"]), pd.read_csv(support_csv), plan=plan),
+                   out_dir, "secondary_s1_support")
     for name, tag in (("table2_per_scene", "table2"), ("table3_per_scene", "table3")):
         if read[name] is not None:
             save_table(per_kind_means(read[name]), out_dir, f"secondary_s3_{tag}_per_kind")
