@@ -30,6 +30,8 @@ ADAPT_PLAN_FILE = Path(__file__).with_name("adapt_plan.yaml")
 #: the per-scene tables of notebook 09 that the claims read, by the claims' ``data``
 TABLES = {"height sweep": "adapt_height_per_scene", "robot map": "table2_adapted_per_scene"}
 _KINDS = ("beats", "similar", "share")
+#: the fine-tuning seed's column in per-scene tables of several seeds (``adapt_seeds``)
+SEED_COLUMN = "seed"
 _NETWORK = "<network>"
 _ADAPTED = "<adapted:"
 
@@ -152,8 +154,9 @@ def load_adapt_plan(path: str | Path | None = None) -> AdaptPlan:
 
 
 def _values(table: pd.DataFrame, claim: AdaptClaim, plan: AdaptPlan, token: str,
-            height: float | None) -> pd.Series | None:
-    """Per-scene values of one side of a claim (None: the table has no such rows)."""
+            height: float | None, *, by_seed: bool = False) -> pd.Series | None:
+    """Per-scene values of one side of a claim (None: the table has no such rows): the mean over
+    the fine-tuning seeds when the table has a ``seed`` column, or per scene and seed with ``by_seed``."""
     model = plan.model(token)
     rows = table[table["model"] == model]
     if claim.data == "robot map":
@@ -163,7 +166,7 @@ def _values(table: pd.DataFrame, claim: AdaptClaim, plan: AdaptPlan, token: str,
         rows = rows[np.isclose(rows["height"].astype(float), height)]
     if rows.empty or claim.measure not in rows.columns:
         return None
-    return rows.groupby("scene")[claim.measure].mean()
+    return rows.groupby(["scene", SEED_COLUMN] if by_seed else "scene")[claim.measure].mean()
 
 
 def _share(table: pd.DataFrame, claim: AdaptClaim, plan: AdaptPlan, confidence: float) -> dict | None:
@@ -193,31 +196,49 @@ def _share_verdict(lo: float, hi: float, target: float) -> str:
 def _judge_one(table: pd.DataFrame, claim: AdaptClaim, plan: AdaptPlan, ap) -> dict:
     """One claim's row (its family is itself: Holm over one comparison is the raw p-value)."""
     from ..evaluate.stats import holm
-    from .claims import _compare, _comparison_verdict
+    from .claims import _compare, _comparison_verdict, claim_rule_v2, comparison_verdict_v2
 
     head = dict(claim=claim.id, statement=claim.statement, role=claim.role, data=claim.data, kind=claim.kind,
                 measure=claim.measure)
     if claim.kind == "share":
         where = f"share of the gap closed ({plan.low:g} m vs {plan.high:g} m)"
-        c = _share(table, claim, plan, ap.confidence)
+        # v1: one-sided bounds at the plan's confidence; v2: at 1 - alpha (the ends of a two-sided 95 % interval)
+        level = 1.0 - ap.alpha if ap.rules == "v2" else ap.confidence
+        c = _share(table, claim, plan, level)
         if c is None:
             return {**head, "comparison": where, "verdict": "not judged", "note": "rows missing"}
+        seeds = table[SEED_COLUMN].nunique() if SEED_COLUMN in table.columns else 1
         return {**head, "comparison": f"{plan.model(claim.subject)}: {where}", **c,
                 "verdict": _share_verdict(c["lo"], c["hi"], plan.target),
-                "note": f"lo/hi: one-sided {ap.confidence:.0%} Fieller bounds; target {plan.target:.0%}"}
+                "note": f"lo/hi: one-sided {level:.1%} Fieller bounds; target {plan.target:.0%}"
+                        + (f"; per-scene mean over {seeds} fine-tuning seeds" if seeds > 1 else "")}
     at = f" at {claim.height:g} m" if claim.data == "height sweep" else ""
     name = lambda t: plan.model(t) if t == _NETWORK or t.startswith(_ADAPTED) else f"{plan.network} {t}"  # noqa: E731
     comparison = f"{name(claim.subject)} - {name(claim.other)}{at}"
-    a, b = (_values(table, claim, plan, t, claim.height) for t in (claim.subject, claim.other))
+    by_seed = ap.rules == "v2" and SEED_COLUMN in table.columns
+    a, b = (_values(table, claim, plan, t, claim.height, by_seed=by_seed) for t in (claim.subject, claim.other))
     if a is None or b is None:
         return {**head, "comparison": comparison, "verdict": "not judged", "note": "rows missing"}
     pair = pd.concat([a, b], axis=1, keys=["a", "b"])
-    kinds = [str(s).rsplit("_", 1)[0] for s in pair.index]
-    c = _compare(pair["a"].to_numpy(np.float64), pair["b"].to_numpy(np.float64), kinds,
-                 sesoi=float(ap.sesoi[claim.measure]), plan=ap, seed=0)
+    scenes = pair.index.get_level_values("scene")
+    kinds = [str(s).rsplit("_", 1)[0] for s in scenes]
+    sesoi = float(ap.sesoi[claim.measure])
+    c = _compare(pair["a"].to_numpy(np.float64), pair["b"].to_numpy(np.float64), kinds, sesoi=sesoi, plan=ap,
+                 seed=0, networks=list(pair.index.get_level_values(SEED_COLUMN)) if by_seed else None,
+                 scenes=list(scenes))
     if c is None:
         return {**head, "comparison": comparison, "verdict": "not judged", "note": "no scene with both"}
     similar = claim.kind == "similar"
+    if ap.rules == "v2":  # a family of one comparison: Holm is the raw p-value
+        side = "p_beyond1" if similar else "p_neg"
+        rule = lambda lo, hi, p: claim_rule_v2([comparison_verdict_v2(  # noqa: E731
+            claim.kind, lo, hi, p, sesoi=sesoi, alpha=ap.alpha)], claim.kind)
+        return {**head, "comparison": comparison, "diff": c["diff"], "lo": c["lo"], "hi": c["hi"],
+                "scenes": c["scenes"], "p_holds": c["p_eq"] if similar else c["p_pos"], "p_against": c[side],
+                "p_equivalent": c["p_eq"], "verdict": rule(c["lo"], c["hi"], c[side]),
+                "min_effect": (-sesoi < c["lo"] and c["hi"] < sesoi) if similar else c["lo"] > sesoi,
+                "verdict_cluster": rule(c["cluster_lo"], c["cluster_hi"], c[f"cluster_{side}"]),
+                "note": f"{c['interval_method']}; sesoi {sesoi:g}; v2 rules"}
     p_holds = holm([c["p_eq"] if similar else c["p_pos"]])[0]
     p_against = holm([c["p_beyond"] if similar else c["p_neg"]])[0]
     p_eq = holm([c["p_eq"]])[0]
@@ -248,7 +269,11 @@ def check_adaptation_claims(tables: dict[str, pd.DataFrame | None], *, plan: Ada
     DataFrame
         ``claim, statement, role, data, kind, measure, comparison, diff, lo, hi, scenes, p_holds,
         p_against, p_equivalent, verdict, note``; for ``share`` claims ``diff`` is the share and
-        ``lo`` / ``hi`` its one-sided bounds.
+        ``lo`` / ``hi`` its one-sided bounds. Under a v2 analysis plan (``rules: v2``): the v2
+        verdicts (``refuted`` for a comparison against the claim; the share at one-sided
+        ``1 - alpha``, on the mean over fine-tuning seeds when the table has a ``seed`` column, the
+        other claims by the two-level bootstrap over those seeds) with ``min_effect`` and
+        ``verdict_cluster`` after ``verdict``.
     """
     from .analysis_plan import load_analysis_plan
 
@@ -265,6 +290,8 @@ def check_adaptation_claims(tables: dict[str, pd.DataFrame | None], *, plan: Ada
         rows.append(_judge_one(table, claim, plan, ap))
     cols = ["claim", "statement", "role", "data", "kind", "measure", "comparison", "diff", "lo", "hi", "scenes",
             "p_holds", "p_against", "p_equivalent", "verdict", "note"]
+    if ap.rules == "v2":  # the minimum-effect and kind-cluster columns beside the verdict
+        cols[cols.index("verdict") + 1:cols.index("verdict") + 1] = ["min_effect", "verdict_cluster"]
     return pd.DataFrame(rows).reindex(columns=cols)
 
 

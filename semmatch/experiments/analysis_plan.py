@@ -9,6 +9,7 @@ effect size of interest (SESOI) per measure, the multiplicity rule and the verdi
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
@@ -21,10 +22,13 @@ __all__ = [
     "ALL_OTHERS",
     "TOP_HEIGHT",
     "PLAN_FILE",
+    "PLAN_V2_FILE",
+    "RULES",
     "FRAMES_REFERENCE",
     "Claim",
     "AnalysisPlan",
     "load_analysis_plan",
+    "plan_for_seeds",
     "CLAIMS",
 ]
 
@@ -43,6 +47,10 @@ ALL_OTHERS = "<all others>"
 TOP_HEIGHT = "<top height>"
 #: the analysis plan read by :func:`load_analysis_plan`
 PLAN_FILE = Path(__file__).with_name("analysis_plan.yaml")
+#: the second analysis plan (issue 52: minimum-effect, intersection-union and "refuted" rules)
+PLAN_V2_FILE = Path(__file__).with_name("analysis_plan_v2.yaml")
+#: the verdict rules a plan can declare (``rules:`` in its YAML; v1's plan has none: ``v1``)
+RULES = ("v1", "v2")
 
 _DATA = {"synthetic": "table2", "real-like": "table3", "height sweep": "fig3", "depth noise": "noise"}
 _KINDS = ("beats", "best", "worst", "similar")
@@ -129,6 +137,11 @@ class AnalysisPlan:
     secondary_references : tuple of str
     route : str
     speed_claims : tuple of dict
+    rules : str
+        The verdict rules (:data:`RULES`): ``v1`` (Holm-adjusted tests, the half-count claim rule)
+        or ``v2`` (minimum-effect test, intersection-union, ``refuted``, kind clusters).
+    version : int
+        The plan's ``plan_version``.
     raw : dict
         The whole YAML document.
     """
@@ -143,6 +156,8 @@ class AnalysisPlan:
     secondary_references: tuple[str, ...] = ("mesh",)
     route: str = "own"
     speed_claims: tuple[dict, ...] = ()
+    rules: str = "v1"
+    version: int = 1
     raw: dict = field(default_factory=dict, compare=False, repr=False)
 
     @property
@@ -150,15 +165,34 @@ class AnalysisPlan:
         """The primary reference, then the secondary ones."""
         return (self.primary_reference, *self.secondary_references)
 
+    @property
+    def one_network_interval(self) -> str:
+        """The interval method for tables with one network per architecture (v2's ``one_network_interval``;
+        the plan's ``interval`` in a v1 plan)."""
+        return str(self.raw.get("inference", {}).get("one_network_interval", self.interval))
+
 
 def _level(v: object) -> str | float:
     return float(v) if isinstance(v, int | float) else str(v)
 
 
+def _carried_over(data: dict, source: str) -> tuple[Claim, ...]:
+    """The claims a plan carries over from another plan file (``claims_carried_over: {from, ids}``)."""
+    spec = data.get("claims_carried_over")
+    if not spec:
+        return ()
+    other = load_analysis_plan(Path(source).with_name(str(spec["from"])))
+    by_id = {c.id: c for c in other.claims}
+    unknown = [i for i in spec["ids"] if str(i) not in by_id]
+    if unknown:
+        raise ValueError(f"{source}: claims_carried_over names claims {unknown} that {spec['from']} does not have")
+    return tuple(by_id[str(i)] for i in spec["ids"])
+
+
 def _parse_plan(data: dict, source: str) -> AnalysisPlan:
     try:
         inf, refs = data["inference"], data["references"]
-        claims = tuple(
+        claims = _carried_over(data, source) + tuple(
             Claim(id=str(c["id"]), statement=str(c["statement"]), section=str(c["section"]), data=c["data"],
                   kind=c["kind"], subjects=tuple(_level(v) for v in c["subjects"]),
                   others=tuple(_level(v) for v in c["others"]), measure=c.get("measure", "mean_acc"),
@@ -170,10 +204,13 @@ def _parse_plan(data: dict, source: str) -> AnalysisPlan:
             interval=str(inf["interval"]), confidence=float(inf["confidence"]), alpha=float(inf["alpha"]),
             min_scenes=int(inf["min_scenes"]), primary_reference=str(refs["primary"]),
             secondary_references=tuple(str(r) for r in refs.get("secondary", ())), route=str(data["route"]),
-            speed_claims=tuple(data.get("speed_claims", ())), raw=data,
+            speed_claims=tuple(data.get("speed_claims", ())), rules=str(data.get("rules", "v1")),
+            version=int(data.get("plan_version", 1)), raw=data,
         )
     except (KeyError, TypeError) as e:
         raise ValueError(f"{source}: not a valid analysis plan ({type(e).__name__}: {e})") from e
+    if plan.rules not in RULES:
+        raise ValueError(f"{source}: rules must be one of {RULES}, got {plan.rules!r}")
     ids = [c.id for c in plan.claims]
     if len(set(ids)) != len(ids):
         raise ValueError(f"{source}: claim ids repeat: {sorted({i for i in ids if ids.count(i) > 1})}")
@@ -212,6 +249,24 @@ def load_analysis_plan(path: str | Path | None = None) -> AnalysisPlan:
     """
     p = Path(path) if path is not None else PLAN_FILE
     return _load_cached(str(p.resolve()), p.stat().st_mtime)
+
+
+def plan_for_seeds(seeds: Sequence[int]) -> AnalysisPlan:
+    """The plan a confirmatory run of ``seeds`` is judged by: v2 (:data:`PLAN_V2_FILE`) for its
+    confirmatory seeds (8101-8106), else v1 (:data:`PLAN_FILE`: the first run's and readers' runs).
+
+    Raises
+    ------
+    ValueError
+        If ``seeds`` mixes v2's confirmatory seeds with others.
+    """
+    v2 = load_analysis_plan(PLAN_V2_FILE)
+    mine = {int(s) for s in v2.raw["scenes"]["confirmatory_seeds"]}
+    given = {int(s) for s in seeds}
+    if given & mine and not given <= mine:
+        raise ValueError(f"{PLAN_V2_FILE.name}: seeds {sorted(given)} mix the v2 plan's confirmatory seeds "
+                         f"{sorted(mine)} with others; run them apart")
+    return v2 if given and given <= mine else load_analysis_plan(PLAN_FILE)
 
 
 #: The comparative claims of the analysis plan (the paper's §4-5 and the abstract's summary of

@@ -37,6 +37,7 @@ from .analysis_plan import (
     FRAMES_REFERENCE,
     MEASURE_LABELS,
     PLAN_FILE,
+    PLAN_V2_FILE,
     TOP_HEIGHT,
     VERDICTS,
     AnalysisPlan,
@@ -44,6 +45,16 @@ from .analysis_plan import (
     load_analysis_plan,
 )
 from .paper import FIG3_MEAN_ACC, PAPER_MODEL_OF, TABLE2, TABLE3
+from .rules_v2 import (
+    CLAIM_VERDICTS_V2,
+    COMPARISON_VERDICTS_V2,
+    NETWORK_COLUMN,
+    _compare_v2,
+    _judge_family_v2,
+    claim_rule_v2,
+    comparison_verdict_v2,
+)
+from .speed_claims import bench_speed_table, judge_speed_claims
 from .summaries import per_kind_means, summarize_over_scenes, support_regression
 from .tables import format_with_intervals, save_table
 
@@ -67,12 +78,19 @@ __all__ = [
     "judge_speed_claims",
     "claims_markdown",
     "judge_figures",
+    "PLAN_V2_FILE",
+    "COMPARISON_VERDICTS_V2",
+    "CLAIM_VERDICTS_V2",
+    "comparison_verdict_v2",
+    "claim_rule_v2",
+    "bench_speed_table",
     "support_regression",
     "per_kind_means",
 ]
 
 _GT = "ground truth"
-_BASELINES = ("lower", "upper")
+# rows a claim may name besides the configured transfer methods (never part of "<all others>")
+_BASELINES = ("lower", "upper", "fused")
 
 
 def _level_name(level: str | float) -> str:
@@ -87,11 +105,11 @@ def _per_scene(df: pd.DataFrame, level_col: str, measure: str, route: str | None
         raise ValueError(f"check_claims: a per-scene frame needs the columns {need}; {missing} missing")
     if "route" in df.columns and route is not None:
         df = df[(df["route"] == route) | df["route"].isna()]
-    keep = need + (["reference"] if "reference" in df.columns else [])
-    df = df[keep].copy()
+    extra = [c for c in ("reference", NETWORK_COLUMN) if c in df.columns]
+    df = df[need + extra].copy()
     if level_col == "height":
         df["height"] = df["height"].astype(np.float64).round(3)
-    key = ["scene", "model", level_col] + (["reference"] if "reference" in df.columns else [])
+    key = ["scene", "model", level_col] + extra
     dup = df.duplicated(key)
     if dup.any():
         raise ValueError(
@@ -137,17 +155,28 @@ def _paper_diff(claim: Claim, model: str, first: str | float, second: str | floa
 
 
 def _compare(x: np.ndarray, y: np.ndarray, strata: list[str], *, sesoi: float, plan: AnalysisPlan,
-             seed: int) -> dict | None:
-    """Mean paired difference, its interval and the raw one-sided p-values (None: no pair)."""
+             seed: int, networks: Sequence | None = None, scenes: Sequence | None = None) -> dict | None:
+    """Mean paired difference, its interval and the raw one-sided p-values (None: no pair).
+
+    Under a v2 plan also the one-sided p-value beyond the nearer margin without doubling
+    (``p_beyond1``), the interval method used and the kind-cluster sensitivity (``cluster_*``:
+    the same numbers over the kinds' mean differences)."""
     keep = ~(np.isnan(x) | np.isnan(y))
     n = int(keep.sum())
     if n == 0:
         return None
     d = (x - y)[keep]
     g = [s for s, k in zip(strata, keep) if k]
+    nets = None if networks is None else [v for v, k in zip(networks, keep) if k]
+    names = None if scenes is None else [v for v, k in zip(scenes, keep) if k]
     nan = dict(lo=np.nan, hi=np.nan, df=np.nan, p_pos=np.nan, p_neg=np.nan, p_eq=np.nan, p_beyond=np.nan)
+    if plan.rules == "v2":
+        nan.update(p_beyond1=np.nan, cluster_diff=np.nan, cluster_lo=np.nan, cluster_hi=np.nan, cluster_p_neg=np.nan,
+                   cluster_p_beyond1=np.nan)
     if n < plan.min_scenes:
         return dict(diff=float(d.mean()), scenes=n, **nan)
+    if plan.rules == "v2":
+        return _compare_v2(d, g, nets, names, sesoi=sesoi, plan=plan, seed=seed)
     est = stratified_estimate(d, g if plan.interval == "stratified-t" else None)
     _, lo, hi = interval(d, g, method=plan.interval, confidence=plan.confidence, seed=seed)
     p = lambda null, alt: t_test_pvalue(est, null, alt)  # noqa: E731
@@ -217,7 +246,13 @@ def check_claims(
         ``diff`` is the mean paired difference as written in ``comparison`` (positive supports a
         beats/best/worst claim), ``lo``/``hi`` its interval; the p-values are Holm-adjusted within
         the claim and reference; ``paper_diff`` is the paper's own difference (NaN where it has
-        none) and ``paper_in_ci`` whether it lies in ``[lo, hi]``.
+        none) and ``paper_in_ci`` whether it lies in ``[lo, hi]``. Under a v2 plan (``rules: v2``)
+        ``p_holds`` / ``p_equivalent`` are unadjusted (intersection-union), ``p_against`` is
+        Holm-adjusted in the wrong direction, ``verdict`` is :func:`comparison_verdict_v2`'s, and
+        ``interval_method``, ``min_effect`` (the bound beyond the SESOI), ``beyond_zero``,
+        ``cluster_diff`` / ``cluster_lo`` / ``cluster_hi`` (t over the kind means) and
+        ``verdict_cluster`` follow. Rows may carry a ``training_seed`` column (several networks
+        per architecture: the v2 plan's two-level bootstrap).
     """
     plan = load_analysis_plan() if plan is None else plan
     claims = plan.claims if claims is None else claims
@@ -243,9 +278,12 @@ def check_claims(
             for model in dref["model"].unique():
                 if (claim.models == "networks" and model == _GT) or (claim.models == "ground truth" and model != _GT):
                     continue
-                wide = dref[dref["model"] == model].pivot(index="scene", columns=level_col, values=claim.measure)
+                index = ["scene", NETWORK_COLUMN] if NETWORK_COLUMN in dref.columns else "scene"
+                wide = dref[dref["model"] == model].pivot(index=index, columns=level_col, values=claim.measure)
                 wide = wide.dropna(axis=1, how="all")
-                strata = [scene_kind(s) for s in wide.index]
+                scenes = wide.index.get_level_values("scene")
+                strata = [scene_kind(s) for s in scenes]
+                networks = list(wide.index.get_level_values(NETWORK_COLUMN)) if index != "scene" else None
                 if heights:
                     available = sorted(float(h) for h in wide.columns)
                     top = available[-1] if available else None
@@ -262,7 +300,8 @@ def check_claims(
                             continue
                         first, second = (b, a) if claim.kind == "worst" else (a, b)
                         c = _compare(wide[first].to_numpy(dtype=np.float64), wide[second].to_numpy(dtype=np.float64),
-                                     strata, sesoi=sesoi, plan=plan, seed=seed)
+                                     strata, sesoi=sesoi, plan=plan, seed=seed, networks=networks,
+                                     scenes=list(scenes))
                         if c is None:
                             continue
                         family.append(dict(
@@ -273,6 +312,9 @@ def check_claims(
             if not family:
                 continue
             fam = pd.DataFrame(family)
+            if plan.rules == "v2":
+                rows.extend(_judge_family_v2(fam, claim.kind, sesoi, plan.alpha).to_dict("records"))
+                continue
             similar = claim.kind == "similar"
             fam["p_holds"] = holm(fam["p_eq"] if similar else fam["p_pos"])
             fam["p_against"] = holm(fam["p_beyond"] if similar else fam["p_neg"])
@@ -282,6 +324,9 @@ def check_claims(
             rows.extend(fam.to_dict("records"))
     cols = ["claim", "statement", "section", "data", "role", "kind", "reference", "model", "measure", "comparison",
             "diff", "lo", "hi", "scenes", "df", "p_holds", "p_against", "p_equivalent", "verdict", "paper_diff"]
+    if plan.rules == "v2":
+        cols += ["interval_method", "min_effect", "beyond_zero", "cluster_diff", "cluster_lo", "cluster_hi",
+                 "verdict_cluster"]
     out = pd.DataFrame(rows, columns=cols)
     inside = (out["paper_diff"] >= out["lo"]) & (out["paper_diff"] <= out["hi"])
     out["paper_in_ci"] = np.where(out["paper_diff"].isna() | out["lo"].isna(), None, inside)
@@ -316,18 +361,28 @@ def claim_verdicts(comparisons: pd.DataFrame) -> pd.DataFrame:
         ``counts`` the comparisons' verdicts (e.g. ``"4 holds, 1 inconclusive"``), ``paper_in_ci``
         how many of the comparisons with a paper value have it inside our interval (``"2 of 5"``).
     """
+    v2 = "verdict_cluster" in comparisons.columns
+    labels = COMPARISON_VERDICTS_V2 if v2 else VERDICTS
     rows = []
     for (cid, ref), g in comparisons.groupby(["claim", "reference"], sort=False):
         counts = g["verdict"].value_counts()
         with_paper = g["paper_in_ci"].dropna()
-        rows.append(dict(
+        kind = g["kind"].iloc[0]
+        row = dict(
             claim=cid, statement=g["statement"].iloc[0], data=g["data"].iloc[0], role=g["role"].iloc[0],
-            reference=ref, verdict=_claim_rule(list(g["verdict"]), g["kind"].iloc[0]), comparisons=len(g),
-            counts=", ".join(f"{int(counts[v])} {v}" for v in VERDICTS if v in counts),
+            reference=ref, verdict=(claim_rule_v2 if v2 else _claim_rule)(list(g["verdict"]), kind),
+            comparisons=len(g), counts=", ".join(f"{int(counts[v])} {v}" for v in labels if v in counts),
             paper_in_ci=f"{int(with_paper.astype(bool).sum())} of {len(with_paper)}" if len(with_paper) else "-",
-        ))
-    return pd.DataFrame(rows, columns=["claim", "statement", "data", "role", "reference", "verdict", "comparisons",
-                                       "counts", "paper_in_ci"])
+        )
+        if v2:
+            row["verdict_cluster"] = claim_rule_v2(list(g["verdict_cluster"]), kind)
+            beyond = f"{int(g['min_effect'].sum())} of {len(g)}"
+            row["min_effect"] = f"{beyond} within ±SESOI" if kind == "similar" else \
+                f"{beyond} beyond SESOI ({int(g['beyond_zero'].sum())} beyond 0)"
+            row["interval"] = ", ".join(dict.fromkeys(g["interval_method"].dropna()))
+        rows.append(row)
+    cols = ["claim", "statement", "data", "role", "reference", "verdict", "comparisons", "counts", "paper_in_ci"]
+    return pd.DataFrame(rows, columns=cols + (["verdict_cluster", "min_effect", "interval"] if v2 else []))
 
 
 def verdict_table(comparisons: pd.DataFrame, *, plan: AnalysisPlan | None = None,
@@ -367,47 +422,11 @@ def verdict_table(comparisons: pd.DataFrame, *, plan: AnalysisPlan | None = None
             row[f"verdict_{ref}"] = sec["verdict"].iloc[0] if len(sec) else "-"
         row["counts"] = primary["counts"].iloc[0] if len(primary) else "-"
         row["paper_in_ci"] = primary["paper_in_ci"].iloc[0] if len(primary) else "-"
+        for col in ("min_effect", "verdict_cluster", "interval"):  # the v2 rules' columns
+            if col in per.columns:
+                row[col] = primary[col].iloc[0] if len(primary) else "-"
         rows.append(row)
     return pd.DataFrame(rows)
-
-
-def judge_speed_claims(table1: pd.DataFrame, *, plan: AnalysisPlan | None = None) -> pd.DataFrame:
-    """The plan's speed claims judged on Table 1 (one measurement: holds / does not hold).
-
-    Parameters
-    ----------
-    table1 : DataFrame
-        ``method`` and ``fps`` (frames per second of each transfer method; a ``cpu_fps`` column,
-        the rate from the method's CPU time on one core, is used instead when present).
-    plan : AnalysisPlan, optional
-        Default the committed plan.
-
-    Returns
-    -------
-    DataFrame
-        ``claim, statement, section, role, rule, evidence, verdict``.
-    """
-    plan = load_analysis_plan() if plan is None else plan
-    col = "cpu_fps" if "cpu_fps" in table1.columns else "fps"
-    if "method" not in table1.columns or col not in table1.columns:
-        raise ValueError(f"judge_speed_claims: Table 1 needs the columns 'method' and '{col}'")
-    fps = dict(zip(table1["method"], table1[col].astype(float)))
-    rows = []
-    for c in plan.speed_claims:
-        if "min_fps" in c:
-            slow = {m: f for m, f in fps.items() if f < float(c["min_fps"])}
-            ok = not slow
-            evidence = (f"slowest {min(fps, key=fps.get)} {min(fps.values()):.1f} FPS" if fps else "no rows")
-            evidence += "" if ok else f"; below {c['min_fps']}: {', '.join(sorted(slow))}"
-        else:
-            slowest = [m for m in c["slowest"] if m in fps]
-            rest = [f for m, f in fps.items() if m not in c["slowest"]]
-            ok = bool(slowest) and bool(rest) and max(fps[m] for m in slowest) < min(rest)
-            evidence = ", ".join(f"{m} {f:.1f}" for m, f in sorted(fps.items(), key=lambda kv: kv[1])) + " FPS"
-        rows.append(dict(claim=c["id"], statement=c["statement"], section=c["section"],
-                         role=c.get("role", "primary"), rule=c["rule"], evidence=evidence,
-                         verdict="holds" if ok else "does not hold"))
-    return pd.DataFrame(rows, columns=["claim", "statement", "section", "role", "rule", "evidence", "verdict"])
 
 
 def claims_markdown(df: pd.DataFrame, *, digits: int = 3, plan: AnalysisPlan | None = None) -> str:
@@ -446,20 +465,30 @@ def claims_markdown(df: pd.DataFrame, *, digits: int = 3, plan: AnalysisPlan | N
         f"difference [{plan.confidence:.0%} CI]": [f"{fmt(d)} [{fmt(lo)}, {fmt(hi)}]" for d, lo, hi in
                                                     zip(df["diff"], df["lo"], df["hi"])],
         "scenes": df["scenes"],
-        "p (Holm)": [("-" if pd.isna(a) else f"{a:.3f}") for a in
-                     np.where(df["verdict"] == "does not hold", df["p_against"],
+        "p (Holm)" if plan.rules == "v1" else "p (against: Holm)": [("-" if pd.isna(a) else f"{a:.3f}") for a in
+                     np.where(df["verdict"].isin(["does not hold", "against"]), df["p_against"],
                               np.where(df["verdict"] == "equivalent", df["p_equivalent"], df["p_holds"]))],
         "verdict": df["verdict"],
         "paper": [fmt(v) for v in df["paper_diff"]],
         "paper in CI": df["paper_in_ci"].map(lambda v: "-" if v is None or pd.isna(v) else ("yes" if v else "no")),
     })
     counts = claims["verdict"].value_counts()
-    summary = ", ".join(f"{int(counts[v])} {v}" for v in (*VERDICTS, "not judged (no data)") if v in counts)
+    summary = ", ".join(f"{int(counts[v])} {v}" for v in (*VERDICTS, "refuted", "not judged (no data)", "not judged")
+                        if v in counts)
     legend = df.drop_duplicates("claim")[["claim", "statement", "section", "data"]]
     lines = [claims.to_markdown(index=False), "", f"Claims judged: {len(claims)} ({summary}).", "",
              comps.to_markdown(index=False), "", f"Comparisons: {len(df)}.", ""]
     lines += [f"- **{r.claim}** ({r.data}, {r.section}): {r.statement}" for r in legend.itertuples()]
     return "\n".join(lines) + "\n"
+
+
+def _network_mean(per_scene: pd.DataFrame) -> pd.DataFrame:
+    """Per-scene rows averaged over the networks of an architecture (``training_seed``), for the
+    secondary analyses that read one value per scene; a table without that column as it is."""
+    if NETWORK_COLUMN not in per_scene.columns:
+        return per_scene
+    keys = [c for c in per_scene.columns if c != NETWORK_COLUMN and not pd.api.types.is_numeric_dtype(per_scene[c])]
+    return per_scene.drop(columns=NETWORK_COLUMN).groupby(keys, sort=False, dropna=False).mean().reset_index()
 
 
 def judge_figures(figures_dir: str | Path, out_dir: str | Path | None = None, *,
@@ -520,8 +549,8 @@ def judge_figures(figures_dir: str | Path, out_dir: str | Path | None = None, *,
     # declared secondary analyses: S1 (C1 against support), S3 (per-kind means)
     support_csv = figures_dir / "support_per_scene.csv"
     if read["table2_per_scene"] is not None and support_csv.is_file():
-        save_table(support_regression(read["table2_per_scene"], pd.read_csv(support_csv), plan=plan), out_dir,
-                   "secondary_s1_support")
+        save_table(support_regression(_network_mean(read["table2_per_scene"]), pd.read_csv(support_csv), plan=plan),
+                   out_dir, "secondary_s1_support")
     for name, tag in (("table2_per_scene", "table2"), ("table3_per_scene", "table3")):
         if read[name] is not None:
             save_table(per_kind_means(read[name]), out_dir, f"secondary_s3_{tag}_per_kind")
