@@ -248,6 +248,7 @@ def home_views(
     fused_base: str = "3d-neighborhood",
     min_coverage: float = MIN_COVERAGE,
     progress: bool = True,
+    recording=None,
 ) -> RobotViews:
     """Label a robot's recorded tour of a home with the person's map of that home.
 
@@ -275,6 +276,9 @@ def home_views(
     min_coverage : float
         Smallest share of the robot's pixels with depth the labels must cover.
     progress : bool
+    recording : sequence of Frame, optional
+        ``sequence`` already opened (any layout of :mod:`semmatch.io.readers`, e.g. with
+        estimated poses); default: ``sequence`` read as a sequence folder.
 
     Returns
     -------
@@ -306,10 +310,10 @@ def home_views(
     if int(frame_step) < 1 or (frames is not None and int(frames) < 1):
         raise ValueError(f"need frames >= 1 and frame_step >= 1, got {frames}, {frame_step}")
     sequence, person_map = Path(sequence), Path(person_map)
-    if sequence.is_dir() and not (sequence / "depth").is_dir():
+    if recording is None and sequence.is_dir() and not (sequence / "depth").is_dir():
         raise ValueError(f"{sequence}: the sequence has no depth/ folder; adapting in a home needs the robot's "
                          "depth to place its pixels in the person's map")
-    seq = read_sequence(sequence)
+    seq = read_sequence(sequence) if recording is None else recording
     m = read_map(person_map)
     if not np.any(m.labels > 0):
         raise ValueError(f"{person_map}: the map carries no labels (every vertex is void); a person's semantic map "
@@ -347,8 +351,10 @@ def home_views(
         gt.append(truth)
         cam_z.append(frame.pose[2, 3])
     if valid_px == 0:
-        raise ValueError(f"{sequence / 'depth'}: no depth in any of the {len(picks)} frames used (frame {picks[0]}: "
-                         f"{sequence / 'depth' / f'{picks[0]:06d}.png'}); adapting in a home needs the robot's depth")
+        where = (f"{sequence / 'depth'}: no depth in any of the {len(picks)} frames used (frame {picks[0]}: "
+                 f"{sequence / 'depth' / f'{picks[0]:06d}.png'})" if recording is None else
+                 f"{sequence}: no depth in any of the {len(picks)} frames used (first: frame {picks[0]})")
+        raise ValueError(f"{where}; adapting in a home needs the robot's depth")
     coverage = labelled / valid_px
     if coverage < min_coverage:
         raise ValueError(f"{person_map}: the map's labels cover {coverage:.2%} of the robot's pixels with depth in "

@@ -16,6 +16,10 @@
   (:mod:`semmatch.io.readers`) with the same recording options (``--frames START:STOP``,
   ``--intrinsics``, ``--estimate-poses``, bag topics): :func:`add_recording_options`,
   :func:`open_sequence`.
+
+Size: over 600 lines because it is the one place of the command line's grammar (the arguments
+every verb shares, their parsing and the output conventions); split, the verbs would import
+their shared options from several modules and two of them could drift apart.
 """
 
 from __future__ import annotations
@@ -37,7 +41,7 @@ __all__ = ["LONG_VERBS", "ImageSize", "HelpFormatter", "RawDescriptionHelpFormat
 #: the verbs that run long enough to want a progress display (on stderr) and ``--quiet`` to hide it;
 #: the benchmarks are left out (they time their work, and print nothing until the numbers)
 LONG_VERBS: tuple[str, ...] = ("simulate", "train", "adapt", "predict", "reconstruct", "transfer",
-                               "panoptic reference", "panoptic transfer")
+                               "panoptic reference", "panoptic transfer", "convert")
 
 
 # ----------------------------------------------------------------------------- help
@@ -442,14 +446,16 @@ def add_recording_options(parser, *, frames: bool = True,
 
     Parameters
     ----------
-    parser : argparse.ArgumentParser
+    parser : argparse.ArgumentParser or argument group
+        A parser gets a "recording" group; a group (a verb's "in a home") takes the options itself.
     frames : bool
         Add ``--frames`` (False for a verb whose ``--frames`` means something else).
     estimate_help : str
         Help of ``--estimate-poses``.
     """
-    g = parser.add_argument_group("recording", "how the sequence is read (any layout: semmatch sequence, TUM "
-                                  "RGB-D, 7-Scenes, plain folder, and any layout registered in semmatch.io.readers)")
+    g = parser if isinstance(parser, argparse._ArgumentGroup) else parser.add_argument_group(
+        "recording", "how the sequence is read (any layout: semmatch sequence, TUM RGB-D, 7-Scenes, plain folder, "
+        "and any layout registered in semmatch.io.readers)")
     if frames:
         g.add_argument("--frames", type=frame_range, default=None, metavar="START:STOP",
                        help="use only frames START..STOP-1 of the recording (either end may be left out; "

@@ -497,6 +497,10 @@ class SequenceWriter:
         """Write an extra text file (e.g. ``meta.json``) into the sequence."""
         atomic_write_text(self._tmp / name, text)
 
+    def write_poses(self, name: str, timestamps: np.ndarray, poses: np.ndarray) -> None:
+        """Write an extra trajectory (TUM format, e.g. ``poses_gt.txt``) into the sequence."""
+        write_tum(self._tmp / name, timestamps, poses)
+
     def close(self) -> Path:
         """Finish: write intrinsics and poses, then move the folder into place."""
         if self._closed:
