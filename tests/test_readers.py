@@ -93,7 +93,7 @@ def test_a_path_of_no_layout_gets_every_layout_listed(tmp_path):
         open_recording(tmp_path / "junk")
     for layout in LAYOUTS:
         assert f"{layout.name}: {layout.description}" in str(e.value)
-    with pytest.raises(FileNotFoundError, match="no such recording"):
+    with pytest.raises(FileNotFoundError, match="no such sequence folder or recording file"):
         open_recording(tmp_path / "none")
 
 
@@ -147,7 +147,7 @@ def test_a_new_layout_is_one_module_and_one_registration_line(tmp_path, monkeypa
     toy = tmp_path / "rec.toy"
     with open(toy, "wb") as fh:
         np.savez(fh, rgb=np.zeros((5, H, W, 3), np.uint8), depth=np.full((5, H, W), 1.5, np.float32))
-    with pytest.raises(ValueError, match="not a recording folder"):
+    with pytest.raises(ValueError, match="not a recording file of any known layout"):
         open_recording(toy)
 
     register_layout("toy", "toy_layout", "is_toy", "ToySequence", "a .toy file (npz of rgb and depth)")

@@ -236,6 +236,28 @@ def robot_training_views(
                       {s: labelled[s] / max(valid_px, 1) for s in sources}, names)
 
 
+def check_home_depth(sequence: str | Path) -> None:
+    """Refuse a robot's sequence folder without a ``depth/`` folder (before it is read).
+
+    Parameters
+    ----------
+    sequence : path
+        The robot's recording; only a semmatch sequence folder (``intrinsics.json`` and
+        ``poses.txt``) is checked here, other layouts keep depth elsewhere.
+
+    Raises
+    ------
+    ValueError
+        The folder has no ``depth/``: adapting in a home needs the robot's depth.
+    """
+    from ..io import is_sequence
+
+    sequence = Path(sequence)
+    if is_sequence(sequence) and not (sequence / "depth").is_dir():
+        raise ValueError(f"{sequence}: the sequence has no depth/ folder; adapting in a home needs the robot's "
+                         "depth to place its pixels in the person's map")
+
+
 def home_views(
     checkpoint: str | Path,
     sequence: str | Path,
@@ -310,9 +332,7 @@ def home_views(
     if int(frame_step) < 1 or (frames is not None and int(frames) < 1):
         raise ValueError(f"need frames >= 1 and frame_step >= 1, got {frames}, {frame_step}")
     sequence, person_map = Path(sequence), Path(person_map)
-    if recording is None and sequence.is_dir() and not (sequence / "depth").is_dir():
-        raise ValueError(f"{sequence}: the sequence has no depth/ folder; adapting in a home needs the robot's "
-                         "depth to place its pixels in the person's map")
+    check_home_depth(sequence)
     seq = read_sequence(sequence) if recording is None else recording
     m = read_map(person_map)
     if not np.any(m.labels > 0):
@@ -351,9 +371,11 @@ def home_views(
         gt.append(truth)
         cam_z.append(frame.pose[2, 3])
     if valid_px == 0:
-        where = (f"{sequence / 'depth'}: no depth in any of the {len(picks)} frames used (frame {picks[0]}: "
-                 f"{sequence / 'depth' / f'{picks[0]:06d}.png'})" if recording is None else
-                 f"{sequence}: no depth in any of the {len(picks)} frames used (first: frame {picks[0]})")
+        from ..io.readers import frame_files
+
+        files = frame_files(seq, picks[0])
+        where = (f"{files[-1].parent}: no depth in any of the {len(picks)} frames used (frame {picks[0]}: {files[-1]})"
+                 if files else f"{sequence}: no depth in any of the {len(picks)} frames used")
         raise ValueError(f"{where}; adapting in a home needs the robot's depth")
     coverage = labelled / valid_px
     if coverage < min_coverage:

@@ -151,9 +151,11 @@ def _run_home(args: argparse.Namespace) -> int:
     import torch
 
     from semmatch.adapt import adapt_in_home
+    from semmatch.adapt.views import check_home_depth
     from semmatch.cli.common import emit, open_sequence
 
     source = args.source or "3d-neighborhood"
+    check_home_depth(args.home)
     recording = open_sequence(args, args.home, needs_poses=True)
     out = adapt_in_home(args.model, args.home, args.map, args.out, source=source, recording=recording,
                         frames=None if isinstance(args.frames, slice) else args.frames,

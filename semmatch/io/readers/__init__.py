@@ -126,10 +126,13 @@ def find_layout(path: PathLike) -> Layout:
     """
     p = Path(path)
     if not p.exists():
-        raise FileNotFoundError(f"{p}: no such recording (folder or file)")
+        raise FileNotFoundError(f"{p}: no such sequence folder or recording file")
     for layout in LAYOUTS:
         if layout.detects(p):
             return layout
+    if not p.is_dir():
+        raise ValueError(f"{p}: no such folder, and not a recording file of any known layout; expected one of: "
+                         f"{layouts_text()}")
     raise ValueError(f"{p}: not a recording folder (or file) of any known layout; expected one of: {layouts_text()}")
 
 
