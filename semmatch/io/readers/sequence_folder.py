@@ -23,9 +23,13 @@ def is_sequence_folder(path: PathLike) -> bool:
     """True when ``path`` is a sequence folder: ``intrinsics.json`` and ``poses.txt``, or semmatch's marker.
 
     A folder with ``intrinsics.json`` and no ``depth/`` folder counts too (a damaged sequence is
-    reported by :class:`~semmatch.io.SequenceReader`, not taken for another layout).
+    reported by :class:`~semmatch.io.SequenceReader`, not taken for another layout); one with
+    ``poses.txt`` whose depth images are not named ``000000.png ...`` is a plain folder.
     """
     p = Path(path)
-    if is_sequence(p) or output_kind(p) == "sequence":
+    if output_kind(p) == "sequence":
         return True
-    return (p / "intrinsics.json").is_file() and not (p / "depth").is_dir()
+    depth = p / "depth"
+    if is_sequence(p):  # a plain folder with poses.txt names its frames otherwise (0000.png, 1305031102.png ...)
+        return not depth.is_dir() or (depth / "000000.png").is_file() or next(depth.glob("*.png"), None) is None
+    return (p / "intrinsics.json").is_file() and not depth.is_dir()
