@@ -187,3 +187,14 @@ def test_estimated_poses_are_cached_by_frames_and_settings(home, tmp_path, monke
     assert main([*argv, "--out", str(tmp_path / "d")]) == 0 and calls == [4, 3, 4, 4]
     cached = sorted((Path(os.environ["SEMMATCH_CACHE_DIR"]) / "poses").glob("*.txt"))
     assert len(cached) >= 4 and not list(cached[0].parent.glob(".*tmp*"))  # written atomically, no leftovers
+
+
+def test_transfer_workers_share_a_recordings_frames(home, tmp_path):
+    """``--jobs 2`` on a recording (no sequence folder for the workers to reopen): the decoded frames are shared."""
+    from semmatch.io import read_label_image
+
+    argv = _verbs(home, "7scenes", tmp_path)["transfer"]
+    assert main([*argv, "--quiet"]) == 0
+    assert main([*argv[:-1], str(tmp_path / "two"), "--jobs", "2", "--quiet"]) == 0
+    for a, b in zip(sorted((tmp_path / "labels").glob("*.png")), sorted((tmp_path / "two").glob("*.png")), strict=True):
+        assert np.array_equal(read_label_image(a), read_label_image(b))
