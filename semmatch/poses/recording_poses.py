@@ -54,7 +54,8 @@ def poses_cache_key(seq, settings: dict) -> str:
 
     Each frame contributes its files' resolved paths, sizes and modification times
     (:func:`semmatch.io.readers.frame_files`), or, for a reader that names no files, its
-    decoded colour and depth; the camera and the number of frames always count.
+    decoded colour and depth; the camera, the number of frames and their timestamps always
+    count (a reader whose frames share one file, a bag, still keys each range apart).
 
     Parameters
     ----------
@@ -71,6 +72,7 @@ def poses_cache_key(seq, settings: dict) -> str:
     h = hashlib.sha256()
     h.update(json.dumps({"version": POSES_CACHE_VERSION, "n": len(seq), "settings": settings,
                          "intrinsics": seq.intrinsics.to_dict()}, sort_keys=True, default=str).encode())
+    h.update(np.ascontiguousarray(getattr(seq, "timestamps", np.arange(len(seq))), dtype=np.float64).tobytes())
     for i in range(len(seq)):
         files = frame_files(seq, i)
         if files:
