@@ -21,13 +21,13 @@ def register(sub) -> None:
         "give a recording with poses, or --estimate-poses (the recording's ground truth, if any, then goes to "
         "poses_gt.txt).",
     )
-    p.add_argument("recording", metavar="RECORDING", help="recording folder or file (any registered layout)")
+    p.add_argument("sequence", metavar="RECORDING", help="recording folder or file (any registered layout)")
     p.add_argument("--out", required=True, metavar="SEQ", help="sequence folder to write")
     p.add_argument("--overwrite", action="store_true",
                    help="replace a sequence semmatch wrote at --out (anything else is refused)")
     add_recording_options(p)
     add_output_flags(p, json_what="what was written", quiet="the progress bar")
-    declare_paths(p, inputs=("recording", "intrinsics"), outputs=("out",))
+    declare_paths(p, inputs=("sequence", "intrinsics"), outputs=("out",))
     p.set_defaults(func=run)
 
 
@@ -49,23 +49,23 @@ def run(args: argparse.Namespace) -> int:
     from semmatch.progress import tqdm
 
     # before any work (reading, odometry): never replace what semmatch did not write, nor the input
-    check_output_dir(args.out, "sequence", overwrite=args.overwrite, inputs=[args.recording])
-    seq = open_sequence(args, args.recording, needs_poses=True)
+    check_output_dir(args.out, "sequence", overwrite=args.overwrite, inputs=[args.sequence])
+    seq = open_sequence(args, args.sequence, needs_poses=True)
     layout = getattr(seq, "layout", None) or getattr(getattr(seq, "base", None), "layout", None)
     instances = bool(getattr(seq, "has_instances", False))
     gt = _ground_truth(seq) if args.estimate_poses else None
     with SequenceWriter(args.out, seq.intrinsics, overwrite=args.overwrite) as w:
         n_labels = 0
-        for i in tqdm(range(len(seq)), desc=f"convert {args.recording}", disable=args.quiet, unit="frame"):
+        for i in tqdm(range(len(seq)), desc=f"convert {args.sequence}", disable=args.quiet, unit="frame"):
             f = seq[i]
             extra = {"instances": seq.read_instances(i).astype("uint16")} if instances else {}
             w.add(f.rgb, f.depth, f.pose, labels=f.labels, timestamp=f.timestamp, **extra)
             n_labels += f.labels is not None
         frames = args.frames
-        meta = {"converted_from": str(args.recording), "layout": layout,
+        meta = {"converted_from": str(args.sequence), "layout": layout,
                 "frames": None if frames is None else [frames.start, frames.stop],
                 "poses": "estimated (RGB-D odometry)" if args.estimate_poses else "recorded"}
-        scene = sequence_scene(args.recording)
+        scene = sequence_scene(args.sequence)
         if scene:
             meta["scene"] = scene
         w.write_extra("meta.json", json.dumps(meta, indent=2) + "\n")
@@ -73,5 +73,5 @@ def run(args: argparse.Namespace) -> int:
             w.write_poses("poses_gt.txt", seq.timestamps, gt)
     result = {"out": str(args.out), "frames": len(seq), "layout": layout, "labels": n_labels,
               "poses": meta["poses"]}
-    return emit(result, args.json, f"{args.out}: {len(seq)} frames from {args.recording} ({layout}; poses "
+    return emit(result, args.json, f"{args.out}: {len(seq)} frames from {args.sequence} ({layout}; poses "
                 f"{meta['poses']}{'; labels' if n_labels else ''})")
