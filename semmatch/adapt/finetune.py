@@ -127,6 +127,7 @@ def adapt_in_home(
     min_coverage: float = MIN_COVERAGE,
     cache_dir: str | Path | None = "checkpoint-if-present",
     progress: bool = True,
+    recording=None,
     **changes: Any,
 ) -> Path:
     """Adapt a network in a home: the robot's tour labelled from the person's map of it.
@@ -150,6 +151,8 @@ def adapt_in_home(
         The cache of the network's human-height training views (:func:`fine_tune`); by default
         the checkpoint's recorded folder where it exists, else the views are rendered each run.
     progress : bool
+    recording : sequence of Frame, optional
+        ``sequence`` already opened (:func:`~semmatch.adapt.views.home_views`).
     **changes
         Fields of the recipe set over ``recipe`` (``steps=800``).
 
@@ -178,7 +181,7 @@ def adapt_in_home(
         if out.resolve() == Path(p).resolve() or Path(p).resolve() in out.resolve().parents:
             raise ValueError(f"--out {out}: it is the input {flag} {p} (or inside it); refusing to overwrite an input")
     robot = home_views(checkpoint, sequence, person_map, source=source, frames=frames, frame_step=frame_step,
-                       min_purity=min_purity, min_coverage=min_coverage, progress=progress)
+                       min_purity=min_purity, min_coverage=min_coverage, progress=progress, recording=recording)
     extra = {
         "mode": "home",
         "home": {"sequence": str(sequence), "scene": sequence_scene(sequence), "frames": list(robot.frames)},

@@ -236,6 +236,28 @@ def robot_training_views(
                       {s: labelled[s] / max(valid_px, 1) for s in sources}, names)
 
 
+def check_home_depth(sequence: str | Path) -> None:
+    """Refuse a robot's sequence folder without a ``depth/`` folder (before it is read).
+
+    Parameters
+    ----------
+    sequence : path
+        The robot's recording; only a semmatch sequence folder (``intrinsics.json`` and
+        ``poses.txt``) is checked here, other layouts keep depth elsewhere.
+
+    Raises
+    ------
+    ValueError
+        The folder has no ``depth/``: adapting in a home needs the robot's depth.
+    """
+    from ..io import is_sequence
+
+    sequence = Path(sequence)
+    if is_sequence(sequence) and not (sequence / "depth").is_dir():
+        raise ValueError(f"{sequence}: the sequence has no depth/ folder; adapting in a home needs the robot's "
+                         "depth to place its pixels in the person's map")
+
+
 def home_views(
     checkpoint: str | Path,
     sequence: str | Path,
@@ -248,6 +270,7 @@ def home_views(
     fused_base: str = "3d-neighborhood",
     min_coverage: float = MIN_COVERAGE,
     progress: bool = True,
+    recording=None,
 ) -> RobotViews:
     """Label a robot's recorded tour of a home with the person's map of that home.
 
@@ -275,6 +298,9 @@ def home_views(
     min_coverage : float
         Smallest share of the robot's pixels with depth the labels must cover.
     progress : bool
+    recording : sequence of Frame, optional
+        ``sequence`` already opened (any layout of :mod:`semmatch.io.readers`, e.g. with
+        estimated poses); default: ``sequence`` read as a sequence folder.
 
     Returns
     -------
@@ -306,10 +332,8 @@ def home_views(
     if int(frame_step) < 1 or (frames is not None and int(frames) < 1):
         raise ValueError(f"need frames >= 1 and frame_step >= 1, got {frames}, {frame_step}")
     sequence, person_map = Path(sequence), Path(person_map)
-    if sequence.is_dir() and not (sequence / "depth").is_dir():
-        raise ValueError(f"{sequence}: the sequence has no depth/ folder; adapting in a home needs the robot's "
-                         "depth to place its pixels in the person's map")
-    seq = read_sequence(sequence)
+    check_home_depth(sequence)
+    seq = read_sequence(sequence) if recording is None else recording
     m = read_map(person_map)
     if not np.any(m.labels > 0):
         raise ValueError(f"{person_map}: the map carries no labels (every vertex is void); a person's semantic map "
@@ -347,8 +371,12 @@ def home_views(
         gt.append(truth)
         cam_z.append(frame.pose[2, 3])
     if valid_px == 0:
-        raise ValueError(f"{sequence / 'depth'}: no depth in any of the {len(picks)} frames used (frame {picks[0]}: "
-                         f"{sequence / 'depth' / f'{picks[0]:06d}.png'}); adapting in a home needs the robot's depth")
+        from ..io.readers import frame_files
+
+        files = frame_files(seq, picks[0])
+        where = (f"{files[-1].parent}: no depth in any of the {len(picks)} frames used (frame {picks[0]}: {files[-1]})"
+                 if files else f"{sequence}: no depth in any of the {len(picks)} frames used")
+        raise ValueError(f"{where}; adapting in a home needs the robot's depth")
     coverage = labelled / valid_px
     if coverage < min_coverage:
         raise ValueError(f"{person_map}: the map's labels cover {coverage:.2%} of the robot's pixels with depth in "

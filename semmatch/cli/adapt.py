@@ -19,7 +19,10 @@ modes (--home selects the second):
                    --views-cache]
                    the robot's recorded tour LOWER_SEQ (RGB, depth, poses in the map's frame) is
                    labelled from the person's map of the same home PERSON_MAP (default source
-                   3d-neighborhood); --frames N uses the first N frames (after --frame-step).
+                   3d-neighborhood); --frames N uses the first N frames (after --frame-step),
+                   --frames START:STOP that range of the recording. LOWER_SEQ may be any
+                   recording layout (TUM RGB-D, 7-Scenes, plain folder ...; --intrinsics,
+                   --estimate-poses and the bag topics as for every verb that reads one).
                    Refused: --seeds/--scene-kinds, a sequence without depth, a map without labels, a
                    map naming another scene than the sequence, labels covering too little of the
                    robot's view.
@@ -30,7 +33,13 @@ both: --out, --steps, --batch-size, --lr, --upper-share, --seed; --out must not 
 def register(sub) -> None:
     """Add ``semmatch adapt``."""
     from semmatch.adapt import HOME_SOURCES, LABEL_SOURCES, AdaptRecipe
-    from semmatch.cli.common import RawDescriptionHelpFormatter, add_output_flags, add_scene_kinds, number
+    from semmatch.cli.common import (
+        RawDescriptionHelpFormatter,
+        add_output_flags,
+        add_recording_options,
+        add_scene_kinds,
+        number,
+    )
     from semmatch.io.outputs import declare_paths
 
     p = sub.add_parser(
@@ -59,9 +68,9 @@ def register(sub) -> None:
                          "apartment)")
     train.add_argument("--seeds", nargs="+", type=int, default=None,
                        help="training scenes to adapt on (never the network's validation/evaluation seeds)")
-    p.add_argument("--frames", type=number(int, lo=1), default=None,
+    p.add_argument("--frames", type=_count_or_range, default=None, metavar="N|START:STOP",
                    help="training scenes: frames of each camera's tour (40 when not given); in a home: use at most N "
-                        "frames of LOWER_SEQ (all when not given)")
+                        "frames of LOWER_SEQ, or its frames START..STOP-1 (all when not given)")
     p.add_argument("--steps", type=number(int, lo=1), default=AdaptRecipe.steps,
                    help="fine-tuning steps (default %(default)s)")
     p.add_argument("--batch-size", type=number(int, lo=2), default=AdaptRecipe.batch_size, help="default %(default)s")
@@ -74,9 +83,20 @@ def register(sub) -> None:
                       help="cache of the network's human-height training views (rendered on the first run, "
                            "minutes); default: the folder recorded in the checkpoint where it exists on this "
                            "machine, else none (rendered each run)")
+    add_recording_options(home, frames=False)
     add_output_flags(p, json_what="the adapted checkpoint and its data", quiet="the progress bars")
-    declare_paths(p, inputs=("model", "home", "map"), outputs=("out", "views_cache"))
+    declare_paths(p, inputs=("model", "home", "map", "intrinsics"), outputs=("out", "views_cache"))
     p.set_defaults(func=run)
+
+
+def _count_or_range(text: str) -> int | slice:
+    """``--frames``: a count N (>= 1), or in a home a frame range ``START:STOP`` of the recording."""
+    from semmatch.cli.common import frame_range, number
+
+    return frame_range(text) if ":" in text else number(int, lo=1)(text)
+
+
+_count_or_range.__name__ = "N or START:STOP"  # argparse names the type in its messages
 
 
 def _check_mode(args: argparse.Namespace) -> None:
@@ -91,6 +111,9 @@ def _check_mode(args: argparse.Namespace) -> None:
         return
     if args.views_cache is not None:
         raise ValueError("--views-cache is for --home LOWER_SEQ (on training scenes the checkpoint's cache is used)")
+    if isinstance(args.frames, slice):
+        raise ValueError("--frames START:STOP is a range of the recording --home LOWER_SEQ; on training scenes give "
+                         "--frames N (frames of each camera's tour)")
     if args.map is not None:
         raise ValueError("--map is the person's map of a home: give it with --home LOWER_SEQ")
     if args.frame_step != 1:
@@ -128,10 +151,14 @@ def _run_home(args: argparse.Namespace) -> int:
     import torch
 
     from semmatch.adapt import adapt_in_home
-    from semmatch.cli.common import emit
+    from semmatch.adapt.views import check_home_depth
+    from semmatch.cli.common import emit, open_sequence
 
     source = args.source or "3d-neighborhood"
-    out = adapt_in_home(args.model, args.home, args.map, args.out, source=source, frames=args.frames,
+    check_home_depth(args.home)
+    recording = open_sequence(args, args.home, needs_poses=True)
+    out = adapt_in_home(args.model, args.home, args.map, args.out, source=source, recording=recording,
+                        frames=None if isinstance(args.frames, slice) else args.frames,
                         frame_step=args.frame_step, steps=args.steps, batch_size=args.batch_size, lr=args.lr,
                         upper_share=args.upper_share, seed=args.seed, progress=not args.quiet,
                         cache_dir=args.views_cache or "checkpoint-if-present")

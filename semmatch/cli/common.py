@@ -12,6 +12,14 @@
   for values of a choice list (``--method 3d-neighbourhood``), and turned into the canonical
   spelling at parse time (:func:`accept_british_spellings`, run on the whole parser).
 * Help lines state a default once (:class:`HelpFormatter`).
+* Every verb that takes a sequence opens any recording layout of the reader registry
+  (:mod:`semmatch.io.readers`) with the same recording options (``--frames START:STOP``,
+  ``--intrinsics``, ``--estimate-poses``, bag topics): :func:`add_recording_options`,
+  :func:`open_sequence`.
+
+Size: over 600 lines because it is the one place of the command line's grammar (the arguments
+every verb shares, their parsing and the output conventions); split, the verbs would import
+their shared options from several modules and two of them could drift apart.
 """
 
 from __future__ import annotations
@@ -26,13 +34,14 @@ from typing import Any, NamedTuple
 
 __all__ = ["LONG_VERBS", "ImageSize", "HelpFormatter", "RawDescriptionHelpFormatter", "Parser", "DeprecatedAlias",
            "add_alias", "add_image_size", "add_camera_height", "add_scene_kind", "add_scene_kinds", "add_json",
-           "add_quiet", "add_output_flags", "add_sequence", "sequence_arg", "number", "image_size", "emit", "emit_table",
+           "add_quiet", "add_output_flags", "add_sequence", "sequence_arg", "add_recording_options", "open_sequence",
+           "frame_range", "number", "image_size", "emit", "emit_table",
            "british", "accept_british_spellings", "walk_parsers", "add_index_cache", "index_cache_options"]
 
 #: the verbs that run long enough to want a progress display (on stderr) and ``--quiet`` to hide it;
 #: the benchmarks are left out (they time their work, and print nothing until the numbers)
 LONG_VERBS: tuple[str, ...] = ("simulate", "train", "adapt", "predict", "reconstruct", "transfer",
-                               "panoptic reference", "panoptic transfer")
+                               "panoptic reference", "panoptic transfer", "convert")
 
 
 # ----------------------------------------------------------------------------- help
@@ -372,18 +381,146 @@ def add_output_flags(parser, *, json_what: str = "the result", quiet: str | None
     add_json(parser, json_what)
 
 
-def add_sequence(parser, help: str) -> None:
+def add_sequence(parser, help: str, *, recording: bool = True) -> None:
     """The sequence as the first positional argument, as every verb takes it (``--sequence SEQ``
-    is a hidden, deprecated alias); read it with :func:`sequence_arg`.
+    is a hidden, deprecated alias), and the recording options (:func:`add_recording_options`);
+    read it with :func:`sequence_arg`, open it with :func:`open_sequence`.
 
     Parameters
     ----------
     parser : argparse.ArgumentParser
     help : str
+    recording : bool
+        Also add the recording options.
     """
     parser.add_argument("sequence", nargs="?", metavar="SEQ", help=help)
     add_alias(parser, "--sequence", canonical="the positional SEQ", dest="sequence_flag", metavar="SEQ",
               default=None)
+    if recording:
+        add_recording_options(parser)
+
+
+def frame_range(text: str) -> slice:
+    """An argparse ``type``: ``"START:STOP"`` (either may be left out) as ``slice(START, STOP)``.
+
+    Parameters
+    ----------
+    text : str
+        E.g. ``"0:250"`` (frames 0 to 249), ``"250:"``, ``":100"``.
+
+    Returns
+    -------
+    slice
+
+    Raises
+    ------
+    argparse.ArgumentTypeError
+        Not two whole numbers >= 0 around one colon, or STOP <= START.
+    """
+    m = re.fullmatch(r"\s*(\d*)\s*:\s*(\d*)\s*", text)
+    if not m:
+        raise argparse.ArgumentTypeError(f"must look like START:STOP, e.g. 0:250 (whole numbers >= 0); got {text!r}")
+    start, stop = (int(g) if g else None for g in m.groups())
+    if start is not None and stop is not None and stop <= start:
+        raise argparse.ArgumentTypeError(f"STOP must be above START (frames START..STOP-1); got {text!r}")
+    return slice(start, stop)
+
+
+frame_range.__name__ = "START:STOP"  # argparse names the type in its messages
+
+#: the bag topic options (:func:`add_recording_options`), passed to a recording's reader only when given
+TOPIC_OPTIONS: tuple[tuple[str, str], ...] = (
+    ("--color-topic", "colour image topic"), ("--depth-topic", "depth image topic"),
+    ("--camera-info-topic", "camera_info topic (intrinsics)"), ("--pose-topic", "pose topic (/tf or odometry)"))
+
+
+def add_recording_options(parser, *, frames: bool = True,
+                          estimate_help: str = "pose a recording without poses by RGB-D odometry (the recorded "
+                                               "poses are ignored); the trajectory is cached in the user cache "
+                                               "folder, keyed by the frames and the odometry settings") -> None:
+    """The options of every verb that reads a recording (any layout of :mod:`semmatch.io.readers`).
+
+    ``--frames START:STOP`` (a frame range, for every layout), ``--intrinsics FILE.json`` (the
+    camera, for a recording without one), ``--estimate-poses`` and the bag topics
+    (:data:`TOPIC_OPTIONS`); read them with :func:`open_sequence`.
+
+    Parameters
+    ----------
+    parser : argparse.ArgumentParser or argument group
+        A parser gets a "recording" group; a group (a verb's "in a home") takes the options itself.
+    frames : bool
+        Add ``--frames`` (False for a verb whose ``--frames`` means something else).
+    estimate_help : str
+        Help of ``--estimate-poses``.
+    """
+    g = parser if isinstance(parser, argparse._ArgumentGroup) else parser.add_argument_group(
+        "recording", "how the sequence is read (any layout: semmatch sequence, TUM RGB-D, 7-Scenes, plain folder, "
+        "and any layout registered in semmatch.io.readers)")
+    if frames:
+        g.add_argument("--frames", type=frame_range, default=None, metavar="START:STOP",
+                       help="use only frames START..STOP-1 of the recording (either end may be left out; "
+                            "default all)")
+    g.add_argument("--intrinsics", default=None, metavar="FILE.json",
+                   help="the camera (an intrinsics.json) for a recording that names none")
+    g.add_argument("--estimate-poses", action="store_true", help=estimate_help)
+    for flag, what in TOPIC_OPTIONS:
+        g.add_argument(flag, default=None, metavar="TOPIC", help=f"bags: the {what}")
+
+
+def open_sequence(args: argparse.Namespace, path: str | None = None, *, needs_poses: bool = False,
+                  odometry: dict | None = None, **options: Any):
+    """Open the verb's sequence (any registered layout) with its recording options.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        With the options of :func:`add_recording_options` (missing ones count as not given).
+    path : str, optional
+        The recording (default :func:`sequence_arg`).
+    needs_poses : bool
+        The verb places frames in the world: a recording without a pose for every frame is
+        refused, naming ``--estimate-poses``, unless that flag was given.
+    odometry : dict, optional
+        ``--estimate-poses`` settings (:func:`semmatch.poses.recording_poses.estimate_recording_poses`:
+        ``residual``, ``pose_graph``, ``prior``, ``device``).
+    **options
+        More reader options (``labels``).
+
+    Returns
+    -------
+    sequence of Frame
+        The reader, or a view with the estimated poses; with ``--estimate-poses`` its
+        ``pose_estimate`` is the estimate's ``info`` (``cached``, ``ground_truth`` ...).
+
+    Raises
+    ------
+    ValueError, FileNotFoundError
+        See :func:`semmatch.io.readers.open_recording`; no poses (the message names
+        ``--estimate-poses``).
+    """
+    from semmatch.io.readers import SequenceView, missing_poses, open_recording
+
+    path = path or sequence_arg(args)
+    frames = getattr(args, "frames", None)
+    opts = {"frames": frames if isinstance(frames, slice) else None, **options}
+    if getattr(args, "intrinsics", None):
+        from semmatch.io import read_intrinsics
+
+        opts["intrinsics"] = read_intrinsics(args.intrinsics)
+    for flag, _ in TOPIC_OPTIONS:
+        opts[flag[2:].replace("-", "_")] = getattr(args, flag[2:].replace("-", "_"), None)
+    seq = open_recording(path, **opts)
+    if getattr(args, "estimate_poses", False):
+        from semmatch.poses.recording_poses import estimate_recording_poses
+
+        poses, info = estimate_recording_poses(seq, name=str(path), progress=not getattr(args, "quiet", False),
+                                               **(odometry or {}))
+        seq = SequenceView(seq, poses=poses)
+        seq.pose_estimate = info
+    elif needs_poses and (why := missing_poses(seq)):
+        raise ValueError(f"{path} {why}; pass --estimate-poses to pose it by RGB-D odometry (cached for the next "
+                         "run), or give a recording with poses")
+    return seq
 
 
 def sequence_arg(args: argparse.Namespace) -> str:

@@ -104,6 +104,38 @@ def check_scorable(gt: str, results: dict[str, dict]) -> list[str]:
             for name, s in results.items() if s["counts"]["intersection"] == 0]
 
 
+def check_label_sets(gt: str, gt_labels: np.ndarray, pred: str, pred_labels: np.ndarray) -> None:
+    """Refuse a prediction whose evaluated labels share none with the ground truth's (another label table).
+
+    A map labelled in another category table scores 0 on every measure at full occupancy
+    overlap: the zeros measure the table, not the transfer.
+
+    Parameters
+    ----------
+    gt, pred : str
+        The files, for the message.
+    gt_labels, pred_labels : ndarray
+        The voxel labels of each (:func:`semmatch.evaluate.metrics.voxelize`).
+
+    Raises
+    ------
+    ValueError
+        Both maps have evaluated labels and no label is in both sets (the message lists them).
+    """
+    from semmatch.evaluate.metrics import EVAL_CLASSES
+    from semmatch.labels import NAMES
+
+    g = set(np.unique(gt_labels).tolist()) & set(EVAL_CLASSES)
+    p = set(np.unique(pred_labels).tolist()) & set(EVAL_CLASSES)
+    if g and p and not g & p:
+        def names(s: set) -> str:
+            return ", ".join(f"{NAMES[c]} ({c})" for c in sorted(s))
+
+        raise ValueError(f"{pred}: its labels ({names(p)}) and those of the ground truth {gt} ({names(g)}) have no "
+                         "label in common: a map of another label table (or of another scene) cannot be scored; "
+                         "map its labels into semmatch's category table first")
+
+
 def run(args: argparse.Namespace) -> int:
     """Evaluate every prediction and print the table."""
     from semmatch.cli.common import emit_table
@@ -114,8 +146,9 @@ def run(args: argparse.Namespace) -> int:
     gt = voxelize(args.gt, args.voxel_size)
     results = {}
     for pred in args.pred:
-        results[pred] = compare(gt, voxelize(pred, args.voxel_size, transform_matrix=T),
-                                args.voxel_size, union=args.union, min_overlap=args.min_overlap)
+        pv = voxelize(pred, args.voxel_size, transform_matrix=T)
+        check_label_sets(args.gt, gt.labels, pred, pv.labels)
+        results[pred] = compare(gt, pv, args.voxel_size, union=args.union, min_overlap=args.min_overlap)
     empty = check_scorable(args.gt, results)
     if empty and args.strict:
         raise ValueError("; ".join(empty) + " (--strict)")

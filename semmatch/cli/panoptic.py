@@ -45,12 +45,12 @@ def register(sub) -> None:
     ref = s.add_parser("reference", help="fuse a sequence with its ground-truth classes and instances",
                        description="TSDF-fuse SEQ with its own labels, then vote its instances/ images "
                        "onto the map's vertices (the panoptic reference of a robot sequence).")
-    add_sequence(ref, "sequence folder with labels/ and instances/")
+    add_sequence(ref, "sequence folder with labels/ and instances/ (any registered layout that has them)")
     ref.add_argument("--out", required=True, help="panoptic PLY to write")
     ref.add_argument("--voxel-size", type=float, default=0.04, help="TSDF voxel in metres (default %(default)s)")
     ref.add_argument("--step", type=number(int, lo=1), default=1, help="use every n-th frame for the instances (default 1)")
     add_output_flags(ref, json_what="the map written", quiet="the progress bars")
-    declare_paths(ref, inputs=("sequence", "sequence_flag"), outputs=("out",))
+    declare_paths(ref, inputs=("sequence", "sequence_flag", "intrinsics"), outputs=("out",))
     ref.set_defaults(func=run_reference)
 
     tr = s.add_parser("transfer", help="transfer classes and instances into a sequence and fuse its panoptic map",
@@ -58,7 +58,7 @@ def register(sub) -> None:
                       "every frame of SEQ, fuse the classes (TSDF) and vote the instances onto the map.")
     tr.add_argument("--map", required=True, help="upper panoptic PLY (with an 'instance' property)")
     add_index_cache(tr)
-    add_sequence(tr, "the robot's (lower) sequence folder")
+    add_sequence(tr, "the robot's (lower) sequence folder or recording (any registered layout)")
     tr.add_argument("--method", required=True, choices=[m for m in available_methods() if m != "fused"],
                     help="transfer method")
     tr.add_argument("--out", required=True, help="lower panoptic PLY to write")
@@ -70,7 +70,7 @@ def register(sub) -> None:
     tr.add_argument("--min-vertices", type=int, default=50,
                     help="fragments smaller than this may join a touching instance (default %(default)s)")
     add_output_flags(tr, json_what="the map written", quiet="the progress bars")
-    declare_paths(tr, inputs=("map", "sequence", "sequence_flag"), outputs=("out",))
+    declare_paths(tr, inputs=("map", "sequence", "sequence_flag", "intrinsics"), outputs=("out",))
     tr.set_defaults(func=run_transfer)
 
     ev = s.add_parser("evaluate", help="panoptic quality of panoptic maps against ground truth",
@@ -118,16 +118,16 @@ def _map_written(args: argparse.Namespace, m) -> int:
 
 def run_reference(args: argparse.Namespace) -> int:
     """Fuse a sequence with its ground-truth classes and instances."""
-    from semmatch.cli.common import sequence_arg
+    from semmatch.cli.common import open_sequence, sequence_arg
     from semmatch.fusion import reconstruct
-    from semmatch.io import read_sequence, write_map
+    from semmatch.io import write_map
     from semmatch.panoptic import fuse_instances, sequence_panoptic_frames
 
     from ..progress import tqdm
 
     seq_path = sequence_arg(args)
-    seq = read_sequence(seq_path)
-    if not seq.has_labels:
+    seq = open_sequence(args, seq_path, needs_poses=True)
+    if not getattr(seq, "has_labels", False):
         raise ValueError(f"{seq_path}: the sequence has no labels/ folder")
     seq.read_instances(0)  # a clear error before the fusion when instances/ is missing
     m = reconstruct(seq, voxel_size=args.voxel_size, progress=not args.quiet)
@@ -140,9 +140,9 @@ def run_reference(args: argparse.Namespace) -> int:
 
 def run_transfer(args: argparse.Namespace) -> int:
     """Transfer classes and instances into a sequence and fuse its panoptic map."""
-    from semmatch.cli.common import index_cache_options, sequence_arg
+    from semmatch.cli.common import index_cache_options, open_sequence, sequence_arg
     from semmatch.fusion import reconstruct
-    from semmatch.io import read_map, read_sequence, write_map
+    from semmatch.io import read_map, write_map
     from semmatch.panoptic import PanopticFrame, fuse_instances, require_instances, transfer_panoptic
     from semmatch.transfer import load_index
 
@@ -150,8 +150,8 @@ def run_transfer(args: argparse.Namespace) -> int:
 
     seq_path = sequence_arg(args)
     upper = require_instances(read_map(args.map), "panoptic transfer")
+    seq = open_sequence(args, seq_path, needs_poses=True)
     index = load_index(args.map, max_distance=args.max_distance, **index_cache_options(args), semantic_map=upper)
-    seq = read_sequence(seq_path)
     labels, evidence = [], []
     for i in tqdm(range(len(seq)), desc=f"panoptic {args.method}", disable=args.quiet):
         f = seq[i]

@@ -7,7 +7,7 @@ import argparse
 
 def register(sub) -> None:
     """Add ``semmatch predict``."""
-    from semmatch.cli.common import add_output_flags
+    from semmatch.cli.common import add_output_flags, add_recording_options
     from semmatch.io.outputs import declare_paths
 
     p = sub.add_parser(
@@ -15,7 +15,8 @@ def register(sub) -> None:
         help="write a labels folder for a sequence (network checkpoint, oracle or noisy oracle)",
         description="Label every frame of SEQ and write a labels folder (000000.png ...) to --out.",
     )
-    p.add_argument("sequence", metavar="SEQ", help="sequence folder")
+    p.add_argument("sequence", metavar="SEQ", help="sequence folder or recording (any registered layout)")
+    add_recording_options(p)
     p.add_argument("--model", required=True,
                    help="checkpoint (.pt), 'oracle' (ground truth) or 'noisy:RATE' (noisy oracle, e.g. noisy:0.2)")
     p.add_argument("--out", required=True, help="labels folder to write")
@@ -27,7 +28,7 @@ def register(sub) -> None:
     p.add_argument("--overwrite", action="store_true",
                    help="replace an existing labels folder semmatch wrote at --out (anything else is refused)")
     add_output_flags(p, json_what="where the labels went", quiet="the progress bar")
-    declare_paths(p, inputs=("sequence", "model"), outputs=("out",))
+    declare_paths(p, inputs=("sequence", "model", "intrinsics"), outputs=("out",))
     p.set_defaults(func=run)
 
 
@@ -50,11 +51,10 @@ def make_segmenter(spec: str, *, seed: int = 0, device: str = "auto", flip: bool
 
 def run(args: argparse.Namespace) -> int:
     """Predict and print where the labels went."""
-    from semmatch.cli.common import emit
-    from semmatch.io import read_sequence
+    from semmatch.cli.common import emit, open_sequence
     from semmatch.segment import predict_sequence
 
-    seq = read_sequence(args.sequence)
+    seq = open_sequence(args, args.sequence)
     if len(seq) == 0:
         raise ValueError(f"{args.sequence}: the sequence has no frames (poses.txt lists none); nothing to predict")
     model = make_segmenter(args.model, seed=args.seed, device=args.device, flip=not args.no_flip)

@@ -5,14 +5,13 @@ from __future__ import annotations
 import argparse
 import contextlib
 from collections.abc import Iterator
-from pathlib import Path
 
 import numpy as np
 
 
 def register(sub) -> None:
     """Add ``semmatch reconstruct``."""
-    from semmatch.cli.common import add_output_flags, number
+    from semmatch.cli.common import add_output_flags, add_recording_options, number
     from semmatch.io.outputs import declare_paths
 
     p = sub.add_parser(
@@ -22,7 +21,8 @@ def register(sub) -> None:
         "reconstruction; write the semantic mesh (label colours + 'label' property), optionally "
         "the RGB mesh and the semantic point cloud.",
     )
-    p.add_argument("seq", help="sequence folder, or a TUM RGB-D folder (rgb.txt, depth.txt)")
+    p.add_argument("seq", help="sequence folder or recording (TUM RGB-D, 7-Scenes, plain folder, any registered "
+                   "layout)")
     p.add_argument("--labels", help="labels folder (000000.png ...) to fuse instead of SEQ/labels")
     p.add_argument("--out", required=True, help="semantic mesh PLY")
     p.add_argument("--rgb-out", help="also write the RGB mesh here")
@@ -38,12 +38,9 @@ def register(sub) -> None:
                    help="minimum surface weight, >= 0 (default 1)")
     p.add_argument("--memory-budget", type=number(float, lo=0.0, lo_open=True), default=None, metavar="GIB",
                    help="largest estimated TSDF memory in GiB (default: 80 %% of the memory available now)")
-    p.add_argument(
-        "--estimate-poses", action="store_true",
-        help="ignore the recorded poses and estimate them by RGB-D odometry, starting at the "
-        "ground-truth first pose when known (prints ATE/RPE against poses_gt.txt or the TUM "
-        "ground truth)",
-    )
+    add_recording_options(p, estimate_help="ignore the recorded poses and estimate them by RGB-D odometry, starting "
+                          "at the ground-truth first pose when known (prints ATE/RPE against poses_gt.txt or the "
+                          "TUM ground truth); cached in the user cache folder, keyed by the frames and settings")
     p.add_argument("--prior", action="store_true",
                    help="with --estimate-poses: seed the odometry with the recorded (rough) poses")
     p.add_argument("--poses-out", help="with --estimate-poses: write the estimated trajectory (TUM)")
@@ -57,26 +54,8 @@ def register(sub) -> None:
     p.add_argument("--device", help="Open3D device (default: CUDA:0 when available, else CPU:0)")
     add_output_flags(p, json_what="the summary (vertices, faces; ATE/RPE with --estimate-poses)",
                      quiet="the progress bars")
-    declare_paths(p, inputs=("seq", "labels"), outputs=("out", "rgb_out", "points_out", "poses_out"))
+    declare_paths(p, inputs=("seq", "labels", "intrinsics"), outputs=("out", "rgb_out", "points_out", "poses_out"))
     p.set_defaults(func=run)
-
-
-def open_any_sequence(path: str | Path):
-    """A sequence folder, a TUM RGB-D, 7-Scenes or plain folder (:func:`semmatch.io.recordings.read_recording`)."""
-    from semmatch.io.recordings import read_recording
-
-    return read_recording(path)
-
-
-def _missing_poses(seq) -> str | None:
-    """Why the frames cannot be fused at their recorded poses (None: every frame has one)."""
-    poses = getattr(seq, "poses", None)
-    if poses is None:
-        return "has no recorded poses"
-    bad = np.flatnonzero(~np.isfinite(np.asarray(poses, dtype=np.float64)).all(axis=(1, 2)))
-    if len(bad):
-        return f"has no recorded pose for {len(bad)} of {len(seq)} frames (first: frame {bad[0]})"
-    return None
 
 
 @contextlib.contextmanager
@@ -174,31 +153,20 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from semmatch.cli.common import emit
+    from semmatch.cli.common import emit, open_sequence
     from semmatch.fusion import extract, fuse_sequence
     from semmatch.io import write_map
 
-    seq = open_any_sequence(args.seq)
-    if not args.estimate_poses and (why := _missing_poses(seq)):
-        raise ValueError(f"{args.seq} {why}; pass --estimate-poses to estimate the poses by RGB-D odometry")
+    seq = open_sequence(args, args.seq, needs_poses=True, odometry={
+        "residual": args.residual, "pose_graph": args.pose_graph, "prior": args.prior, "device": args.device})
     poses = None
     info: dict = {}
     if args.estimate_poses:
-
         from semmatch.io import write_tum
-        from semmatch.poses.odometry import (
-            anchor_to_ground_truth,
-            estimate_poses,
-            ground_truth_poses,
-            start_pose,
-        )
         from semmatch.poses.trajectory_metrics import rpe_pairs, trajectory_errors
 
-        gt = ground_truth_poses(seq)  # for the start pose and the report only
-        prior = seq.poses if args.prior and getattr(seq, "poses", None) is not None else None
-        poses = estimate_poses(seq, init_pose=start_pose(gt), prior=prior, residual=args.residual,
-                               pose_graph=args.pose_graph, progress=not args.quiet)
-        poses, first = anchor_to_ground_truth(poses, gt, name=str(args.seq))
+        poses, gt, first = seq.poses, seq.pose_estimate["ground_truth"], seq.pose_estimate["gt_first_frame"]
+        info["poses_cached"] = seq.pose_estimate["cached"]
         if args.poses_out:
             write_tum(args.poses_out, getattr(seq, "timestamps", range(len(poses))), poses)
         scorable = gt is not None and len(gt) == len(poses) and len(rpe_pairs(poses, gt)) and int(

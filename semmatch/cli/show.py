@@ -7,7 +7,7 @@ import argparse
 
 def register(sub) -> None:
     """Add ``semmatch show``."""
-    from semmatch.cli.common import add_output_flags, number
+    from semmatch.cli.common import add_output_flags, add_recording_options, number
     from semmatch.io.outputs import declare_paths
 
     p = sub.add_parser(
@@ -23,7 +23,7 @@ def register(sub) -> None:
     p.add_argument("--reference", help="show the errors of MAP against this semantic PLY instead")
     p.add_argument("--instances", action="store_true", help="colour by instance (panoptic maps)")
     p.add_argument("--trajectory", action="append", default=[], metavar="SEQ",
-                   help="add the camera path of a sequence folder (repeatable)")
+                   help="add the camera path of a sequence folder or recording (repeatable)")
     p.add_argument("--plotlyjs", choices=("inline", "directory", "cdn"), default="inline",
                    help="inline: plotly.js inside the page (self-contained, several MB); directory: one "
                         "shared plotly.min.js beside the pages (small pages, offline); cdn: loaded from "
@@ -31,15 +31,15 @@ def register(sub) -> None:
     p.add_argument("--voxel-size", type=float, default=0.05, help="voxels of --reference (default %(default)s)")
     p.add_argument("--max-vertices", type=number(int, lo=1), default=150_000,
                    help="display budget; larger maps are decimated (default %(default)s)")
+    add_recording_options(p)
     add_output_flags(p, json_what="the page written")
-    declare_paths(p, inputs=("map", "reference", "trajectory"), outputs=("html",))
+    declare_paths(p, inputs=("map", "reference", "trajectory", "intrinsics"), outputs=("html",))
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     """Write the page."""
-    from semmatch.cli.common import emit
-    from semmatch.io import read_sequence
+    from semmatch.cli.common import emit, open_sequence
     from semmatch.viz import error_figure, map_figure, trajectory_name, trajectory_trace, write_html
 
     if args.reference and args.instances:
@@ -51,6 +51,6 @@ def run(args: argparse.Namespace) -> int:
                          max_vertices=args.max_vertices)
     for k, seq in enumerate(args.trajectory):
         colour = ("black", "rgb(204,121,167)", "rgb(0,158,115)", "rgb(86,180,233)")[k % 4]
-        fig.add_trace(trajectory_trace(read_sequence(seq).poses, trajectory_name(seq), colour))
+        fig.add_trace(trajectory_trace(open_sequence(args, seq, needs_poses=True).poses, trajectory_name(seq), colour))
     write_html(fig, args.html, plotlyjs=args.plotlyjs)
     return emit({"html": str(args.html), "plotlyjs": args.plotlyjs}, args.json, f"{args.html}: written")

@@ -18,7 +18,7 @@ def register(sub) -> None:
         "with one of the paper's label-projection methods; writes DIR/000000.png ... atomically.",
     )
     p.add_argument("--map", required=True, help="upper semantic map or mesh (PLY)")
-    add_sequence(p, "the robot's (lower) sequence folder")
+    add_sequence(p, "the robot's (lower) sequence folder or recording (any registered layout)")
     p.add_argument("--method", required=True, choices=list(available_methods()),
                    help="transfer method (fused: also --probs)")
     p.add_argument("--probs", default=None,
@@ -36,7 +36,7 @@ def register(sub) -> None:
     p.add_argument("--strict", action="store_true",
                    help="exit with an error when the map supports (almost) no pixel (default: a warning)")
     add_index_cache(p)
-    declare_paths(p, inputs=("sequence", "sequence_flag", "map", "probs"), outputs=("out",))
+    declare_paths(p, inputs=("sequence", "sequence_flag", "map", "probs", "intrinsics"), outputs=("out",))
     p.set_defaults(func=run)
 
 
@@ -55,8 +55,8 @@ def _parse_params(items: list[str]) -> dict:
 
 def run(args) -> int:
     """Run ``semmatch transfer``."""
-    from semmatch.cli.common import emit, index_cache_options, sequence_arg
-    from semmatch.io import check_output_dir, read_sequence
+    from semmatch.cli.common import emit, index_cache_options, open_sequence, sequence_arg
+    from semmatch.io import InMemorySequence, SequenceReader, check_output_dir
     from semmatch.transfer import load_index, transfer_sequence
     from semmatch.transfer.registry import check_params
 
@@ -73,7 +73,9 @@ def run(args) -> int:
     check_params(args.method, params)
     if args.jobs < 1:  # before the map is indexed (and its index cached)
         raise ValueError(f"--jobs must be >= 1, got {args.jobs}")
-    seq = read_sequence(seq_path)
+    seq = open_sequence(args, seq_path, needs_poses=True)
+    if args.jobs > 1 and type(seq) is not SequenceReader:  # workers share a recording's decoded frames
+        seq = InMemorySequence(seq, progress=not args.quiet)
     index = load_index(args.map, max_distance=args.max_distance, voxel_size=args.voxel_size,
                        **index_cache_options(args))
     import warnings

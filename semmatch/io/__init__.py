@@ -7,7 +7,9 @@ frames, sequence readers and the writer, label folders), :mod:`~semmatch.io.cont
 frame contract: the checks of a frame's RGB, depth, labels and intrinsics that segmentation,
 transfer and fusion share), :mod:`~semmatch.io.maps` (semantic maps as PLY),
 :mod:`~semmatch.io.outputs` (the output policy of every command). Every public name
-is importable from ``semmatch.io`` itself.
+is importable from ``semmatch.io`` itself, except those of the recording readers:
+:mod:`~semmatch.io.readers` (the reader registry, one module per recording layout,
+``open_recording``) and :mod:`~semmatch.io.reading_checks` (the checks every reader shares).
 
 Writers never leave a half-written file behind: files are written to a temporary name in the
 same folder and renamed; a sequence is written into a hidden temporary folder and renamed to

@@ -23,7 +23,6 @@ from pathlib import Path
 import numpy as np
 
 from ..geometry import Intrinsics, check_pose, pose_from_tum, pose_to_tum
-from ..labels import NUM_CLASSES
 from .files import (
     OUTPUT_MARKER,
     _recover,
@@ -44,6 +43,7 @@ from .images import (
     write_label_image,
 )
 from .outputs import temp_dir
+from .reading_checks import MAX_POSITION, check_depth_scale, check_label_ids, check_poses
 
 __all__ = ['Frame', 'SequenceReader', 'InMemorySequence', 'SequenceWriter', 'read_intrinsics', 'write_intrinsics', 'read_tum', 'write_tum', 'read_labels_folder', 'write_labels_folder', 'frame_index', 'is_sequence', 'read_sequence', 'listed_file', 'sequence_scene']
 
@@ -66,10 +66,6 @@ def read_intrinsics(path: PathLike) -> Intrinsics:
 def write_intrinsics(path: PathLike, intr: Intrinsics) -> None:
     """Write ``intrinsics.json`` atomically."""
     write_json(path, intr.to_dict())
-
-
-#: largest camera coordinate a trajectory may hold (metres): no recorded scene spans 10 km
-MAX_POSITION = 1e4
 
 
 def read_tum(path: PathLike) -> tuple[np.ndarray, np.ndarray]:
@@ -228,9 +224,19 @@ class SequenceReader(_SequenceABC):
         The sequence folder.
     labels : path, optional
         A labels folder to use instead of ``<path>/labels`` (e.g. transferred labels).
+    check_units : bool
+        Check the depth scale of ``intrinsics.json`` against the depth statistics when the
+        folder is opened (:func:`~semmatch.io.reading_checks.check_depth_scale`: ``depth_scale``
+        5000 on millimetre depth is refused), like every recording reader.
+
+    Raises
+    ------
+    ValueError
+        Not a sequence folder, no ``poses.txt`` (an interrupted write), a pose that is not
+        rigid or lies beyond 10 km, frames missing, a depth scale that contradicts the depth.
     """
 
-    def __init__(self, path: PathLike, labels: PathLike | None = None) -> None:
+    def __init__(self, path: PathLike, labels: PathLike | None = None, *, check_units: bool = True) -> None:
         self.path = Path(path)
         if not self.path.is_dir():
             raise FileNotFoundError(f"{self.path}: no such sequence folder")
@@ -254,6 +260,10 @@ class SequenceReader(_SequenceABC):
                 )
                 raise ValueError(f"{self.path}: {sub}/ does not match poses.txt: {what}")
         self.has_labels = self.labels_dir.is_dir() and any(self.labels_dir.glob("*.png"))
+        check_poses(self.poses, where=str(self.path / "poses.txt"))
+        if check_units and n:
+            check_depth_scale([self.path / "depth" / _frame_name(i) for i in range(n)], self.intrinsics.depth_scale,
+                              where=f"{self.path} (intrinsics.json)")
 
     def __len__(self) -> int:
         return len(self.poses)
@@ -273,11 +283,14 @@ class SequenceReader(_SequenceABC):
             if self.has_labels:
                 raise ValueError(f"{self.labels_dir}: frame {i} ({p.name}) is missing")
             return None
-        lab = read_label_image(p)
+        lab = check_label_ids(read_label_image(p), where=p)
         self._check_shape(lab, p, i)
-        if lab.max(initial=0) >= NUM_CLASSES:
-            raise ValueError(f"{p}: label id {lab.max()} outside 0..{NUM_CLASSES - 1}")
         return lab
+
+    def frame_files(self, i: int) -> tuple[Path, Path]:
+        """The files frame ``i`` is read from (colour, depth): what a cache of results keys on."""
+        i = frame_index(i, len(self))
+        return self.path / "rgb" / _frame_name(i), self.path / "depth" / _frame_name(i)
 
     @property
     def has_instances(self) -> bool:
@@ -350,7 +363,8 @@ class InMemorySequence(_SequenceABC):
 
     Parameters
     ----------
-    reader : SequenceReader
+    reader : SequenceReader or any recording reader
+        (:mod:`semmatch.io.readers`: ``labels_dir``/``has_labels`` default to None/False.)
     progress : bool
         Show a tqdm bar while decoding.
     """
@@ -360,7 +374,8 @@ class InMemorySequence(_SequenceABC):
 
         self.path, self.intrinsics = reader.path, reader.intrinsics
         self.timestamps, self.poses = reader.timestamps, reader.poses
-        self.labels_dir, self.has_labels = reader.labels_dir, reader.has_labels
+        self.labels_dir = getattr(reader, "labels_dir", None)
+        self.has_labels = bool(getattr(reader, "has_labels", False))
         self._frames: list[Frame] = []
         # PNG decoding releases the GIL: two threads decode about twice as fast (frames in order)
         with ThreadPoolExecutor(max_workers=min(2, os.cpu_count() or 1)) as ex:
@@ -481,6 +496,10 @@ class SequenceWriter:
     def write_extra(self, name: str, text: str) -> None:
         """Write an extra text file (e.g. ``meta.json``) into the sequence."""
         atomic_write_text(self._tmp / name, text)
+
+    def write_poses(self, name: str, timestamps: np.ndarray, poses: np.ndarray) -> None:
+        """Write an extra trajectory (TUM format, e.g. ``poses_gt.txt``) into the sequence."""
+        write_tum(self._tmp / name, timestamps, poses)
 
     def close(self) -> Path:
         """Finish: write intrinsics and poses, then move the folder into place."""
