@@ -45,7 +45,7 @@ import numpy as np
 from ..geometry import Intrinsics
 from .images import check_depth_units, read_image, read_label_image, read_rgb
 from .sequences import Frame, frame_index, listed_file, read_intrinsics, read_tum
-from .timestamps import associate, interpolate_poses, read_file_list
+from .timestamps import associate, associate_frames, interpolate_poses, read_file_list
 
 __all__ = [
     "TUM_INTRINSICS",
@@ -61,6 +61,7 @@ __all__ = [
     "read_tum_rgbd",
     "read_file_list",
     "associate",
+    "associate_frames",
     "interpolate_poses",
 ]
 
@@ -179,10 +180,6 @@ def is_tum_rgbd(path: PathLike) -> bool:
     return (p / "rgb.txt").is_file() and (p / "depth.txt").is_file()
 
 
-def _span(t: np.ndarray) -> str:
-    return f"{t.min():.3f}..{t.max():.3f}" if len(t) else "empty"
-
-
 class _ImageSequence(_SequenceABC):
     """Lazy, random-access sequence over lists of colour and depth files (the readers' shared part).
 
@@ -220,13 +217,17 @@ class _ImageSequence(_SequenceABC):
             UserWarning, stacklevel=3)
         return assumed
 
+    def _read_images(self, i: int) -> tuple[np.ndarray, np.ndarray, str, str]:
+        """Frame ``i``'s colour (uint8 RGB) and depth (float32 metres), and where each came from (for messages)."""
+        rp, dp = self._rgb[i], self._depth[i]
+        # 16-bit colour scaled, not wrapped to its low byte
+        return read_rgb(rp), read_raw_depth(dp, self.intrinsics.depth_scale), str(rp), str(dp)
+
     def __getitem__(self, i):  # type: ignore[override]
         if isinstance(i, slice):
             return [self[j] for j in range(*i.indices(len(self)))]
         i = frame_index(i, len(self))
-        rp, dp = self._rgb[i], self._depth[i]
-        rgb = read_rgb(rp)  # 16-bit colour scaled, not wrapped to its low byte
-        depth = read_raw_depth(dp, self.intrinsics.depth_scale)
+        rgb, depth, rp, dp = self._read_images(i)
         shape = self.intrinsics.shape
         for p, arr in ((rp, rgb), (dp, depth)):
             if arr.shape[:2] != shape:
@@ -323,25 +324,9 @@ class TumRgbdSequence(_ImageSequence):
                 raise ValueError(f"{self.path}: not a TUM RGB-D folder (no {name})")
         t_rgb, f_rgb = read_file_list(self.path / "rgb.txt")
         t_dep, f_dep = read_file_list(self.path / "depth.txt")
-        pairs = associate(t_rgb, t_dep, max_difference)
         rgb_txt, dep_txt = self.path / "rgb.txt", self.path / "depth.txt"
-        if len(pairs) == 0:
-            raise ValueError(
-                f"{rgb_txt} and {dep_txt}: no colour/depth pair within {max_difference} s "
-                f"(colour times {_span(t_rgb)}, depth times {_span(t_dep)}); unmatched timestamps"
-            )
-        n_bad = len(t_rgb) - len(pairs)
-        if n_bad:
-            matched = np.zeros(len(t_rgb), dtype=bool)
-            matched[pairs[:, 0]] = True
-            first = ", ".join(f"{t:.6f}" for t in t_rgb[~matched][:3])
-            msg = (
-                f"{rgb_txt}: {n_bad} of {len(t_rgb)} colour frames have no depth image in {dep_txt} "
-                f"within {max_difference} s (first: {first})"
-            )
-            if n_bad > max_unmatched * len(t_rgb):
-                raise ValueError(msg + f"; more than {max_unmatched:.0%} unmatched timestamps")
-            warnings.warn(msg + "; they are skipped", UserWarning, stacklevel=2)
+        pairs = associate_frames(t_rgb, t_dep, max_difference, max_unmatched, rgb_where=str(rgb_txt),
+                                 depth_where=str(dep_txt))
         self.timestamps = t_rgb[pairs[:, 0]]
         self.depth_timestamps = t_dep[pairs[:, 1]]
         # entries stay inside the folder (no absolute paths, no '..'): semmatch.io.listed_file

@@ -1,0 +1,987 @@
+"""ROS bags as sequences of :class:`semmatch.io.Frame`: ROS 1 ``.bag``, ROS 2 bag folders, MCAP files.
+
+Read through the pure-Python `rosbags <https://ternaris.gitlab.io/rosbags/>`_ library (no ROS
+install). :class:`RosBagSequence` is lazy and random access like the folder readers of
+:mod:`semmatch.io.recordings` (``len(seq)``, ``seq[i] -> Frame``); :func:`is_rosbag` tells a bag
+from other paths; :func:`write_rosbag` writes frames as a bag (the tests' and examples' bags).
+
+What is read
+------------
+- Colour: ``sensor_msgs/msg/Image`` (``rgb8``, ``bgr8``, ``rgba8``, ``bgra8``, ``mono8``) or
+  ``sensor_msgs/msg/CompressedImage`` (JPEG or PNG, as image_transport's ``compressed``).
+- Depth: ``sensor_msgs/msg/Image`` ``16UC1`` (or ``mono16``; millimetres, REP 118) or ``32FC1``
+  (metres), or ``sensor_msgs/msg/CompressedImage`` in image_transport's ``compressedDepth`` PNG
+  format (a 12-byte header, then a 16-bit PNG: millimetres for ``16UC1``, quantised inverse
+  depth for ``32FC1``). 0, NaN, inf and 65535 (16-bit) are "no measurement". The depth must be
+  registered to the colour image (same size, same camera: e.g. RealSense's
+  ``aligned_depth_to_color``, OpenNI's ``depth_registered``); it is not reprojected.
+- Intrinsics: the first ``sensor_msgs/msg/CameraInfo`` of the colour camera (``K``, width,
+  height). The images are taken as undistorted pinhole images: a non-zero distortion is
+  warned about (use the rectified ``image_rect`` topics).
+- Colour and depth are paired by their header stamps as TUM's ``associate.py`` pairs its
+  timestamps (:func:`semmatch.io.recordings.associate_frames`); the frame's timestamp is the
+  colour header stamp (seconds).
+- Poses (optional), ``T_world_camera`` of the camera's optical frame (x right, y down, z forward,
+  REP 103's ``*_optical_frame``; the frame of the colour images' headers) in a z-up world in
+  metres (REP 103's ``map`` and ``odom`` are), interpolated at the colour stamps (linear
+  translation, slerp rotation; NaN where the samples around a frame are more than
+  ``max_pose_gap`` apart):
+
+  - ``pose_topic``: ``nav_msgs/msg/Odometry``, ``geometry_msgs/msg/PoseStamped``,
+    ``PoseWithCovarianceStamped`` or ``TransformStamped``. Odometry and TransformStamped name
+    the frame they pose (``child_frame_id``, e.g. ``base_link``); when that is not the
+    colour images' frame, the transform from it to the camera is looked up in ``/tf_static``
+    and ``/tf`` and composed (an error when the bag has none). A PoseStamped is taken as the
+    pose of the camera's optical frame itself.
+  - ``pose_frames="WORLD:CAMERA"`` (or ``"WORLD"``: the camera is the colour images' frame):
+    the chain of transforms from WORLD to CAMERA through the TF tree of ``/tf`` and
+    ``/tf_static`` (e.g. ``map -> odom -> base_link -> camera_link -> camera_color_optical_frame``).
+
+Topic defaults: colour is the one Image/CompressedImage topic whose name does not contain
+"depth", depth the one that does (of two, the one named ``aligned``/``registered``; of a raw
+topic and its own ``/compressed`` or ``/compressedDepth``, the raw one), camera info the
+CameraInfo topic nearest the colour topic's namespace. When none or several fit, the error lists
+the bag's topics (name, type, message count) and names the flag to pass.
+
+Random access without loading the bag: opening reads the colour and depth messages once to
+index their header stamps (only the first 12 bytes of each are parsed; nothing is kept but the
+stamps), and ``seq[i]`` reads the two messages of frame ``i`` from the storage by their
+receive time. Each thread and process opens its own reader of the bag.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import struct
+import threading
+import warnings
+from collections import deque
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from ..geometry import Intrinsics, pose_to_tum, quat_to_rotation
+from .images import check_depth_units, depth_to_uint16
+from .recordings import DEPTH_HOLE, _ImageSequence
+from .sequences import Frame
+from .timestamps import associate_frames, interpolate_poses
+
+__all__ = [
+    "IMAGE",
+    "COMPRESSED_IMAGE",
+    "CAMERA_INFO",
+    "POSE_TYPES",
+    "TF_TYPES",
+    "is_rosbag",
+    "RosBagSequence",
+    "read_rosbag",
+    "decode_colour",
+    "decode_depth",
+    "camera_info_intrinsics",
+    "write_rosbag",
+]
+
+PathLike = str | os.PathLike
+
+IMAGE = "sensor_msgs/msg/Image"
+COMPRESSED_IMAGE = "sensor_msgs/msg/CompressedImage"
+CAMERA_INFO = "sensor_msgs/msg/CameraInfo"
+ODOMETRY = "nav_msgs/msg/Odometry"
+POSE_STAMPED = "geometry_msgs/msg/PoseStamped"
+POSE_COV_STAMPED = "geometry_msgs/msg/PoseWithCovarianceStamped"
+TRANSFORM_STAMPED = "geometry_msgs/msg/TransformStamped"
+#: message types a pose topic may have
+POSE_TYPES = (ODOMETRY, POSE_STAMPED, POSE_COV_STAMPED, TRANSFORM_STAMPED)
+#: message types of ``/tf`` and ``/tf_static`` (ROS 2 and ROS 1's tf2, ROS 1's old tf)
+TF_TYPES = ("tf2_msgs/msg/TFMessage", "tf/msg/tfMessage")
+TF_TOPICS = ("/tf", "/tf_static")
+
+#: colour encodings of raw images: channels and the OpenCV conversion to RGB
+_COLOUR_ENCODINGS = {
+    "rgb8": (3, None),
+    "bgr8": (3, cv2.COLOR_BGR2RGB),
+    "rgba8": (4, cv2.COLOR_RGBA2RGB),
+    "bgra8": (4, cv2.COLOR_BGRA2RGB),
+    "mono8": (1, cv2.COLOR_GRAY2RGB),
+}
+#: image_transport's compressedDepth header: int32 format, float32 depthQuantA, depthQuantB
+_DEPTH_HEADER = struct.Struct("<iff")
+#: image_transport's compressedDepth defaults for 32FC1 (depth_quantization 100, depth_max 10 m)
+_QUANT_A = 100.0 * 101.0
+_QUANT_B = 1.0 - _QUANT_A / 10.0
+#: the camera's optical frame in the bags :func:`write_rosbag` writes
+OPTICAL_FRAME = "camera_color_optical_frame"
+#: ROS's camera_link (x forward, y left, z up) to optical frame (x right, y down, z forward)
+_LINK_TO_OPTICAL = np.array([[0.0, 0.0, 1.0, 0.0], [-1.0, 0.0, 0.0, 0.0], [0.0, -1.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
+
+
+# ----------------------------------------------------------------------------- opening
+def is_rosbag(path: PathLike) -> bool:
+    """True when ``path`` is a ROS 1 ``.bag`` file, an ``.mcap`` file, or a ROS 2 bag folder.
+
+    A ROS 2 bag folder holds ``metadata.yaml`` and its storage files (``*.db3`` or ``*.mcap``, or
+    those compressed as ``*.zstd``).
+    """
+    p = Path(path)
+    if p.is_file():
+        return p.suffix.lower() in (".bag", ".mcap")
+    return p.is_dir() and (p / "metadata.yaml").is_file() and any(
+        f.name.endswith((".db3", ".mcap", ".db3.zstd", ".mcap.zstd")) for f in p.iterdir())
+
+
+def _open_reader(path: Path):
+    """An open :class:`rosbags.highlevel.AnyReader` of ``path`` (types from the bag, else ROS 2 Humble's)."""
+    from rosbags.highlevel import AnyReader, AnyReaderError
+    from rosbags.typesys import Stores, get_typestore
+
+    reader = AnyReader([path], default_typestore=get_typestore(Stores.ROS2_HUMBLE))
+    try:
+        reader.open()
+    except AnyReaderError as e:
+        raise ValueError(f"{path}: not a readable ROS bag ({e})") from None
+    return reader
+
+
+def _stamp_ns(raw: bytes | memoryview, cdr: bool) -> int:
+    """The header stamp (ns) of a serialized message that starts with a ``std_msgs/Header``.
+
+    ROS 1: ``uint32 seq, uint32 sec, uint32 nsec``; CDR (ROS 2): a 4-byte encapsulation header
+    whose second byte's low bit says little endian, then ``int32 sec, uint32 nanosec``. Either
+    way the stamp is bytes 4 to 12.
+    """
+    fmt = "<iI" if not cdr or raw[1] & 1 else ">iI"
+    sec, nsec = struct.unpack_from(fmt, raw, 4)
+    return sec * 1_000_000_000 + nsec
+
+
+def _stamp(msg) -> float:
+    """A message header's stamp in seconds (as ``ns * 1e-9``, like the images' stamps: equal stamps stay equal)."""
+    return (msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec) * 1e-9
+
+
+def _frame_id(name: str) -> str:
+    """A TF frame name without ROS 1's leading slash."""
+    return name.lstrip("/")
+
+
+# ----------------------------------------------------------------------------- topics
+def _topic_table(topics: dict) -> str:
+    """The bag's topics, one a line: name, message type, message count."""
+    width = max((len(n) for n in topics), default=0)
+    return "\n".join(f"  {name:<{width}}  {info.msgtype}  ({info.msgcount} messages)"
+                     for name, info in sorted(topics.items()))
+
+
+def _pick(candidates: list[str], prefer) -> list[str]:
+    """Narrow ambiguous candidates: a raw topic over its own transports, then ``prefer``."""
+    raw = [c for c in candidates if not any(c.startswith(o + "/") for o in candidates if o != c)]
+    if len(raw) == 1 or prefer is None:
+        return raw
+    preferred = [c for c in raw if prefer(c)]
+    return preferred if len(preferred) == 1 else raw
+
+
+def _choose_topic(path: Path, topics: dict, given: str | None, types: Sequence[str], what: str, flag: str,
+                  accept=None, prefer=None) -> str:
+    """The topic for ``what``: ``given`` (checked), else the one candidate of ``types`` that ``accept`` takes.
+
+    Raises
+    ------
+    ValueError
+        ``given`` is not in the bag or has another type; no or several candidates. The message lists
+        the bag's topics and names ``flag``.
+    """
+    listing = f"; the bag's topics:\n{_topic_table(topics)}"
+    if given is not None:
+        if given not in topics:
+            raise ValueError(f"{path}: no topic {given} ({flag}){listing}")
+        if topics[given].msgtype not in types:
+            raise ValueError(f"{path}: topic {given} ({flag}) is {topics[given].msgtype}, expected "
+                             f"{' or '.join(types)}{listing}")
+        return given
+    candidates = sorted(n for n, info in topics.items() if info.msgtype in types and (accept is None or accept(n)))
+    candidates = _pick(candidates, prefer) if len(candidates) > 1 else candidates
+    if len(candidates) == 1:
+        return candidates[0]
+    found = "no" if not candidates else f"{len(candidates)} ({', '.join(candidates)})"
+    raise ValueError(f"{path}: {found} {what} topics ({' or '.join(types)}); pass {flag} TOPIC{listing}")
+
+
+def _namespace_distance(a: str, b: str) -> int:
+    """How many namespace levels of ``a`` lie outside the namespace ``a`` and ``b`` share."""
+    pa, pb = a.strip("/").split("/")[:-1], b.strip("/").split("/")[:-1]
+    common = 0
+    for x, y in zip(pa, pb):
+        if x != y:
+            break
+        common += 1
+    return len(pa) - common
+
+
+def _camera_info_topic(path: Path, topics: dict, given: str | None, colour: str) -> str:
+    """``given``, else the CameraInfo topic in (or nearest to) the colour topic's namespace."""
+    infos = sorted(n for n, info in topics.items() if info.msgtype == CAMERA_INFO)
+    if given is None and len(infos) > 1:
+        dist = {n: _namespace_distance(colour, n) for n in infos}
+        best = [n for n in infos if dist[n] == min(dist.values())]
+        infos = best if len(best) == 1 else infos
+        if len(infos) == 1:
+            return infos[0]
+    return _choose_topic(path, topics, given, (CAMERA_INFO,), f"camera info (for {colour})", "--camera-info-topic")
+
+
+# ----------------------------------------------------------------------------- images
+def _raw_pixels(msg, dtype: np.dtype, channels: int) -> np.ndarray:
+    """The pixels of a ``sensor_msgs/Image`` as (H, W[, C]), row padding (``step``) removed."""
+    h, w = int(msg.height), int(msg.width)
+    dtype = np.dtype(dtype).newbyteorder(">" if msg.is_bigendian else "<")
+    row = w * channels * dtype.itemsize
+    data = np.asarray(msg.data, dtype=np.uint8)
+    if msg.step < row or data.size < msg.step * h:
+        raise ValueError(f"{msg.encoding} image of {w}x{h} has step {msg.step} and {data.size} bytes; "
+                         f"it needs {row} bytes a row")
+    px = data[: msg.step * h].reshape(h, msg.step)[:, :row].copy().view(dtype)
+    px = px.astype(dtype.newbyteorder("="), copy=False)
+    return px.reshape(h, w, channels) if channels > 1 else px.reshape(h, w)
+
+
+def _decompress(msg, where: str) -> np.ndarray:
+    """A ``CompressedImage``'s JPEG/PNG data decoded by OpenCV (unchanged depth and channels)."""
+    buf = np.asarray(msg.data, dtype=np.uint8)
+    img = cv2.imdecode(buf, cv2.IMREAD_UNCHANGED) if buf.size else None
+    if img is None:
+        raise ValueError(f"{where}: the compressed image ({msg.format!r}, {buf.size} bytes) does not decode")
+    return img
+
+
+def decode_colour(msg, where: str = "colour") -> np.ndarray:
+    """A colour ``sensor_msgs/Image`` or ``CompressedImage`` message as uint8 RGB (H, W, 3).
+
+    Parameters
+    ----------
+    msg : Image or CompressedImage message
+        Raw images in ``rgb8``, ``bgr8``, ``rgba8``, ``bgra8`` or ``mono8``; compressed JPEG or PNG
+        (8 bits; decoded as OpenCV does, BGR, as image_transport encodes them).
+    where : str
+        What the message is (bag, topic, stamp), for the messages.
+
+    Raises
+    ------
+    ValueError
+        Another encoding, a size that does not fit the data, or data that does not decode.
+    """
+    if hasattr(msg, "format"):
+        img = _decompress(msg, where)
+        if img.dtype != np.uint8:
+            raise ValueError(f"{where}: compressed colour images must be 8-bit, got {img.dtype} ({msg.format!r})")
+        code = {2: cv2.COLOR_GRAY2RGB, 3: cv2.COLOR_BGR2RGB, 4: cv2.COLOR_BGRA2RGB}[img.ndim if img.ndim == 2
+                                                                                   else img.shape[2]]
+        return cv2.cvtColor(img, code)
+    if msg.encoding not in _COLOUR_ENCODINGS:
+        raise ValueError(f"{where}: colour encoding {msg.encoding!r} is not read; expected one of "
+                         f"{', '.join(_COLOUR_ENCODINGS)} (or a CompressedImage topic)")
+    channels, code = _COLOUR_ENCODINGS[msg.encoding]
+    try:
+        px = _raw_pixels(msg, np.uint8, channels)
+    except ValueError as e:
+        raise ValueError(f"{where}: {e}") from None
+    return np.ascontiguousarray(px if code is None else cv2.cvtColor(px, code))
+
+
+def _compressed_depth(msg, where: str) -> np.ndarray:
+    """image_transport's ``compressedDepth`` (header + 16-bit PNG) as float32 metres (0 = none)."""
+    fmt = str(msg.format)
+    encoding = fmt.split(";")[0].strip()
+    if "rvl" in fmt.lower():
+        raise ValueError(f"{where}: compressedDepth in RVL ({fmt!r}) is not read; record the PNG "
+                         "compressedDepth format or raw depth")
+    data = bytes(np.asarray(msg.data, dtype=np.uint8))
+    if len(data) <= _DEPTH_HEADER.size:
+        raise ValueError(f"{where}: compressedDepth message of {len(data)} bytes has no image")
+    _, quant_a, quant_b = _DEPTH_HEADER.unpack_from(data)
+    img = cv2.imdecode(np.frombuffer(data, np.uint8, offset=_DEPTH_HEADER.size), cv2.IMREAD_UNCHANGED)
+    if img is None or img.dtype != np.uint16 or img.ndim != 2:
+        raise ValueError(f"{where}: compressedDepth ({fmt!r}) does not hold a 16-bit single-channel PNG")
+    if encoding in ("16UC1", "mono16"):
+        return _millimetres(img)
+    if encoding == "32FC1":
+        inv = img.astype(np.float32)
+        out = np.zeros(img.shape, np.float32)
+        ok = img > 0
+        out[ok] = np.float32(quant_a) / (inv[ok] - np.float32(quant_b))
+        return _metres(out)
+    raise ValueError(f"{where}: compressedDepth of {encoding!r} is not read; expected 16UC1 or 32FC1")
+
+
+def _millimetres(raw: np.ndarray) -> np.ndarray:
+    """16-bit millimetres as float32 metres; 0 and 65535 are holes (0)."""
+    out = raw.astype(np.float32) / np.float32(1000.0)
+    out[raw == DEPTH_HOLE] = 0.0
+    return out
+
+
+def _metres(depth: np.ndarray) -> np.ndarray:
+    """float metres with NaN, inf and non-positive values as holes (0), float32."""
+    depth = depth.astype(np.float32, copy=False)
+    return np.where(np.isfinite(depth) & (depth > 0), depth, np.float32(0.0)).astype(np.float32)
+
+
+def decode_depth(msg, where: str = "depth") -> np.ndarray:
+    """A depth ``sensor_msgs/Image`` or ``CompressedImage`` (``compressedDepth``) as float32 metres.
+
+    Parameters
+    ----------
+    msg : Image or CompressedImage message
+        Raw ``16UC1``/``mono16`` (millimetres) or ``32FC1`` (metres); or image_transport's
+        ``compressedDepth`` PNG of either.
+    where : str
+        What the message is, for the messages.
+
+    Returns
+    -------
+    float32 (H, W)
+        Metres; 0 = no measurement (0, NaN, inf and 16-bit 65535 in the message).
+
+    Raises
+    ------
+    ValueError
+        Another encoding (e.g. a colour topic given as depth), or data that does not fit.
+    """
+    if hasattr(msg, "format"):
+        if "compresseddepth" not in str(msg.format).lower():
+            raise ValueError(f"{where}: a compressed depth topic must be image_transport's compressedDepth "
+                             f"(format '16UC1; compressedDepth png'), got {msg.format!r}")
+        return _compressed_depth(msg, where)
+    try:
+        if msg.encoding in ("16UC1", "mono16"):
+            return _millimetres(_raw_pixels(msg, np.uint16, 1))
+        if msg.encoding == "32FC1":
+            return _metres(_raw_pixels(msg, np.float32, 1))
+    except ValueError as e:
+        raise ValueError(f"{where}: {e}") from None
+    raise ValueError(f"{where}: depth encoding {msg.encoding!r} is not read; expected 16UC1 (millimetres) or "
+                     "32FC1 (metres)")
+
+
+def camera_info_intrinsics(msg, where: str = "camera_info") -> Intrinsics:
+    """The :class:`~semmatch.geometry.Intrinsics` of a ``sensor_msgs/CameraInfo`` (its ``K``).
+
+    ``depth_scale`` is 1000 (millimetres: what a sequence written from the bag stores).
+
+    Warns
+    -----
+    UserWarning
+        Non-zero distortion coefficients: the images are read as undistorted pinhole images.
+    """
+    K = np.asarray(msg.k if hasattr(msg, "k") else msg.K, dtype=np.float64).reshape(3, 3)  # ROS 2 / ROS 1 names
+    D = np.asarray(msg.d if hasattr(msg, "d") else msg.D, dtype=np.float64)
+    try:
+        intr = Intrinsics(int(msg.width), int(msg.height), K[0, 0], K[1, 1], K[0, 2], K[1, 2], 1000.0)
+    except ValueError as e:
+        raise ValueError(f"{where}: {e} (K = {K.ravel().tolist()}, {msg.width}x{msg.height})") from None
+    if D.size and np.abs(D).max() > 1e-6:
+        warnings.warn(f"{where}: distortion {msg.distortion_model} {np.round(D, 4).tolist()} is ignored; semmatch "
+                      "reads the images as undistorted pinhole images (record the rectified image_rect topics)",
+                      UserWarning, stacklevel=3)
+    return intr
+
+
+# ----------------------------------------------------------------------------- poses
+def _transform_matrix(translation, rotation) -> np.ndarray:
+    """A 4x4 from a ROS translation (x, y, z) and quaternion (x, y, z, w)."""
+    T = np.eye(4)
+    T[:3, :3] = quat_to_rotation(np.array([rotation.x, rotation.y, rotation.z, rotation.w], dtype=np.float64))
+    T[:3, 3] = (translation.x, translation.y, translation.z)
+    return T
+
+
+def _pose_of(msg) -> tuple[np.ndarray, str, str]:
+    """A pose message's ``T_parent_child``, parent frame and child frame ("" when the message names none)."""
+    parent = _frame_id(msg.header.frame_id)
+    if msg.__msgtype__ == TRANSFORM_STAMPED:
+        return _transform_matrix(msg.transform.translation, msg.transform.rotation), parent, _frame_id(
+            msg.child_frame_id)
+    pose = msg.pose.pose if msg.__msgtype__ in (ODOMETRY, POSE_COV_STAMPED) else msg.pose
+    child = _frame_id(msg.child_frame_id) if msg.__msgtype__ == ODOMETRY else ""
+    return _transform_matrix(pose.position, pose.orientation), parent, child
+
+
+class _TfTree:
+    """The transforms of ``/tf`` (time series per edge) and ``/tf_static`` (one per edge) of a bag."""
+
+    def __init__(self, reader) -> None:
+        self.dynamic: dict[tuple[str, str], tuple[list[float], list[np.ndarray]]] = {}
+        self.static: dict[tuple[str, str], np.ndarray] = {}
+        conns = [c for c in reader.connections if c.topic in TF_TOPICS and c.msgtype in TF_TYPES]
+        for conn, _, raw in reader.messages(conns):
+            msg = reader.deserialize(raw, conn.msgtype)
+            for tf in msg.transforms:
+                edge = (_frame_id(tf.header.frame_id), _frame_id(tf.child_frame_id))
+                T = _transform_matrix(tf.transform.translation, tf.transform.rotation)
+                if conn.topic == "/tf_static":
+                    self.static[edge] = T
+                else:
+                    ts, Ts = self.dynamic.setdefault(edge, ([], []))
+                    ts.append(_stamp(tf))
+                    Ts.append(T)
+
+    def frames(self) -> list[str]:
+        """Every frame the tree names."""
+        return sorted({f for e in (*self.static, *self.dynamic) for f in e})
+
+    def path(self, parent: str, child: str) -> list[tuple[str, str, bool]] | None:
+        """The edges from ``parent`` to ``child`` as ``(a, b, forward)``; None when they are not connected."""
+        links: dict[str, list[tuple[str, bool]]] = {}
+        for a, b in (*self.static, *self.dynamic):
+            links.setdefault(a, []).append((b, True))
+            links.setdefault(b, []).append((a, False))
+        came: dict[str, tuple[str, bool] | None] = {parent: None}
+        todo = deque([parent])
+        while todo:
+            f = todo.popleft()
+            for g, forward in links.get(f, []):
+                if g not in came:
+                    came[g] = (f, forward)
+                    todo.append(g)
+        if child not in came:
+            return None
+        edges = []
+        f = child
+        while came[f] is not None:
+            prev, forward = came[f]
+            edges.append((prev, f, forward))
+            f = prev
+        return edges[::-1]
+
+    def lookup(self, parent: str, child: str, stamps: np.ndarray, max_gap: float, where: str) -> np.ndarray:
+        """``T_parent_child`` at ``stamps`` (N,4,4) along the tree's chain; NaN where an edge has no sample.
+
+        Raises
+        ------
+        ValueError
+            The two frames are not connected (the message lists the tree's frames).
+        """
+        edges = self.path(parent, child)
+        if edges is None:
+            raise ValueError(f"{where}: /tf and /tf_static connect no chain from {parent!r} to {child!r}; "
+                             f"their frames: {', '.join(self.frames()) or 'none'}")
+        out = np.broadcast_to(np.eye(4), (len(stamps), 4, 4)).copy()
+        for a, b, forward in edges:
+            key = (a, b) if forward else (b, a)
+            if key in self.dynamic:
+                ts, Ts = self.dynamic[key]
+                T = interpolate_poses(stamps, np.asarray(ts), np.asarray(Ts), max_gap)
+            else:
+                T = np.broadcast_to(self.static[key], (len(stamps), 4, 4))
+            if not forward:
+                T = np.linalg.inv(T)  # NaN stays NaN
+            out = out @ T
+        return out
+
+
+# ----------------------------------------------------------------------------- the sequence
+class _TopicIndex:
+    """A topic's messages by header stamp: stamps (ns), receive times (ns), sorted by stamp."""
+
+    def __init__(self, topic: str) -> None:
+        self.topic = topic
+        self.stamps: list[int] = []
+        self.times: list[int] = []
+
+    def sort(self) -> None:
+        order = np.argsort(np.asarray(self.stamps, dtype=np.int64), kind="stable")
+        self.stamps = np.asarray(self.stamps, dtype=np.int64)[order]
+        self.times = np.asarray(self.times, dtype=np.int64)[order]
+
+
+class RosBagSequence(_ImageSequence):
+    """Lazy, random-access ROS bag (ROS 1, ROS 2 sqlite3/MCAP, MCAP file): ``len(seq)``, ``seq[i] -> Frame``.
+
+    What is read, the topic defaults and the pose conventions: :mod:`semmatch.io.bags`. The
+    depth must be registered to the colour camera (same size and intrinsics); the intrinsics
+    are the colour topic's CameraInfo ``K``.
+
+    Parameters
+    ----------
+    path : path
+        The ``.bag`` file, the ROS 2 bag folder (``metadata.yaml`` + ``*.db3``/``*.mcap``), or an
+        ``.mcap`` file.
+    color_topic, depth_topic, camera_info_topic : str, optional
+        Topics; default: chosen from the bag's topics by type and name (see the module).
+    pose_topic : str, optional
+        An Odometry, PoseStamped, PoseWithCovarianceStamped or TransformStamped topic.
+    pose_frames : str, optional
+        ``"WORLD:CAMERA"`` (or ``"WORLD"``): poses from ``/tf`` + ``/tf_static``. Not with ``pose_topic``.
+    frames : slice, optional
+        Use only these frames (indices of the colour/depth pairs in stamp order, e.g. ``slice(0, 500)``).
+    max_difference : float
+        Association window (seconds) for colour/depth header stamps.
+    max_unmatched : float
+        Fraction of colour frames allowed to have no depth partner (skipped with a warning).
+    max_pose_gap : float
+        Longest gap (seconds) between pose samples bridged by interpolation.
+    labels : path, optional
+        A labels folder ``000000.png ...`` indexed like the frames used.
+    check_units : bool
+        Check the median depth of up to 5 frames spread over the bag when it is opened, and of
+        every frame read (:func:`semmatch.io.check_depth_units`).
+    intrinsics : Intrinsics, optional
+        The camera, instead of the CameraInfo topic (for bags without one).
+
+    Attributes
+    ----------
+    timestamps : float64 (N,)
+        Colour header stamps (seconds).
+    depth_timestamps : float64 (N,)
+        The paired depth header stamps.
+    poses : float64 (N,4,4) or None
+        ``T_world_camera`` per frame (NaN rows where unknown); None without a pose source.
+    topics : dict
+        ``{"color": ..., "depth": ..., "camera_info": ..., "pose": ...}`` as used.
+    camera_frame : str
+        The colour images' ``header.frame_id``.
+
+    Raises
+    ------
+    FileNotFoundError
+        No such path.
+    ValueError
+        Not a ROS bag; a topic missing, ambiguous or of the wrong type (the message lists the bag's
+        topics and the flag to pass); no colour/depth pair; poses that cover no frame; frames
+        whose depth is not in metres.
+    """
+
+    def __init__(
+        self,
+        path: PathLike,
+        *,
+        color_topic: str | None = None,
+        depth_topic: str | None = None,
+        camera_info_topic: str | None = None,
+        pose_topic: str | None = None,
+        pose_frames: str | None = None,
+        frames: slice | None = None,
+        max_difference: float = 0.02,
+        max_unmatched: float = 0.05,
+        max_pose_gap: float = 0.1,
+        labels: PathLike | None = None,
+        check_units: bool = True,
+        intrinsics: Intrinsics | None = None,
+    ) -> None:
+        from ..progress import tqdm
+
+        self.path = Path(path)
+        if not self.path.exists():
+            raise FileNotFoundError(f"{self.path}: no such ROS bag")
+        if not is_rosbag(self.path):
+            raise ValueError(f"{self.path}: not a ROS bag (a .bag file, an .mcap file, or a ROS 2 bag folder with "
+                             "metadata.yaml and *.db3 or *.mcap)")
+        if pose_topic is not None and pose_frames is not None:
+            raise ValueError(f"{self.path}: give a pose topic ({pose_topic}) or TF frames ({pose_frames}), not both")
+        self._lock = threading.Lock()
+        self._readers: dict[tuple[int, int], tuple[object, dict]] = {}
+        reader = self._reader()[0]
+        topics = reader.topics
+        images = (IMAGE, COMPRESSED_IMAGE)
+        colour = _choose_topic(self.path, topics, color_topic, images, "colour", "--color-topic",
+                               accept=lambda n: "depth" not in n.lower())
+        depth = _choose_topic(self.path, topics, depth_topic, images, "depth", "--depth-topic",
+                              accept=lambda n: "depth" in n.lower(),
+                              prefer=lambda n: "aligned" in n.lower() or "registered" in n.lower())
+        self.topics = {"color": colour, "depth": depth, "camera_info": None, "pose": pose_topic}
+        self._cdr = reader.is2
+        index = {t: _TopicIndex(t) for t in (colour, depth)}
+        conns = [c for c in reader.connections if c.topic in index]
+        total = topics[colour].msgcount + topics[depth].msgcount
+        for conn, time, raw in tqdm(reader.messages(conns), total=total, desc=f"index {self.path.name}",
+                                    unit="msg", leave=False, disable=total < 2000):
+            ix = index[conn.topic]
+            ix.stamps.append(_stamp_ns(raw, self._cdr))
+            ix.times.append(time)
+        for ix in index.values():
+            if not ix.stamps:
+                raise ValueError(f"{self.path}: topic {ix.topic} has no messages")
+            ix.sort()
+        self._colour, self._depth_ix = index[colour], index[depth]
+        pairs = associate_frames(self._colour.stamps * 1e-9, self._depth_ix.stamps * 1e-9, max_difference,
+                                 max_unmatched, rgb_where=f"{self.path}: colour topic {colour}",
+                                 depth_where=f"depth topic {depth}")
+        if frames is not None:
+            pairs = pairs[frames]
+            if not len(pairs):
+                raise ValueError(f"{self.path}: no frames in {frames} (the bag has {len(self._colour.stamps)} "
+                                 "colour/depth pairs)")
+        self._pairs = pairs
+        self.timestamps = self._colour.stamps[pairs[:, 0]] * 1e-9
+        self.depth_timestamps = self._depth_ix.stamps[pairs[:, 1]] * 1e-9
+        first = self._message(self._colour, int(pairs[0, 0]))
+        self.camera_frame = _frame_id(first.header.frame_id)
+        if intrinsics is None:
+            info = _camera_info_topic(self.path, topics, camera_info_topic, colour)
+            self.topics["camera_info"] = info
+            msg = self._first_message(info)
+            intrinsics = camera_info_intrinsics(msg, where=f"{self.path}: {info}")
+        self.intrinsics = intrinsics
+        self.labels_dir = Path(labels) if labels is not None else None
+        self.check_units = check_units
+        if check_units:
+            for k in np.unique(np.linspace(0, len(self) - 1, min(5, len(self))).round().astype(int)):
+                _, depth_img, _, where = self._read_images(int(k))
+                check_depth_units(depth_img, where=where)
+        self.poses: np.ndarray | None = None
+        if pose_topic is not None:
+            self.poses = self._topic_poses(pose_topic, topics, max_pose_gap)
+        elif pose_frames is not None:
+            world, _, camera = pose_frames.partition(":")
+            camera = camera or self.camera_frame
+            if not world or not camera:
+                raise ValueError(f"{self.path}: --pose-frames {pose_frames!r} must be WORLD:CAMERA (or WORLD, with the "
+                                 f"colour images' frame {self.camera_frame!r} as CAMERA)")
+            self.topics["pose"] = f"/tf {world} -> {camera}"
+            where = f"{self.path}: /tf {world} -> {camera}"
+            self.poses = _TfTree(reader).lookup(_frame_id(world), _frame_id(camera), self.timestamps, max_pose_gap,
+                                                where)
+            self._check_pose_cover(self.poses, where)
+
+    # ---- reading
+    def _reader(self) -> tuple[object, dict]:
+        """This thread's open reader of the bag and its connections by topic (opened on first use)."""
+        key = (os.getpid(), threading.get_ident())
+        with self._lock:
+            got = self._readers.get(key)
+        if got is None:
+            self._close_finished_threads()
+            reader = _open_reader(self.path)
+            by_topic: dict[str, list] = {}
+            for c in reader.connections:
+                by_topic.setdefault(c.topic, []).append(c)
+            got = (reader, by_topic)
+            with self._lock:
+                self._readers[key] = got
+        return got
+
+    def _close_finished_threads(self) -> None:
+        """Close the readers of this process's threads that have ended (a thread pool's, after its work)."""
+        alive = {t.ident for t in threading.enumerate()}
+        with self._lock:
+            gone = [k for k in self._readers if k[0] == os.getpid() and k[1] not in alive]
+            readers = [self._readers.pop(k)[0] for k in gone]
+        for reader in readers:
+            reader.close()
+
+    def _message(self, ix: _TopicIndex, k: int):
+        """The ``k``-th message (in stamp order) of an indexed topic, deserialized."""
+        reader, by_topic = self._reader()
+        stamp, time = int(ix.stamps[k]), int(ix.times[k])
+        for conn, _, raw in reader.messages(by_topic[ix.topic], start=time, stop=time + 1):
+            if _stamp_ns(raw, self._cdr) == stamp:
+                return reader.deserialize(raw, conn.msgtype)
+        raise ValueError(f"{self.path}: topic {ix.topic} has no message stamped {stamp * 1e-9:.9f} at "
+                         f"{time * 1e-9:.9f} any more (was the bag changed since it was opened?)")
+
+    def _first_message(self, topic: str):
+        """The first message of ``topic`` (by receive time)."""
+        reader, by_topic = self._reader()
+        for conn, _, raw in reader.messages(by_topic[topic]):
+            return reader.deserialize(raw, conn.msgtype)
+        raise ValueError(f"{self.path}: topic {topic} has no messages")
+
+    def _read_images(self, i: int) -> tuple[np.ndarray, np.ndarray, str, str]:
+        ci, di = int(self._pairs[i, 0]), int(self._pairs[i, 1])
+        rp = f"{self.path}: {self._colour.topic} at {self._colour.stamps[ci] * 1e-9:.6f} (frame {i})"
+        dp = f"{self.path}: {self._depth_ix.topic} at {self._depth_ix.stamps[di] * 1e-9:.6f} (frame {i})"
+        rgb = decode_colour(self._message(self._colour, ci), rp)
+        depth = decode_depth(self._message(self._depth_ix, di), dp)
+        return rgb, depth, rp, dp
+
+    def __len__(self) -> int:
+        return len(self._pairs)
+
+    # ---- poses
+    def _check_pose_cover(self, poses: np.ndarray, where: str) -> None:
+        """Refuse poses that cover no frame (the message gives the frames' time span)."""
+        if not np.isfinite(poses[:, 0, 0]).any():
+            raise ValueError(f"{where}: the poses cover none of the {len(self)} frames "
+                             f"({self.timestamps[0]:.3f}..{self.timestamps[-1]:.3f}; gaps over the pose samples "
+                             "longer than max_pose_gap are not bridged)")
+
+    def _topic_poses(self, topic: str, topics: dict, max_gap: float) -> np.ndarray:
+        """Poses from a pose topic, composed with the TF chain to the camera where it poses another frame."""
+        _choose_topic(self.path, topics, topic, POSE_TYPES, "pose", "--pose-topic")
+        reader, by_topic = self._reader()
+        stamps, poses, child = [], [], ""
+        for conn, _, raw in reader.messages(by_topic[topic]):
+            msg = reader.deserialize(raw, conn.msgtype)
+            T, _, child = _pose_of(msg)
+            stamps.append(_stamp(msg))
+            poses.append(T)
+        where = f"{self.path}: {topic}"
+        if not stamps:
+            raise ValueError(f"{where}: the pose topic has no messages")
+        out = interpolate_poses(self.timestamps, np.asarray(stamps), np.asarray(poses), max_gap)
+        if child and self.camera_frame and child != self.camera_frame:
+            tree = _TfTree(reader)
+            if tree.path(child, self.camera_frame) is None:
+                raise ValueError(f"{where}: the poses are of frame {child!r}, the colour images are in "
+                                 f"{self.camera_frame!r}, and /tf and /tf_static connect no chain between them "
+                                 f"(their frames: {', '.join(tree.frames()) or 'none'}); pass --pose-frames "
+                                 f"WORLD:{self.camera_frame} instead, or record the camera's static transforms")
+            out = out @ tree.lookup(child, self.camera_frame, self.timestamps, max_gap, where)
+        self._check_pose_cover(out, where)
+        return out
+
+    # ---- life cycle
+    def close(self) -> None:
+        """Close the bag readers this sequence opened (it reopens them when read again)."""
+        with self._lock:
+            readers, self._readers = self._readers, {}
+        for (pid, _), (reader, _) in readers.items():
+            if pid == os.getpid():
+                reader.close()
+
+    def __enter__(self) -> RosBagSequence:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def __getstate__(self) -> dict:
+        state = self.__dict__.copy()
+        state["_readers"], state["_lock"] = {}, None
+        return state
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self._lock = threading.Lock()
+
+
+def read_rosbag(path: PathLike, **kwargs) -> RosBagSequence:
+    """Open a ROS bag as a sequence (see :class:`RosBagSequence`)."""
+    return RosBagSequence(path, **kwargs)
+
+
+# ----------------------------------------------------------------------------- writing
+def _ros_types(version: int):
+    """The typestore to write with: ROS 1 Noetic (+ tf2_msgs/TFMessage) or ROS 2 Humble."""
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    if version == 2:
+        return get_typestore(Stores.ROS2_HUMBLE)
+    store = get_typestore(Stores.ROS1_NOETIC)
+    store.register(get_types_from_msg("geometry_msgs/TransformStamped[] transforms", TF_TYPES[0]))
+    return store
+
+
+class _BagWriter:
+    """A ROS 1 or ROS 2 bag being written: connections by topic, messages serialized for the version."""
+
+    def __init__(self, path: Path, version: int, storage: str) -> None:
+        from rosbags.rosbag1 import Writer as Writer1
+        from rosbags.rosbag2 import StoragePlugin
+        from rosbags.rosbag2 import Writer as Writer2
+
+        self.version, self.store = version, _ros_types(version)
+        if version == 1:
+            self.writer = Writer1(path)
+        else:
+            plugin = {"sqlite3": StoragePlugin.SQLITE3, "mcap": StoragePlugin.MCAP}[storage]
+            self.writer = Writer2(path, version=9, storage_plugin=plugin)
+        self.writer.open()
+        self.connections: dict[str, object] = {}
+        self.T = self.store.types
+
+    def header(self, stamp_ns: int, frame: str):
+        Time, Header = self.T["builtin_interfaces/msg/Time"], self.T["std_msgs/msg/Header"]
+        t = Time(sec=stamp_ns // 1_000_000_000, nanosec=stamp_ns % 1_000_000_000)
+        return Header(seq=0, stamp=t, frame_id=frame) if self.version == 1 else Header(stamp=t, frame_id=frame)
+
+    def write(self, topic: str, msg, time_ns: int) -> None:
+        typ = msg.__msgtype__
+        if topic not in self.connections:
+            self.connections[topic] = self.writer.add_connection(topic, typ, typestore=self.store)
+        data = self.store.serialize_ros1(msg, typ) if self.version == 1 else self.store.serialize_cdr(msg, typ)
+        self.writer.write(self.connections[topic], time_ns, data)
+
+    def transform(self, T: np.ndarray, stamp_ns: int, parent: str, child: str):
+        """A ``TransformStamped`` of ``T_parent_child``."""
+        q = pose_to_tum(T)  # tx ty tz qx qy qz qw
+        Vector3, Quaternion = self.T["geometry_msgs/msg/Vector3"], self.T["geometry_msgs/msg/Quaternion"]
+        tf = self.T["geometry_msgs/msg/Transform"](Vector3(*q[:3]), Quaternion(*q[3:]))
+        return self.T[TRANSFORM_STAMPED](self.header(stamp_ns, parent), child, tf)
+
+    def pose(self, T: np.ndarray):
+        q = pose_to_tum(T)
+        return self.T["geometry_msgs/msg/Pose"](self.T["geometry_msgs/msg/Point"](*q[:3]),
+                                                  self.T["geometry_msgs/msg/Quaternion"](*q[3:]))
+
+    def close(self) -> None:
+        self.writer.close()
+
+
+def _image_msgs(w: _BagWriter, frame: Frame, stamp: int, depth_stamp: int, compressed: str | None,
+                depth_encoding: str) -> tuple[object, object]:
+    """The colour and depth messages of a frame."""
+    U8 = np.uint8
+    Image, Compressed = w.T[IMAGE], w.T[COMPRESSED_IMAGE]
+    h, wd = frame.depth.shape
+    rgb = np.ascontiguousarray(frame.rgb, dtype=U8)
+    if compressed:
+        ok, buf = cv2.imencode(f".{'jpg' if compressed == 'jpeg' else 'png'}", cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR))
+        colour = Compressed(w.header(stamp, OPTICAL_FRAME), f"rgb8; {compressed} compressed bgr8", buf.ravel())
+    else:
+        colour = Image(w.header(stamp, OPTICAL_FRAME), h, wd, "rgb8", 0, 3 * wd, rgb.ravel().view(U8))
+    depth = np.asarray(frame.depth, dtype=np.float32)
+    if depth_encoding == "16UC1":
+        raw = depth_to_uint16(depth, 1000.0)
+    else:
+        raw = np.where(depth > 0, depth, np.float32(np.nan)).astype("<f4")
+    if compressed:
+        quant = (0.0, 0.0) if depth_encoding == "16UC1" else (_QUANT_A, _QUANT_B)
+        if depth_encoding == "32FC1":  # image_transport's inverse-depth quantisation (0 = none, beyond 10 m too)
+            ok_ = np.isfinite(raw) & (raw < 10.0)
+            inv = np.zeros(raw.shape, np.uint16)
+            inv[ok_] = np.clip(np.round(_QUANT_A / raw[ok_] + _QUANT_B), 0, 65535).astype(np.uint16)
+            raw = inv
+        ok, png = cv2.imencode(".png", raw)
+        data = np.frombuffer(_DEPTH_HEADER.pack(0, *quant) + png.tobytes(), U8)
+        dmsg = Compressed(w.header(depth_stamp, OPTICAL_FRAME), f"{depth_encoding}; compressedDepth png", data)
+    else:
+        dmsg = Image(w.header(depth_stamp, OPTICAL_FRAME), h, wd, depth_encoding, 0, raw.itemsize * wd,
+                     np.ascontiguousarray(raw).ravel().view(U8))
+    return colour, dmsg
+
+
+def write_rosbag(
+    path: PathLike,
+    frames: Iterable[Frame],
+    intrinsics: Intrinsics | None = None,
+    *,
+    version: int = 2,
+    storage: str = "sqlite3",
+    compressed: bool | str = False,
+    depth_encoding: str = "16UC1",
+    poses: str | None = "odom",
+    timestamps: Sequence[float] | None = None,
+    depth_offset: float = 0.0,
+) -> Path:
+    """Write frames as a ROS bag with the topics of a RealSense camera driver (small bags for tests and examples).
+
+    Topics: ``/camera/color/image_raw`` (``rgb8``; or ``.../compressed``),
+    ``/camera/color/camera_info``, ``/camera/aligned_depth_to_color/image_raw`` (or
+    ``.../compressedDepth``), in frame ``camera_color_optical_frame``; and the poses (each
+    frame's ``T_world_camera``; frames without one are left out):
+
+    - ``"odom"``: ``/odom`` (``nav_msgs/Odometry`` of ``base_link`` in ``odom``) and ``/tf_static``
+      ``base_link -> camera_link -> camera_color_optical_frame`` (a camera 0.2 m ahead of and
+      0.3 m above the base);
+    - ``"tf"``: the same chain with ``odom -> base_link`` on ``/tf`` (read with
+      ``pose_frames="odom:camera_color_optical_frame"``);
+    - ``"pose"``: ``/camera/pose`` (``geometry_msgs/PoseStamped`` of the optical frame in ``map``);
+    - None: no poses.
+
+    Each message's receive time is its header stamp plus 1 ms (colour), 2 ms (depth).
+
+    Parameters
+    ----------
+    path : path
+        A new ``.bag`` file (``version=1``) or a new ROS 2 bag folder (``version=2``).
+    frames : iterable of Frame
+        RGB (uint8), depth (metres) and poses.
+    intrinsics : Intrinsics, optional
+        The camera; default: the first frame's.
+    version : {1, 2}
+    storage : {"sqlite3", "mcap"}
+        ROS 2 storage (the folder then holds one ``.db3`` or ``.mcap`` file).
+    compressed : bool or {"jpeg", "png"}
+        Compressed colour (``True`` = JPEG) and image_transport ``compressedDepth`` depth.
+    depth_encoding : {"16UC1", "32FC1"}
+        Millimetres (``depth_to_uint16``) or float metres (NaN where no depth).
+    timestamps : sequence of float, optional
+        Header stamps (seconds, increasing, >= 0); default: the frames' timestamps.
+    depth_offset : float
+        Seconds added to the depth header stamps (an unsynchronised depth camera).
+
+    Returns
+    -------
+    Path
+        ``path``.
+
+    Raises
+    ------
+    ValueError
+        An unknown option, ``path`` exists, or stamps that are negative or not increasing.
+    """
+    path = Path(path)
+    if version not in (1, 2) or storage not in ("sqlite3", "mcap") or depth_encoding not in ("16UC1", "32FC1") \
+            or poses not in (None, "odom", "tf", "pose"):
+        raise ValueError(f"write_rosbag: version {version!r} (1, 2), storage {storage!r} (sqlite3, mcap), "
+                         f"depth_encoding {depth_encoding!r} (16UC1, 32FC1), poses {poses!r} (odom, tf, pose, None)")
+    compressed = "jpeg" if compressed is True else (compressed or None)
+    if compressed not in (None, "jpeg", "png"):
+        raise ValueError(f"write_rosbag: compressed must be False, True, 'jpeg' or 'png', got {compressed!r}")
+    if path.exists():
+        raise ValueError(f"{path}: exists; write_rosbag writes a new bag only")
+    frames = list(frames)
+    if not frames:
+        raise ValueError(f"{path}: no frames to write")
+    intrinsics = intrinsics or frames[0].intrinsics
+    t = np.asarray([f.timestamp for f in frames] if timestamps is None else timestamps, dtype=np.float64)
+    if len(t) != len(frames) or (t < 0).any() or (t + depth_offset < 0).any() or (np.diff(t) <= 0).any():
+        raise ValueError(f"{path}: {len(t)} stamps for {len(frames)} frames; they must be >= 0 and increasing")
+    ns = np.round(t * 1e9).astype(np.int64)
+    dns = np.round((t + depth_offset) * 1e9).astype(np.int64)
+    from .outputs import sweep_stale, temp_dir
+
+    sweep_stale(path)
+    tmp = temp_dir(path)  # written whole beside the target, then renamed: no half-written bag
+    try:
+        w = _BagWriter(tmp / path.name, version, storage)
+        try:
+            _write_frames(w, frames, intrinsics, ns, dns, compressed, depth_encoding, poses)
+        finally:
+            w.close()
+        os.replace(tmp / path.name, path)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return path
+
+
+def _write_frames(w: _BagWriter, frames: list[Frame], intrinsics: Intrinsics, ns: np.ndarray, dns: np.ndarray,
+                  compressed: str | None, depth_encoding: str, poses: str | None) -> None:
+    """The messages of :func:`write_rosbag` (stamps ``ns``, depth stamps ``dns``, nanoseconds)."""
+    base_camera = np.eye(4)
+    base_camera[:3, 3] = (0.2, 0.0, 0.3)
+    colour_topic = "/camera/color/image_raw" + ("/compressed" if compressed else "")
+    depth_topic = "/camera/aligned_depth_to_color/image_raw" + ("/compressedDepth" if compressed else "")
+    K = [intrinsics.fx, 0.0, intrinsics.cx, 0.0, intrinsics.fy, intrinsics.cy, 0.0, 0.0, 1.0]
+    P = K[:3] + [0.0] + K[3:6] + [0.0] + K[6:] + [0.0]
+    info_type = w.T[CAMERA_INFO]
+    roi = w.T["sensor_msgs/msg/RegionOfInterest"](0, 0, 0, 0, False)
+    if poses in ("odom", "tf"):
+        w.write("/tf_static", w.T[TF_TYPES[0]]([w.transform(base_camera, int(ns[0]), "base_link", "camera_link"),
+                                                w.transform(_LINK_TO_OPTICAL, int(ns[0]), "camera_link",
+                                                            OPTICAL_FRAME)]), int(ns[0]))
+    for k, f in enumerate(frames):
+        s = int(ns[k])
+        info = info_type(w.header(s, OPTICAL_FRAME), intrinsics.height, intrinsics.width, "plumb_bob",
+                         np.zeros(5), np.asarray(K), np.eye(3).ravel(), np.asarray(P), 0, 0, roi)
+        w.write("/camera/color/camera_info", info, s)
+        colour, depth = _image_msgs(w, f, s, int(dns[k]), compressed, depth_encoding)
+        w.write(colour_topic, colour, s + 1_000_000)
+        w.write(depth_topic, depth, int(dns[k]) + 2_000_000)
+        if f.pose is None or poses is None:
+            continue
+        T_base = f.pose @ np.linalg.inv(base_camera @ _LINK_TO_OPTICAL)  # T_odom_base
+        if poses == "odom":
+            cov = w.T["geometry_msgs/msg/PoseWithCovariance"](w.pose(T_base), np.zeros(36))
+            V3 = w.T["geometry_msgs/msg/Vector3"]
+            twist = w.T["geometry_msgs/msg/TwistWithCovariance"](
+                w.T["geometry_msgs/msg/Twist"](V3(0.0, 0.0, 0.0), V3(0.0, 0.0, 0.0)), np.zeros(36))
+            w.write("/odom", w.T[ODOMETRY](w.header(s, "odom"), "base_link", cov, twist), s)
+        elif poses == "tf":
+            w.write("/tf", w.T[TF_TYPES[0]]([w.transform(T_base, s, "odom", "base_link")]), s)
+        else:
+            w.write("/camera/pose", w.T[POSE_STAMPED](w.header(s, "map"), w.pose(f.pose)), s)
