@@ -51,6 +51,8 @@ receive time. Each thread and process opens its own reader of the bag.
 
 from __future__ import annotations
 
+import functools
+import itertools
 import os
 import shutil
 import struct
@@ -132,12 +134,19 @@ def is_rosbag(path: PathLike) -> bool:
         f.name.endswith((".db3", ".mcap", ".db3.zstd", ".mcap.zstd")) for f in p.iterdir())
 
 
+@functools.cache
+def _default_types():
+    """ROS 2 Humble's message types: for ROS 2 bags that carry no definitions (sqlite3 before Iron)."""
+    from rosbags.typesys import Stores, get_typestore
+
+    return get_typestore(Stores.ROS2_HUMBLE)
+
+
 def _open_reader(path: Path):
     """An open :class:`rosbags.highlevel.AnyReader` of ``path`` (types from the bag, else ROS 2 Humble's)."""
     from rosbags.highlevel import AnyReader, AnyReaderError
-    from rosbags.typesys import Stores, get_typestore
 
-    reader = AnyReader([path], default_typestore=get_typestore(Stores.ROS2_HUMBLE))
+    reader = AnyReader([path], default_typestore=_default_types())
     try:
         reader.open()
     except AnyReaderError as e:
@@ -206,8 +215,11 @@ def _choose_topic(path: Path, topics: dict, given: str | None, types: Sequence[s
     candidates = _pick(candidates, prefer) if len(candidates) > 1 else candidates
     if len(candidates) == 1:
         return candidates[0]
-    found = "no" if not candidates else f"{len(candidates)} ({', '.join(candidates)})"
-    raise ValueError(f"{path}: {found} {what} topics ({' or '.join(types)}); pass {flag} TOPIC{listing}")
+    kinds = " or ".join(types)
+    if not candidates:
+        raise ValueError(f"{path}: no {what} topic ({kinds}); pass {flag} TOPIC{listing}")
+    raise ValueError(f"{path}: {len(candidates)} {what} topics ({kinds}): {', '.join(candidates)}; pass {flag} "
+                     f"TOPIC to choose one{listing}")
 
 
 def _namespace_distance(a: str, b: str) -> int:
@@ -230,7 +242,7 @@ def _camera_info_topic(path: Path, topics: dict, given: str | None, colour: str)
         infos = best if len(best) == 1 else infos
         if len(infos) == 1:
             return infos[0]
-    return _choose_topic(path, topics, given, (CAMERA_INFO,), f"camera info (for {colour})", "--camera-info-topic")
+    return _choose_topic(path, topics, given, (CAMERA_INFO,), "camera info", "--camera-info-topic")
 
 
 # ----------------------------------------------------------------------------- images
@@ -416,7 +428,7 @@ class _TfTree:
         self.dynamic: dict[tuple[str, str], tuple[list[float], list[np.ndarray]]] = {}
         self.static: dict[tuple[str, str], np.ndarray] = {}
         conns = [c for c in reader.connections if c.topic in TF_TOPICS and c.msgtype in TF_TYPES]
-        for conn, _, raw in reader.messages(conns):
+        for conn, _, raw in reader.messages(conns) if conns else ():  # no connections would read every topic
             msg = reader.deserialize(raw, conn.msgtype)
             for tf in msg.transforms:
                 edge = (_frame_id(tf.header.frame_id), _frame_id(tf.child_frame_id))
@@ -924,15 +936,10 @@ def write_rosbag(
         raise ValueError(f"write_rosbag: compressed must be False, True, 'jpeg' or 'png', got {compressed!r}")
     if path.exists():
         raise ValueError(f"{path}: exists; write_rosbag writes a new bag only")
-    frames = list(frames)
-    if not frames:
+    frames = iter(frames)
+    first = next(frames, None)
+    if first is None:
         raise ValueError(f"{path}: no frames to write")
-    intrinsics = intrinsics or frames[0].intrinsics
-    t = np.asarray([f.timestamp for f in frames] if timestamps is None else timestamps, dtype=np.float64)
-    if len(t) != len(frames) or (t < 0).any() or (t + depth_offset < 0).any() or (np.diff(t) <= 0).any():
-        raise ValueError(f"{path}: {len(t)} stamps for {len(frames)} frames; they must be >= 0 and increasing")
-    ns = np.round(t * 1e9).astype(np.int64)
-    dns = np.round((t + depth_offset) * 1e9).astype(np.int64)
     from .outputs import sweep_stale, temp_dir
 
     sweep_stale(path)
@@ -940,18 +947,22 @@ def write_rosbag(
     try:
         w = _BagWriter(tmp / path.name, version, storage)
         try:
-            _write_frames(w, frames, intrinsics, ns, dns, compressed, depth_encoding, poses)
+            n = _write_frames(w, path, itertools.chain([first], frames), intrinsics or first.intrinsics, timestamps,
+                              depth_offset, compressed, depth_encoding, poses)
         finally:
             w.close()
+        if timestamps is not None and len(timestamps) != n:
+            raise ValueError(f"{path}: {len(timestamps)} stamps for {n} frames")
         os.replace(tmp / path.name, path)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     return path
 
 
-def _write_frames(w: _BagWriter, frames: list[Frame], intrinsics: Intrinsics, ns: np.ndarray, dns: np.ndarray,
-                  compressed: str | None, depth_encoding: str, poses: str | None) -> None:
-    """The messages of :func:`write_rosbag` (stamps ``ns``, depth stamps ``dns``, nanoseconds)."""
+def _write_frames(w: _BagWriter, path: Path, frames: Iterable[Frame], intrinsics: Intrinsics,
+                  timestamps: Sequence[float] | None, depth_offset: float, compressed: str | None,
+                  depth_encoding: str, poses: str | None) -> int:
+    """The messages of :func:`write_rosbag`, a frame at a time; returns the number of frames."""
     base_camera = np.eye(4)
     base_camera[:3, 3] = (0.2, 0.0, 0.3)
     colour_topic = "/camera/color/image_raw" + ("/compressed" if compressed else "")
@@ -960,19 +971,29 @@ def _write_frames(w: _BagWriter, frames: list[Frame], intrinsics: Intrinsics, ns
     P = K[:3] + [0.0] + K[3:6] + [0.0] + K[6:] + [0.0]
     info_type = w.T[CAMERA_INFO]
     roi = w.T["sensor_msgs/msg/RegionOfInterest"](0, 0, 0, 0, False)
-    if poses in ("odom", "tf"):
-        w.write("/tf_static", w.T[TF_TYPES[0]]([w.transform(base_camera, int(ns[0]), "base_link", "camera_link"),
-                                                w.transform(_LINK_TO_OPTICAL, int(ns[0]), "camera_link",
-                                                            OPTICAL_FRAME)]), int(ns[0]))
+    previous = -np.inf
+    k = -1
     for k, f in enumerate(frames):
-        s = int(ns[k])
+        if timestamps is None or k < len(timestamps):
+            t = float(f.timestamp if timestamps is None else timestamps[k])
+        else:
+            raise ValueError(f"{path}: {len(timestamps)} stamps for more frames")
+        if not (t > previous and t >= 0 and t + depth_offset >= 0):
+            raise ValueError(f"{path}: frame {k} has stamp {t} (depth {t + depth_offset}); stamps must be >= 0 and "
+                             f"increasing (the one before: {previous}), one per frame")
+        previous = t
+        s, ds = round(t * 1e9), round((t + depth_offset) * 1e9)
+        if k == 0 and poses in ("odom", "tf"):
+            w.write("/tf_static", w.T[TF_TYPES[0]]([w.transform(base_camera, s, "base_link", "camera_link"),
+                                                    w.transform(_LINK_TO_OPTICAL, s, "camera_link", OPTICAL_FRAME)]),
+                    s)
         info = info_type(w.header(s, OPTICAL_FRAME), intrinsics.height, intrinsics.width, "plumb_bob",
                          np.zeros(5), np.asarray(K), np.eye(3).ravel(), np.asarray(P), 0, 0, roi)
         w.write("/camera/color/camera_info", info, s)
-        colour, depth = _image_msgs(w, f, s, int(dns[k]), compressed, depth_encoding)
+        colour, depth = _image_msgs(w, f, s, ds, compressed, depth_encoding)
         w.write(colour_topic, colour, s + 1_000_000)
-        w.write(depth_topic, depth, int(dns[k]) + 2_000_000)
-        if f.pose is None or poses is None:
+        w.write(depth_topic, depth, ds + 2_000_000)
+        if f.pose is None or poses is None or not np.isfinite(f.pose).all():
             continue
         T_base = f.pose @ np.linalg.inv(base_camera @ _LINK_TO_OPTICAL)  # T_odom_base
         if poses == "odom":
@@ -985,3 +1006,4 @@ def _write_frames(w: _BagWriter, frames: list[Frame], intrinsics: Intrinsics, ns
             w.write("/tf", w.T[TF_TYPES[0]]([w.transform(T_base, s, "odom", "base_link")]), s)
         else:
             w.write("/camera/pose", w.T[POSE_STAMPED](w.header(s, "map"), w.pose(f.pose)), s)
+    return k + 1
