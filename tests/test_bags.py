@@ -12,18 +12,16 @@ import pytest
 
 from semmatch.geometry import DEFAULT_INTRINSICS, look_at
 from semmatch.io import Frame, write_labels_folder
-from semmatch.io.bags import (
-    _QUANT_A,
+from semmatch.io.bags import OPTICAL_FRAME, RosBagSequence, _BagWriter, is_rosbag, write_rosbag
+from semmatch.io.ros_images import (
     IMAGE,
-    OPTICAL_FRAME,
-    RosBagSequence,
-    _BagWriter,
-    _image_msgs,
+    QUANT_A,
     camera_info_intrinsics,
+    colour_message,
     decode_colour,
-    is_rosbag,
-    write_rosbag,
+    depth_message,
 )
+from semmatch.io.ros_transforms import transform_message
 
 INTR = DEFAULT_INTRINSICS.scaled(40, 30)
 STAMPS = 1700000000.0 + np.arange(6) / 30  # header stamps (s), 30 Hz
@@ -51,7 +49,7 @@ def depth_tolerance(depth: np.ndarray, encoding: str, compressed: bool) -> np.nd
         return np.full(depth.shape, 5e-4 + 1e-6)
     if not compressed:
         return np.zeros(depth.shape)
-    return depth.astype(np.float64) ** 2 / (2 * _QUANT_A) * 1.01 + 1e-6
+    return depth.astype(np.float64) ** 2 / (2 * QUANT_A) * 1.01 + 1e-6
 
 
 CASES = [  # version, storage, compressed, depth encoding, poses
@@ -142,11 +140,10 @@ def test_tf_chain_runs_both_ways_and_odometry_needs_the_camera_transform(tmp_pat
     w = _BagWriter(tmp_path / "odom_only", 2, "sqlite3")
     ns = (STAMPS[:3] * 1e9).astype(np.int64)
     for f, s in zip(frames, ns):
-        colour, depth = _image_msgs(w, f, int(s), int(s), None, "16UC1")
-        w.write("/camera/color/image_raw", colour, int(s))
-        w.write("/camera/depth/image_raw", depth, int(s))
-        tf = w.transform(f.pose, int(s), "odom", "base_link")
-        w.write("/base_pose", tf, int(s))
+        header = w.header(int(s), OPTICAL_FRAME)
+        w.write("/camera/color/image_raw", colour_message(w.T, header, f.rgb), int(s))
+        w.write("/camera/depth/image_raw", depth_message(w.T, header, f.depth), int(s))
+        w.write("/base_pose", transform_message(w.T, w.header(int(s), "odom"), "base_link", f.pose), int(s))
     w.close()
     with pytest.raises(ValueError, match="poses are of frame 'base_link'.*pass --pose-frames WORLD:camera_color"):
         RosBagSequence(tmp_path / "odom_only", pose_topic="/base_pose", intrinsics=INTR)
@@ -161,10 +158,10 @@ def test_topic_choice_errors_list_the_topics(tmp_path):
     frames = synthetic_frames(2)
     w = _BagWriter(tmp_path / "two_cameras", 2, "mcap")
     for f, s in zip(frames, (STAMPS[:2] * 1e9).astype(np.int64)):
-        colour, depth = _image_msgs(w, f, int(s), int(s), None, "16UC1")
+        header = w.header(int(s), OPTICAL_FRAME)
         for cam in ("front", "rear"):
-            w.write(f"/{cam}/color/image_raw", colour, int(s))
-        w.write("/rear/depth/image_raw", depth, int(s))
+            w.write(f"/{cam}/color/image_raw", colour_message(w.T, header, f.rgb), int(s))
+        w.write("/rear/depth/image_raw", depth_message(w.T, header, f.depth), int(s))
     w.close()
     path = tmp_path / "two_cameras"
     with pytest.raises(ValueError, match=r"2 colour topics \(.*\): /front/color/image_raw, /rear/color/image_raw; "

@@ -4,6 +4,8 @@ Read through the pure-Python `rosbags <https://ternaris.gitlab.io/rosbags/>`_ li
 install). :class:`RosBagSequence` is lazy and random access like the folder readers of
 :mod:`semmatch.io.recordings` (``len(seq)``, ``seq[i] -> Frame``); :func:`is_rosbag` tells a bag
 from other paths; :func:`write_rosbag` writes frames as a bag (the tests' and examples' bags).
+The messages are decoded by :mod:`semmatch.io.ros_images` (images, camera info) and
+:mod:`semmatch.io.ros_transforms` (poses, the TF tree).
 
 What is read
 ------------
@@ -19,7 +21,7 @@ What is read
   height). The images are taken as undistorted pinhole images: a non-zero distortion is
   warned about (use the rectified ``image_rect`` topics).
 - Colour and depth are paired by their header stamps as TUM's ``associate.py`` pairs its
-  timestamps (:func:`semmatch.io.recordings.associate_frames`); the frame's timestamp is the
+  timestamps (:func:`semmatch.io.timestamps.associate_frames`); the frame's timestamp is the
   colour header stamp (seconds).
 - Poses (optional), ``T_world_camera`` of the camera's optical frame (x right, y down, z forward,
   REP 103's ``*_optical_frame``; the frame of the colour images' headers) in a z-up world in
@@ -57,67 +59,45 @@ import os
 import shutil
 import struct
 import threading
-import warnings
-from collections import deque
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 
-import cv2
 import numpy as np
 
-from ..geometry import Intrinsics, pose_to_tum, quat_to_rotation
-from .images import check_depth_units, depth_to_uint16
-from .recordings import DEPTH_HOLE, _ImageSequence
+from ..geometry import Intrinsics
+from .images import check_depth_units
+from .recordings import _ImageSequence
+from .ros_images import (
+    CAMERA_INFO,
+    COMPRESSED_IMAGE,
+    IMAGE,
+    camera_info_intrinsics,
+    camera_info_message,
+    colour_message,
+    decode_colour,
+    decode_depth,
+    depth_message,
+)
+from .ros_transforms import (
+    LINK_TO_OPTICAL,
+    POSE_TYPES,
+    TF_TYPES,
+    TfTree,
+    pose_message,
+    pose_of,
+    stamp_seconds,
+    tf_frame,
+    transform_message,
+)
 from .sequences import Frame
 from .timestamps import associate_frames, interpolate_poses
 
-__all__ = [
-    "IMAGE",
-    "COMPRESSED_IMAGE",
-    "CAMERA_INFO",
-    "POSE_TYPES",
-    "TF_TYPES",
-    "is_rosbag",
-    "RosBagSequence",
-    "read_rosbag",
-    "decode_colour",
-    "decode_depth",
-    "camera_info_intrinsics",
-    "write_rosbag",
-]
+__all__ = ["OPTICAL_FRAME", "is_rosbag", "RosBagSequence", "read_rosbag", "write_rosbag"]
 
 PathLike = str | os.PathLike
 
-IMAGE = "sensor_msgs/msg/Image"
-COMPRESSED_IMAGE = "sensor_msgs/msg/CompressedImage"
-CAMERA_INFO = "sensor_msgs/msg/CameraInfo"
-ODOMETRY = "nav_msgs/msg/Odometry"
-POSE_STAMPED = "geometry_msgs/msg/PoseStamped"
-POSE_COV_STAMPED = "geometry_msgs/msg/PoseWithCovarianceStamped"
-TRANSFORM_STAMPED = "geometry_msgs/msg/TransformStamped"
-#: message types a pose topic may have
-POSE_TYPES = (ODOMETRY, POSE_STAMPED, POSE_COV_STAMPED, TRANSFORM_STAMPED)
-#: message types of ``/tf`` and ``/tf_static`` (ROS 2 and ROS 1's tf2, ROS 1's old tf)
-TF_TYPES = ("tf2_msgs/msg/TFMessage", "tf/msg/tfMessage")
-TF_TOPICS = ("/tf", "/tf_static")
-
-#: colour encodings of raw images: channels and the OpenCV conversion to RGB
-_COLOUR_ENCODINGS = {
-    "rgb8": (3, None),
-    "bgr8": (3, cv2.COLOR_BGR2RGB),
-    "rgba8": (4, cv2.COLOR_RGBA2RGB),
-    "bgra8": (4, cv2.COLOR_BGRA2RGB),
-    "mono8": (1, cv2.COLOR_GRAY2RGB),
-}
-#: image_transport's compressedDepth header: int32 format, float32 depthQuantA, depthQuantB
-_DEPTH_HEADER = struct.Struct("<iff")
-#: image_transport's compressedDepth defaults for 32FC1 (depth_quantization 100, depth_max 10 m)
-_QUANT_A = 100.0 * 101.0
-_QUANT_B = 1.0 - _QUANT_A / 10.0
 #: the camera's optical frame in the bags :func:`write_rosbag` writes
 OPTICAL_FRAME = "camera_color_optical_frame"
-#: ROS's camera_link (x forward, y left, z up) to optical frame (x right, y down, z forward)
-_LINK_TO_OPTICAL = np.array([[0.0, 0.0, 1.0, 0.0], [-1.0, 0.0, 0.0, 0.0], [0.0, -1.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
 
 
 # ----------------------------------------------------------------------------- opening
@@ -164,16 +144,6 @@ def _stamp_ns(raw: bytes | memoryview, cdr: bool) -> int:
     fmt = "<iI" if not cdr or raw[1] & 1 else ">iI"
     sec, nsec = struct.unpack_from(fmt, raw, 4)
     return sec * 1_000_000_000 + nsec
-
-
-def _stamp(msg) -> float:
-    """A message header's stamp in seconds (as ``ns * 1e-9``, like the images' stamps: equal stamps stay equal)."""
-    return (msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec) * 1e-9
-
-
-def _frame_id(name: str) -> str:
-    """A TF frame name without ROS 1's leading slash."""
-    return name.lstrip("/")
 
 
 # ----------------------------------------------------------------------------- topics
@@ -243,255 +213,6 @@ def _camera_info_topic(path: Path, topics: dict, given: str | None, colour: str)
         if len(infos) == 1:
             return infos[0]
     return _choose_topic(path, topics, given, (CAMERA_INFO,), "camera info", "--camera-info-topic")
-
-
-# ----------------------------------------------------------------------------- images
-def _raw_pixels(msg, dtype: np.dtype, channels: int) -> np.ndarray:
-    """The pixels of a ``sensor_msgs/Image`` as (H, W[, C]), row padding (``step``) removed."""
-    h, w = int(msg.height), int(msg.width)
-    dtype = np.dtype(dtype).newbyteorder(">" if msg.is_bigendian else "<")
-    row = w * channels * dtype.itemsize
-    data = np.asarray(msg.data, dtype=np.uint8)
-    if msg.step < row or data.size < msg.step * h:
-        raise ValueError(f"{msg.encoding} image of {w}x{h} has step {msg.step} and {data.size} bytes; "
-                         f"it needs {row} bytes a row")
-    px = data[: msg.step * h].reshape(h, msg.step)[:, :row].copy().view(dtype)
-    px = px.astype(dtype.newbyteorder("="), copy=False)
-    return px.reshape(h, w, channels) if channels > 1 else px.reshape(h, w)
-
-
-def _decompress(msg, where: str) -> np.ndarray:
-    """A ``CompressedImage``'s JPEG/PNG data decoded by OpenCV (unchanged depth and channels)."""
-    buf = np.asarray(msg.data, dtype=np.uint8)
-    img = cv2.imdecode(buf, cv2.IMREAD_UNCHANGED) if buf.size else None
-    if img is None:
-        raise ValueError(f"{where}: the compressed image ({msg.format!r}, {buf.size} bytes) does not decode")
-    return img
-
-
-def decode_colour(msg, where: str = "colour") -> np.ndarray:
-    """A colour ``sensor_msgs/Image`` or ``CompressedImage`` message as uint8 RGB (H, W, 3).
-
-    Parameters
-    ----------
-    msg : Image or CompressedImage message
-        Raw images in ``rgb8``, ``bgr8``, ``rgba8``, ``bgra8`` or ``mono8``; compressed JPEG or PNG
-        (8 bits; decoded as OpenCV does, BGR, as image_transport encodes them).
-    where : str
-        What the message is (bag, topic, stamp), for the messages.
-
-    Raises
-    ------
-    ValueError
-        Another encoding, a size that does not fit the data, or data that does not decode.
-    """
-    if hasattr(msg, "format"):
-        img = _decompress(msg, where)
-        if img.dtype != np.uint8:
-            raise ValueError(f"{where}: compressed colour images must be 8-bit, got {img.dtype} ({msg.format!r})")
-        code = {2: cv2.COLOR_GRAY2RGB, 3: cv2.COLOR_BGR2RGB, 4: cv2.COLOR_BGRA2RGB}[img.ndim if img.ndim == 2
-                                                                                   else img.shape[2]]
-        return cv2.cvtColor(img, code)
-    if msg.encoding not in _COLOUR_ENCODINGS:
-        raise ValueError(f"{where}: colour encoding {msg.encoding!r} is not read; expected one of "
-                         f"{', '.join(_COLOUR_ENCODINGS)} (or a CompressedImage topic)")
-    channels, code = _COLOUR_ENCODINGS[msg.encoding]
-    try:
-        px = _raw_pixels(msg, np.uint8, channels)
-    except ValueError as e:
-        raise ValueError(f"{where}: {e}") from None
-    return np.ascontiguousarray(px if code is None else cv2.cvtColor(px, code))
-
-
-def _compressed_depth(msg, where: str) -> np.ndarray:
-    """image_transport's ``compressedDepth`` (header + 16-bit PNG) as float32 metres (0 = none)."""
-    fmt = str(msg.format)
-    encoding = fmt.split(";")[0].strip()
-    if "rvl" in fmt.lower():
-        raise ValueError(f"{where}: compressedDepth in RVL ({fmt!r}) is not read; record the PNG "
-                         "compressedDepth format or raw depth")
-    data = bytes(np.asarray(msg.data, dtype=np.uint8))
-    if len(data) <= _DEPTH_HEADER.size:
-        raise ValueError(f"{where}: compressedDepth message of {len(data)} bytes has no image")
-    _, quant_a, quant_b = _DEPTH_HEADER.unpack_from(data)
-    img = cv2.imdecode(np.frombuffer(data, np.uint8, offset=_DEPTH_HEADER.size), cv2.IMREAD_UNCHANGED)
-    if img is None or img.dtype != np.uint16 or img.ndim != 2:
-        raise ValueError(f"{where}: compressedDepth ({fmt!r}) does not hold a 16-bit single-channel PNG")
-    if encoding in ("16UC1", "mono16"):
-        return _millimetres(img)
-    if encoding == "32FC1":
-        inv = img.astype(np.float32)
-        out = np.zeros(img.shape, np.float32)
-        ok = img > 0
-        out[ok] = np.float32(quant_a) / (inv[ok] - np.float32(quant_b))
-        return _metres(out)
-    raise ValueError(f"{where}: compressedDepth of {encoding!r} is not read; expected 16UC1 or 32FC1")
-
-
-def _millimetres(raw: np.ndarray) -> np.ndarray:
-    """16-bit millimetres as float32 metres; 0 and 65535 are holes (0)."""
-    out = raw.astype(np.float32) / np.float32(1000.0)
-    out[raw == DEPTH_HOLE] = 0.0
-    return out
-
-
-def _metres(depth: np.ndarray) -> np.ndarray:
-    """float metres with NaN, inf and non-positive values as holes (0), float32."""
-    depth = depth.astype(np.float32, copy=False)
-    return np.where(np.isfinite(depth) & (depth > 0), depth, np.float32(0.0)).astype(np.float32)
-
-
-def decode_depth(msg, where: str = "depth") -> np.ndarray:
-    """A depth ``sensor_msgs/Image`` or ``CompressedImage`` (``compressedDepth``) as float32 metres.
-
-    Parameters
-    ----------
-    msg : Image or CompressedImage message
-        Raw ``16UC1``/``mono16`` (millimetres) or ``32FC1`` (metres); or image_transport's
-        ``compressedDepth`` PNG of either.
-    where : str
-        What the message is, for the messages.
-
-    Returns
-    -------
-    float32 (H, W)
-        Metres; 0 = no measurement (0, NaN, inf and 16-bit 65535 in the message).
-
-    Raises
-    ------
-    ValueError
-        Another encoding (e.g. a colour topic given as depth), or data that does not fit.
-    """
-    if hasattr(msg, "format"):
-        if "compresseddepth" not in str(msg.format).lower():
-            raise ValueError(f"{where}: a compressed depth topic must be image_transport's compressedDepth "
-                             f"(format '16UC1; compressedDepth png'), got {msg.format!r}")
-        return _compressed_depth(msg, where)
-    try:
-        if msg.encoding in ("16UC1", "mono16"):
-            return _millimetres(_raw_pixels(msg, np.uint16, 1))
-        if msg.encoding == "32FC1":
-            return _metres(_raw_pixels(msg, np.float32, 1))
-    except ValueError as e:
-        raise ValueError(f"{where}: {e}") from None
-    raise ValueError(f"{where}: depth encoding {msg.encoding!r} is not read; expected 16UC1 (millimetres) or "
-                     "32FC1 (metres)")
-
-
-def camera_info_intrinsics(msg, where: str = "camera_info") -> Intrinsics:
-    """The :class:`~semmatch.geometry.Intrinsics` of a ``sensor_msgs/CameraInfo`` (its ``K``).
-
-    ``depth_scale`` is 1000 (millimetres: what a sequence written from the bag stores).
-
-    Warns
-    -----
-    UserWarning
-        Non-zero distortion coefficients: the images are read as undistorted pinhole images.
-    """
-    K = np.asarray(msg.k if hasattr(msg, "k") else msg.K, dtype=np.float64).reshape(3, 3)  # ROS 2 / ROS 1 names
-    D = np.asarray(msg.d if hasattr(msg, "d") else msg.D, dtype=np.float64)
-    try:
-        intr = Intrinsics(int(msg.width), int(msg.height), K[0, 0], K[1, 1], K[0, 2], K[1, 2], 1000.0)
-    except ValueError as e:
-        raise ValueError(f"{where}: {e} (K = {K.ravel().tolist()}, {msg.width}x{msg.height})") from None
-    if D.size and np.abs(D).max() > 1e-6:
-        warnings.warn(f"{where}: distortion {msg.distortion_model} {np.round(D, 4).tolist()} is ignored; semmatch "
-                      "reads the images as undistorted pinhole images (record the rectified image_rect topics)",
-                      UserWarning, stacklevel=3)
-    return intr
-
-
-# ----------------------------------------------------------------------------- poses
-def _transform_matrix(translation, rotation) -> np.ndarray:
-    """A 4x4 from a ROS translation (x, y, z) and quaternion (x, y, z, w)."""
-    T = np.eye(4)
-    T[:3, :3] = quat_to_rotation(np.array([rotation.x, rotation.y, rotation.z, rotation.w], dtype=np.float64))
-    T[:3, 3] = (translation.x, translation.y, translation.z)
-    return T
-
-
-def _pose_of(msg) -> tuple[np.ndarray, str, str]:
-    """A pose message's ``T_parent_child``, parent frame and child frame ("" when the message names none)."""
-    parent = _frame_id(msg.header.frame_id)
-    if msg.__msgtype__ == TRANSFORM_STAMPED:
-        return _transform_matrix(msg.transform.translation, msg.transform.rotation), parent, _frame_id(
-            msg.child_frame_id)
-    pose = msg.pose.pose if msg.__msgtype__ in (ODOMETRY, POSE_COV_STAMPED) else msg.pose
-    child = _frame_id(msg.child_frame_id) if msg.__msgtype__ == ODOMETRY else ""
-    return _transform_matrix(pose.position, pose.orientation), parent, child
-
-
-class _TfTree:
-    """The transforms of ``/tf`` (time series per edge) and ``/tf_static`` (one per edge) of a bag."""
-
-    def __init__(self, reader) -> None:
-        self.dynamic: dict[tuple[str, str], tuple[list[float], list[np.ndarray]]] = {}
-        self.static: dict[tuple[str, str], np.ndarray] = {}
-        conns = [c for c in reader.connections if c.topic in TF_TOPICS and c.msgtype in TF_TYPES]
-        for conn, _, raw in reader.messages(conns) if conns else ():  # no connections would read every topic
-            msg = reader.deserialize(raw, conn.msgtype)
-            for tf in msg.transforms:
-                edge = (_frame_id(tf.header.frame_id), _frame_id(tf.child_frame_id))
-                T = _transform_matrix(tf.transform.translation, tf.transform.rotation)
-                if conn.topic == "/tf_static":
-                    self.static[edge] = T
-                else:
-                    ts, Ts = self.dynamic.setdefault(edge, ([], []))
-                    ts.append(_stamp(tf))
-                    Ts.append(T)
-
-    def frames(self) -> list[str]:
-        """Every frame the tree names."""
-        return sorted({f for e in (*self.static, *self.dynamic) for f in e})
-
-    def path(self, parent: str, child: str) -> list[tuple[str, str, bool]] | None:
-        """The edges from ``parent`` to ``child`` as ``(a, b, forward)``; None when they are not connected."""
-        links: dict[str, list[tuple[str, bool]]] = {}
-        for a, b in (*self.static, *self.dynamic):
-            links.setdefault(a, []).append((b, True))
-            links.setdefault(b, []).append((a, False))
-        came: dict[str, tuple[str, bool] | None] = {parent: None}
-        todo = deque([parent])
-        while todo:
-            f = todo.popleft()
-            for g, forward in links.get(f, []):
-                if g not in came:
-                    came[g] = (f, forward)
-                    todo.append(g)
-        if child not in came:
-            return None
-        edges = []
-        f = child
-        while came[f] is not None:
-            prev, forward = came[f]
-            edges.append((prev, f, forward))
-            f = prev
-        return edges[::-1]
-
-    def lookup(self, parent: str, child: str, stamps: np.ndarray, max_gap: float, where: str) -> np.ndarray:
-        """``T_parent_child`` at ``stamps`` (N,4,4) along the tree's chain; NaN where an edge has no sample.
-
-        Raises
-        ------
-        ValueError
-            The two frames are not connected (the message lists the tree's frames).
-        """
-        edges = self.path(parent, child)
-        if edges is None:
-            raise ValueError(f"{where}: /tf and /tf_static connect no chain from {parent!r} to {child!r}; "
-                             f"their frames: {', '.join(self.frames()) or 'none'}")
-        out = np.broadcast_to(np.eye(4), (len(stamps), 4, 4)).copy()
-        for a, b, forward in edges:
-            key = (a, b) if forward else (b, a)
-            if key in self.dynamic:
-                ts, Ts = self.dynamic[key]
-                T = interpolate_poses(stamps, np.asarray(ts), np.asarray(Ts), max_gap)
-            else:
-                T = np.broadcast_to(self.static[key], (len(stamps), 4, 4))
-            if not forward:
-                T = np.linalg.inv(T)  # NaN stays NaN
-            out = out @ T
-        return out
 
 
 # ----------------------------------------------------------------------------- the sequence
@@ -630,7 +351,7 @@ class RosBagSequence(_ImageSequence):
         self.timestamps = self._colour.stamps[pairs[:, 0]] * 1e-9
         self.depth_timestamps = self._depth_ix.stamps[pairs[:, 1]] * 1e-9
         first = self._message(self._colour, int(pairs[0, 0]))
-        self.camera_frame = _frame_id(first.header.frame_id)
+        self.camera_frame = tf_frame(first.header.frame_id)
         if intrinsics is None:
             info = _camera_info_topic(self.path, topics, camera_info_topic, colour)
             self.topics["camera_info"] = info
@@ -654,7 +375,7 @@ class RosBagSequence(_ImageSequence):
                                  f"colour images' frame {self.camera_frame!r} as CAMERA)")
             self.topics["pose"] = f"/tf {world} -> {camera}"
             where = f"{self.path}: /tf {world} -> {camera}"
-            self.poses = _TfTree(reader).lookup(_frame_id(world), _frame_id(camera), self.timestamps, max_pose_gap,
+            self.poses = TfTree(reader).lookup(tf_frame(world), tf_frame(camera), self.timestamps, max_pose_gap,
                                                 where)
             self._check_pose_cover(self.poses, where)
 
@@ -727,15 +448,15 @@ class RosBagSequence(_ImageSequence):
         stamps, poses, child = [], [], ""
         for conn, _, raw in reader.messages(by_topic[topic]):
             msg = reader.deserialize(raw, conn.msgtype)
-            T, _, child = _pose_of(msg)
-            stamps.append(_stamp(msg))
+            T, _, child = pose_of(msg)
+            stamps.append(stamp_seconds(msg))
             poses.append(T)
         where = f"{self.path}: {topic}"
         if not stamps:
             raise ValueError(f"{where}: the pose topic has no messages")
         out = interpolate_poses(self.timestamps, np.asarray(stamps), np.asarray(poses), max_gap)
         if child and self.camera_frame and child != self.camera_frame:
-            tree = _TfTree(reader)
+            tree = TfTree(reader)
             if tree.path(child, self.camera_frame) is None:
                 raise ValueError(f"{where}: the poses are of frame {child!r}, the colour images are in "
                                  f"{self.camera_frame!r}, and /tf and /tf_static connect no chain between them "
@@ -781,7 +502,7 @@ def _ros_types(version: int):
     from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
     if version == 2:
-        return get_typestore(Stores.ROS2_HUMBLE)
+        return _default_types()
     store = get_typestore(Stores.ROS1_NOETIC)
     store.register(get_types_from_msg("geometry_msgs/TransformStamped[] transforms", TF_TYPES[0]))
     return store
@@ -817,53 +538,8 @@ class _BagWriter:
         data = self.store.serialize_ros1(msg, typ) if self.version == 1 else self.store.serialize_cdr(msg, typ)
         self.writer.write(self.connections[topic], time_ns, data)
 
-    def transform(self, T: np.ndarray, stamp_ns: int, parent: str, child: str):
-        """A ``TransformStamped`` of ``T_parent_child``."""
-        q = pose_to_tum(T)  # tx ty tz qx qy qz qw
-        Vector3, Quaternion = self.T["geometry_msgs/msg/Vector3"], self.T["geometry_msgs/msg/Quaternion"]
-        tf = self.T["geometry_msgs/msg/Transform"](Vector3(*q[:3]), Quaternion(*q[3:]))
-        return self.T[TRANSFORM_STAMPED](self.header(stamp_ns, parent), child, tf)
-
-    def pose(self, T: np.ndarray):
-        q = pose_to_tum(T)
-        return self.T["geometry_msgs/msg/Pose"](self.T["geometry_msgs/msg/Point"](*q[:3]),
-                                                  self.T["geometry_msgs/msg/Quaternion"](*q[3:]))
-
     def close(self) -> None:
         self.writer.close()
-
-
-def _image_msgs(w: _BagWriter, frame: Frame, stamp: int, depth_stamp: int, compressed: str | None,
-                depth_encoding: str) -> tuple[object, object]:
-    """The colour and depth messages of a frame."""
-    U8 = np.uint8
-    Image, Compressed = w.T[IMAGE], w.T[COMPRESSED_IMAGE]
-    h, wd = frame.depth.shape
-    rgb = np.ascontiguousarray(frame.rgb, dtype=U8)
-    if compressed:
-        ok, buf = cv2.imencode(f".{'jpg' if compressed == 'jpeg' else 'png'}", cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR))
-        colour = Compressed(w.header(stamp, OPTICAL_FRAME), f"rgb8; {compressed} compressed bgr8", buf.ravel())
-    else:
-        colour = Image(w.header(stamp, OPTICAL_FRAME), h, wd, "rgb8", 0, 3 * wd, rgb.ravel().view(U8))
-    depth = np.asarray(frame.depth, dtype=np.float32)
-    if depth_encoding == "16UC1":
-        raw = depth_to_uint16(depth, 1000.0)
-    else:
-        raw = np.where(depth > 0, depth, np.float32(np.nan)).astype("<f4")
-    if compressed:
-        quant = (0.0, 0.0) if depth_encoding == "16UC1" else (_QUANT_A, _QUANT_B)
-        if depth_encoding == "32FC1":  # image_transport's inverse-depth quantisation (0 = none, beyond 10 m too)
-            ok_ = np.isfinite(raw) & (raw < 10.0)
-            inv = np.zeros(raw.shape, np.uint16)
-            inv[ok_] = np.clip(np.round(_QUANT_A / raw[ok_] + _QUANT_B), 0, 65535).astype(np.uint16)
-            raw = inv
-        ok, png = cv2.imencode(".png", raw)
-        data = np.frombuffer(_DEPTH_HEADER.pack(0, *quant) + png.tobytes(), U8)
-        dmsg = Compressed(w.header(depth_stamp, OPTICAL_FRAME), f"{depth_encoding}; compressedDepth png", data)
-    else:
-        dmsg = Image(w.header(depth_stamp, OPTICAL_FRAME), h, wd, depth_encoding, 0, raw.itemsize * wd,
-                     np.ascontiguousarray(raw).ravel().view(U8))
-    return colour, dmsg
 
 
 def write_rosbag(
@@ -967,43 +643,37 @@ def _write_frames(w: _BagWriter, path: Path, frames: Iterable[Frame], intrinsics
     base_camera[:3, 3] = (0.2, 0.0, 0.3)
     colour_topic = "/camera/color/image_raw" + ("/compressed" if compressed else "")
     depth_topic = "/camera/aligned_depth_to_color/image_raw" + ("/compressedDepth" if compressed else "")
-    K = [intrinsics.fx, 0.0, intrinsics.cx, 0.0, intrinsics.fy, intrinsics.cy, 0.0, 0.0, 1.0]
-    P = K[:3] + [0.0] + K[3:6] + [0.0] + K[6:] + [0.0]
-    info_type = w.T[CAMERA_INFO]
-    roi = w.T["sensor_msgs/msg/RegionOfInterest"](0, 0, 0, 0, False)
     previous = -np.inf
     k = -1
     for k, f in enumerate(frames):
-        if timestamps is None or k < len(timestamps):
-            t = float(f.timestamp if timestamps is None else timestamps[k])
-        else:
+        if timestamps is not None and k >= len(timestamps):
             raise ValueError(f"{path}: {len(timestamps)} stamps for more frames")
+        t = float(f.timestamp if timestamps is None else timestamps[k])
         if not (t > previous and t >= 0 and t + depth_offset >= 0):
             raise ValueError(f"{path}: frame {k} has stamp {t} (depth {t + depth_offset}); stamps must be >= 0 and "
                              f"increasing (the one before: {previous}), one per frame")
         previous = t
         s, ds = round(t * 1e9), round((t + depth_offset) * 1e9)
         if k == 0 and poses in ("odom", "tf"):
-            w.write("/tf_static", w.T[TF_TYPES[0]]([w.transform(base_camera, s, "base_link", "camera_link"),
-                                                    w.transform(_LINK_TO_OPTICAL, s, "camera_link", OPTICAL_FRAME)]),
-                    s)
-        info = info_type(w.header(s, OPTICAL_FRAME), intrinsics.height, intrinsics.width, "plumb_bob",
-                         np.zeros(5), np.asarray(K), np.eye(3).ravel(), np.asarray(P), 0, 0, roi)
-        w.write("/camera/color/camera_info", info, s)
-        colour, depth = _image_msgs(w, f, s, ds, compressed, depth_encoding)
-        w.write(colour_topic, colour, s + 1_000_000)
-        w.write(depth_topic, depth, ds + 2_000_000)
+            w.write("/tf_static", w.T[TF_TYPES[0]]([
+                transform_message(w.T, w.header(s, "base_link"), "camera_link", base_camera),
+                transform_message(w.T, w.header(s, "camera_link"), OPTICAL_FRAME, LINK_TO_OPTICAL)]), s)
+        w.write("/camera/color/camera_info", camera_info_message(w.T, w.header(s, OPTICAL_FRAME), intrinsics), s)
+        w.write(colour_topic, colour_message(w.T, w.header(s, OPTICAL_FRAME), f.rgb, compressed), s + 1_000_000)
+        w.write(depth_topic, depth_message(w.T, w.header(ds, OPTICAL_FRAME), f.depth, depth_encoding,
+                                           bool(compressed)), ds + 2_000_000)
         if f.pose is None or poses is None or not np.isfinite(f.pose).all():
             continue
-        T_base = f.pose @ np.linalg.inv(base_camera @ _LINK_TO_OPTICAL)  # T_odom_base
+        T_base = f.pose @ np.linalg.inv(base_camera @ LINK_TO_OPTICAL)  # T_odom_base
         if poses == "odom":
-            cov = w.T["geometry_msgs/msg/PoseWithCovariance"](w.pose(T_base), np.zeros(36))
+            cov = w.T["geometry_msgs/msg/PoseWithCovariance"](pose_message(w.T, T_base), np.zeros(36))
             V3 = w.T["geometry_msgs/msg/Vector3"]
             twist = w.T["geometry_msgs/msg/TwistWithCovariance"](
                 w.T["geometry_msgs/msg/Twist"](V3(0.0, 0.0, 0.0), V3(0.0, 0.0, 0.0)), np.zeros(36))
-            w.write("/odom", w.T[ODOMETRY](w.header(s, "odom"), "base_link", cov, twist), s)
+            w.write("/odom", w.T["nav_msgs/msg/Odometry"](w.header(s, "odom"), "base_link", cov, twist), s)
         elif poses == "tf":
-            w.write("/tf", w.T[TF_TYPES[0]]([w.transform(T_base, s, "odom", "base_link")]), s)
+            w.write("/tf", w.T[TF_TYPES[0]]([transform_message(w.T, w.header(s, "odom"), "base_link", T_base)]), s)
         else:
-            w.write("/camera/pose", w.T[POSE_STAMPED](w.header(s, "map"), w.pose(f.pose)), s)
+            w.write("/camera/pose", w.T["geometry_msgs/msg/PoseStamped"](w.header(s, "map"), pose_message(w.T, f.pose)),
+                    s)
     return k + 1
