@@ -12,7 +12,8 @@ import pytest
 
 from semmatch.geometry import DEFAULT_INTRINSICS, look_at
 from semmatch.io import Frame, write_labels_folder
-from semmatch.io.bags import OPTICAL_FRAME, RosBagSequence, _BagWriter, is_rosbag, write_rosbag
+from semmatch.io.bag_writer import _BagWriter
+from semmatch.io.bags import OPTICAL_FRAME, RosBagSequence, is_rosbag, write_rosbag
 from semmatch.io.ros_images import (
     IMAGE,
     QUANT_A,
