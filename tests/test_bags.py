@@ -261,3 +261,57 @@ def test_raw_encodings_row_padding_and_distortion():
         intr = camera_info_intrinsics(info, "info")
     assert (intr.width, intr.height, intr.fx, intr.fy, intr.cx, intr.cy) == (40, 30, 50, 51, 20, 15)
     assert any("distortion plumb_bob [0.1" in str(c.message) for c in caught)
+
+
+def test_tf_poses_are_interpolated_between_samples_and_gaps_stay_unknown(tmp_path):
+    """/tf at 20 Hz, off the camera's stamps: the camera's pose is interpolated along the moving edge and
+    composed with the static one; a frame in a gap longer than max_pose_gap has no pose."""
+    from semmatch.io.ros_transforms import TF_TYPES
+
+    frames = synthetic_frames(3)
+    stamps = np.array([10.0, 10.13, 10.5])
+    w = _BagWriter(tmp_path / "tf20", 2, "sqlite3")
+    base_camera = np.eye(4)
+    base_camera[:3, :3] = [[0, 0, 1], [-1, 0, 0], [0, -1, 0]]  # base_link -> optical frame
+    base_camera[:3, 3] = (0.1, 0.0, 0.5)
+    s0 = int(stamps[0] * 1e9)
+    w.write("/tf_static", w.T[TF_TYPES[0]]([transform_message(w.T, w.header(s0, "base_link"), OPTICAL_FRAME,
+                                                              base_camera)]), s0)
+    for f, t in zip(frames, stamps):
+        s = round(t * 1e9)
+        header = w.header(s, OPTICAL_FRAME)
+        w.write("/camera/color/image_raw", colour_message(w.T, header, f.rgb), s)
+        w.write("/camera/depth/image_raw", depth_message(w.T, header, f.depth), s)
+    for t in np.r_[np.arange(9.95, 10.2, 0.05), 10.6]:  # no sample between 10.2 and 10.6
+        odom_base = np.eye(4)
+        odom_base[0, 3] = 2.0 * (t - 10.0)  # driving along x at 2 m/s
+        s = round(t * 1e9)
+        w.write("/tf", w.T[TF_TYPES[0]]([transform_message(w.T, w.header(s, "odom"), "base_link", odom_base)]), s)
+    w.close()
+    seq = RosBagSequence(tmp_path / "tf20", pose_frames="odom", intrinsics=INTR)
+    assert np.isfinite(seq.poses[:2]).all() and np.isnan(seq.poses[2]).all() and not seq.has_poses
+    for k in range(2):
+        expected = np.eye(4)
+        expected[0, 3] = 2.0 * (stamps[k] - 10.0)
+        assert np.allclose(seq.poses[k], expected @ base_camera, atol=1e-9)
+    assert seq[2].pose is None
+    wide = RosBagSequence(tmp_path / "tf20", pose_frames="odom", intrinsics=INTR, max_pose_gap=0.5)
+    assert wide.has_poses and wide.poses[2][0, 3] == pytest.approx(2.0 * 0.5 + 0.1)
+
+
+def test_pose_messages_of_every_type():
+    from rosbags.typesys import Stores, get_typestore
+
+    from semmatch.io.ros_transforms import pose_message, pose_of
+
+    T = get_typestore(Stores.ROS2_HUMBLE).types
+    Header, Time = T["std_msgs/msg/Header"], T["builtin_interfaces/msg/Time"]
+    pose = look_at([1.0, 2.0, 0.5], [3.0, 0.0, 0.2])
+    h = Header(Time(5, 0), "/map")  # ROS 1's leading slash is dropped
+    msg_pose = pose_message(T, pose)
+    cov = T["geometry_msgs/msg/PoseWithCovariance"](msg_pose, np.zeros(36))
+    for msg, child in [(T["geometry_msgs/msg/PoseStamped"](h, msg_pose), ""),
+                       (T["geometry_msgs/msg/PoseWithCovarianceStamped"](h, cov), ""),
+                       (transform_message(T, h, "/base_link", pose), "base_link")]:
+        got, parent, got_child = pose_of(msg)
+        assert np.allclose(got, pose, atol=1e-12) and parent == "map" and got_child == child
