@@ -137,6 +137,10 @@ def test_tf_chain_runs_both_ways_and_odometry_needs_the_camera_transform(tmp_pat
         RosBagSequence(tmp_path / "tf", pose_frames="map")
     with pytest.raises(ValueError, match="not both"):
         RosBagSequence(tmp_path / "tf", pose_frames="odom", pose_topic="/odom")
+    with pytest.raises(ValueError, match="give 'odom' no parent frame"):
+        RosBagSequence(tmp_path / "tf", pose_topic="/tf", pose_frames=":odom")
+    from_root = RosBagSequence(tmp_path / "tf", pose_topic="/tf").poses  # odom, the tree's root, to the camera
+    assert np.allclose(from_root, [f.pose for f in frames], atol=1e-9)
     # odometry of base_link without /tf_static: the camera's pose is unknown, said so
     w = _BagWriter(tmp_path / "odom_only", 2, "sqlite3")
     ns = (STAMPS[:3] * 1e9).astype(np.int64)
@@ -288,7 +292,8 @@ def test_tf_poses_are_interpolated_between_samples_and_gaps_stay_unknown(tmp_pat
         s = round(t * 1e9)
         w.write("/tf", w.T[TF_TYPES[0]]([transform_message(w.T, w.header(s, "odom"), "base_link", odom_base)]), s)
     w.close()
-    seq = RosBagSequence(tmp_path / "tf20", pose_frames="odom", intrinsics=INTR)
+    seq = RosBagSequence(tmp_path / "tf20", pose_topic="/tf", intrinsics=INTR)  # the root of the tree: odom
+    assert seq.topics["pose"] == f"/tf odom -> {OPTICAL_FRAME}"
     assert np.isfinite(seq.poses[:2]).all() and np.isnan(seq.poses[2]).all() and not seq.has_poses
     for k in range(2):
         expected = np.eye(4)

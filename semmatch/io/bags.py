@@ -38,6 +38,8 @@ What is read
   - ``pose_frames="WORLD:CAMERA"`` (or ``"WORLD"``: the camera is the colour images' frame):
     the chain of transforms from WORLD to CAMERA through the TF tree of ``/tf`` and
     ``/tf_static`` (e.g. ``map -> odom -> base_link -> camera_link -> camera_color_optical_frame``).
+    ``pose_topic="/tf"`` (a ``TFMessage`` topic) means the same, with WORLD the root of the
+    camera's tree unless ``pose_frames`` names it.
 
 Topic defaults: colour is the one Image/CompressedImage topic whose name does not contain
 "depth", depth the one that does (of two, the one named ``aligned``/``registered``; of a raw
@@ -76,6 +78,7 @@ from .ros_images import (
 )
 from .ros_transforms import (
     POSE_TYPES,
+    TF_TYPES,
     TfTree,
     pose_of,
     stamp_seconds,
@@ -234,7 +237,8 @@ class RosBagSequence(_ImageSequence):
     color_topic, depth_topic, camera_info_topic : str, optional
         Topics; default: chosen from the bag's topics by type and name (see the module).
     pose_topic : str, optional
-        An Odometry, PoseStamped, PoseWithCovarianceStamped or TransformStamped topic.
+        An Odometry, PoseStamped, PoseWithCovarianceStamped or TransformStamped topic; or ``/tf``
+        (the TF tree, from its root above the camera unless ``pose_frames`` says otherwise).
     pose_frames : str, optional
         ``"WORLD:CAMERA"`` (or ``"WORLD"``): poses from ``/tf`` + ``/tf_static``. Not with ``pose_topic``.
     frames : slice, optional
@@ -301,8 +305,6 @@ class RosBagSequence(_ImageSequence):
         if not is_rosbag(self.path):
             raise ValueError(f"{self.path}: not a ROS bag (a .bag file, an .mcap file, or a ROS 2 bag folder with "
                              "metadata.yaml and *.db3 or *.mcap)")
-        if pose_topic is not None and pose_frames is not None:
-            raise ValueError(f"{self.path}: give a pose topic ({pose_topic}) or TF frames ({pose_frames}), not both")
         self._lock = threading.Lock()
         self._readers: dict[tuple[int, int], tuple[object, dict]] = {}
         reader = self._reader()[0]
@@ -354,19 +356,14 @@ class RosBagSequence(_ImageSequence):
                 _, depth_img, _, where = self._read_images(int(k))
                 check_depth_units(depth_img, where=where)
         self.poses: np.ndarray | None = None
+        if pose_topic is not None and topics.get(pose_topic) is not None and topics[pose_topic].msgtype in TF_TYPES:
+            pose_topic, pose_frames = None, pose_frames or ""  # --pose-topic /tf: the TF tree
+        if pose_topic is not None and pose_frames is not None:
+            raise ValueError(f"{self.path}: give a pose topic ({pose_topic}) or TF frames ({pose_frames}), not both")
         if pose_topic is not None:
             self.poses = self._topic_poses(pose_topic, topics, max_pose_gap)
         elif pose_frames is not None:
-            world, _, camera = pose_frames.partition(":")
-            camera = camera or self.camera_frame
-            if not world or not camera:
-                raise ValueError(f"{self.path}: --pose-frames {pose_frames!r} must be WORLD:CAMERA (or WORLD, with the "
-                                 f"colour images' frame {self.camera_frame!r} as CAMERA)")
-            self.topics["pose"] = f"/tf {world} -> {camera}"
-            where = f"{self.path}: /tf {world} -> {camera}"
-            self.poses = TfTree(reader).lookup(tf_frame(world), tf_frame(camera), self.timestamps, max_pose_gap,
-                                                where)
-            self._check_pose_cover(self.poses, where)
+            self.poses = self._tf_poses(pose_frames, reader, max_pose_gap)
 
     # ---- reading
     def _reader(self) -> tuple[object, dict]:
@@ -422,6 +419,10 @@ class RosBagSequence(_ImageSequence):
     def __len__(self) -> int:
         return len(self._pairs)
 
+    def frame_files(self, i: int) -> tuple[Path, ...]:
+        """No file per frame: a bag's frames are messages (caches keyed on files decode the frames instead)."""
+        return ()
+
     # ---- poses
     def _check_pose_cover(self, poses: np.ndarray, where: str) -> None:
         """Refuse poses that cover no frame (the message gives the frames' time span)."""
@@ -429,6 +430,25 @@ class RosBagSequence(_ImageSequence):
             raise ValueError(f"{where}: the poses cover none of the {len(self)} frames "
                              f"({self.timestamps[0]:.3f}..{self.timestamps[-1]:.3f}; gaps over the pose samples "
                              "longer than max_pose_gap are not bridged)")
+
+    def _tf_poses(self, spec: str, reader, max_gap: float) -> np.ndarray:
+        """Poses from the TF tree: ``spec`` is ``WORLD:CAMERA``, ``WORLD`` (the images' frame as CAMERA) or
+        ``""`` (also WORLD left to the tree: the root above the camera)."""
+        world, _, camera = spec.partition(":")
+        camera = tf_frame(camera or self.camera_frame)
+        if not camera:
+            raise ValueError(f"{self.path}: the colour images name no frame (header.frame_id); pass --pose-frames "
+                             "WORLD:CAMERA")
+        tree = TfTree(reader)
+        world = tf_frame(world) or tree.root(camera)
+        where = f"{self.path}: /tf {world} -> {camera}"
+        if world == camera:
+            raise ValueError(f"{where}: /tf and /tf_static give {camera!r} no parent frame (their frames: "
+                             f"{', '.join(tree.frames()) or 'none'}); pass --pose-frames WORLD:CAMERA")
+        self.topics["pose"] = f"/tf {world} -> {camera}"
+        poses = tree.lookup(world, camera, self.timestamps, max_gap, where)
+        self._check_pose_cover(poses, where)
+        return poses
 
     def _topic_poses(self, topic: str, topics: dict, max_gap: float) -> np.ndarray:
         """Poses from a pose topic, composed with the TF chain to the camera where it poses another frame."""

@@ -97,6 +97,15 @@ class TfTree:
         """Every frame the tree names."""
         return sorted({f for e in (*self.static, *self.dynamic) for f in e})
 
+    def root(self, frame: str) -> str:
+        """The top of ``frame``'s tree (following parents; ``frame`` itself when it has none)."""
+        parents = {b: a for a, b in (*self.static, *self.dynamic)}
+        seen = {frame}
+        while frame in parents and parents[frame] not in seen:
+            frame = parents[frame]
+            seen.add(frame)
+        return frame
+
     def path(self, parent: str, child: str) -> list[tuple[str, str, bool]] | None:
         """The edges from ``parent`` to ``child`` as ``(a, b, forward)``; None when they are not connected."""
         links: dict[str, list[tuple[str, bool]]] = {}
