@@ -142,7 +142,7 @@ def _stamp_ns(raw: bytes | memoryview, cdr: bool) -> int:
 def _topic_table(topics: dict) -> str:
     """The bag's topics, one a line: name, message type, message count."""
     width = max((len(n) for n in topics), default=0)
-    return "\n".join(f"  {name:<{width}}  {info.msgtype}  ({info.msgcount} messages)"
+    return "\n".join(f"  {name:<{width}}  {info.msgtype}  ({info.msgcount} message{'' if info.msgcount == 1 else 's'})"
                      for name, info in sorted(topics.items()))
 
 
