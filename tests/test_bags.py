@@ -7,6 +7,7 @@ import pickle
 import warnings
 from concurrent.futures import ThreadPoolExecutor
 
+import cv2
 import numpy as np
 import pytest
 
@@ -20,6 +21,7 @@ from semmatch.io.ros_images import (
     camera_info_intrinsics,
     colour_message,
     decode_colour,
+    decode_depth,
     depth_message,
 )
 from semmatch.io.ros_transforms import transform_message
@@ -254,6 +256,14 @@ def test_raw_encodings_row_padding_and_distortion():
     assert np.array_equal(decode_colour(image("mono8", rgb[..., 0].copy())), np.repeat(rgb[..., :1], 3, axis=2))
     with pytest.raises(ValueError, match="frame 7: colour encoding 'yuv422' is not read"):
         decode_colour(image("yuv422", rgb[..., :2].copy()), "frame 7")
+    Compressed = T["sensor_msgs/msg/CompressedImage"]
+    mm = np.array([[0, 1000, 65535], [2500, 400, 7]], np.uint16)
+    png = cv2.imencode(".png", mm)[1].ravel()
+    depth = decode_depth(Compressed(Header(Time(1, 0), "cam"), "16UC1; png compressed ", png), "d")
+    assert np.array_equal(depth, np.where(mm == 65535, 0, mm / np.float32(1000)).astype(np.float32))
+    jpeg = cv2.imencode(".jpg", rgb)[1].ravel()
+    with pytest.raises(ValueError, match="must hold 16-bit single-channel PNGs .* decodes to uint8"):
+        decode_depth(Compressed(Header(Time(1, 0), "cam"), "rgb8; jpeg compressed bgr8", jpeg), "d")
     with pytest.raises(ValueError, match="needs 12 bytes a row"):
         decode_colour(Image(Header(Time(1, 0), "cam"), 3, 4, "rgb8", 0, 10, np.zeros(30, np.uint8)))
     info = T["sensor_msgs/msg/CameraInfo"](

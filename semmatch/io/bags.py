@@ -14,7 +14,8 @@ What is read
 - Depth: ``sensor_msgs/msg/Image`` ``16UC1`` (or ``mono16``; millimetres, REP 118) or ``32FC1``
   (metres), or ``sensor_msgs/msg/CompressedImage`` in image_transport's ``compressedDepth`` PNG
   format (a 12-byte header, then a 16-bit PNG: millimetres for ``16UC1``, quantised inverse
-  depth for ``32FC1``). 0, NaN, inf and 65535 (16-bit) are "no measurement". The depth must be
+  depth for ``32FC1``), or a plain 16-bit PNG (millimetres). 0, NaN, inf and 65535 (16-bit) are
+  "no measurement". The depth must be
   registered to the colour image (same size, same camera: e.g. RealSense's
   ``aligned_depth_to_color``, OpenNI's ``depth_registered``); it is not reprojected.
 - Intrinsics: the first ``sensor_msgs/msg/CameraInfo`` of the colour camera (``K``, width,

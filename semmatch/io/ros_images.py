@@ -157,8 +157,8 @@ def decode_depth(msg, where: str = "depth") -> np.ndarray:
     Parameters
     ----------
     msg : Image or CompressedImage message
-        Raw ``16UC1``/``mono16`` (millimetres) or ``32FC1`` (metres); or image_transport's
-        ``compressedDepth`` PNG of either.
+        Raw ``16UC1``/``mono16`` (millimetres) or ``32FC1`` (metres); image_transport's
+        ``compressedDepth`` PNG of either; or a 16-bit PNG ``CompressedImage`` (millimetres).
     where : str
         What the message is, for the messages.
 
@@ -173,10 +173,13 @@ def decode_depth(msg, where: str = "depth") -> np.ndarray:
         Another encoding (e.g. a colour topic given as depth), or data that does not fit.
     """
     if hasattr(msg, "format"):
-        if "compresseddepth" not in str(msg.format).lower():
-            raise ValueError(f"{where}: a compressed depth topic must be image_transport's compressedDepth "
-                             f"(format '16UC1; compressedDepth png'), got {msg.format!r}")
-        return _compressed_depth(msg, where)
+        if "compresseddepth" in str(msg.format).lower():
+            return _compressed_depth(msg, where)
+        img = _decompress(msg, where)  # image_transport's plain "compressed" of a 16UC1 image: a 16-bit PNG
+        if img.dtype != np.uint16 or img.ndim != 2:
+            raise ValueError(f"{where}: a compressed depth topic must hold 16-bit single-channel PNGs (millimetres) or "
+                             f"image_transport's compressedDepth; {msg.format!r} decodes to {img.dtype} {img.shape}")
+        return _millimetres(img)
     try:
         if msg.encoding in ("16UC1", "mono16"):
             return _millimetres(_raw_pixels(msg, np.uint16, 1))
