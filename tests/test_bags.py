@@ -357,3 +357,22 @@ def test_sequence_to_rosbag_script(tmp_path, capsys):
         assert np.allclose(f.pose, g.pose, atol=1e-6)  # poses.txt keeps 9 decimals
     assert script.main([str(tmp_path / "seq"), str(tmp_path / "robot.bag")]) == 2
     assert "exists" in capsys.readouterr().err
+
+
+def test_depth_not_registered_to_the_colour_camera(tmp_path):
+    """Depth of another size is refused at open; depth in another frame is warned about."""
+    frames = synthetic_frames(2)
+    w = _BagWriter(tmp_path / "unaligned", 2, "sqlite3")
+    for f, s in zip(frames, (STAMPS[:2] * 1e9).astype(np.int64)):
+        w.write("/camera/color/image_raw", colour_message(w.T, w.header(int(s), OPTICAL_FRAME), f.rgb), int(s))
+        depth_header = w.header(int(s), "camera_depth_optical_frame")
+        w.write("/camera/depth/image_rect_raw", depth_message(w.T, depth_header, f.depth[:-2]), int(s))
+        w.write("/camera/depth_same_size", depth_message(w.T, depth_header, f.depth), int(s))
+    w.close()
+    with pytest.raises(ValueError, match=r"image_rect_raw at .*: depth images are 40x28, the colour images 40x30 .*"
+                                         r"not registered to the colour camera"):
+        RosBagSequence(tmp_path / "unaligned", depth_topic="/camera/depth/image_rect_raw", intrinsics=INTR)
+    with pytest.warns(UserWarning, match="is in frame 'camera_depth_optical_frame', colour topic .* in "
+                                         "'camera_color_optical_frame'"):
+        seq = RosBagSequence(tmp_path / "unaligned", depth_topic="/camera/depth_same_size", intrinsics=INTR)
+    assert len(seq) == 2

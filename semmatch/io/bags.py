@@ -17,7 +17,8 @@ What is read
   depth for ``32FC1``), or a plain 16-bit PNG (millimetres). 0, NaN, inf and 65535 (16-bit) are
   "no measurement". The depth must be
   registered to the colour image (same size, same camera: e.g. RealSense's
-  ``aligned_depth_to_color``, OpenNI's ``depth_registered``); it is not reprojected.
+  ``aligned_depth_to_color``, OpenNI's ``depth_registered``); it is not reprojected. Depth of
+  another size is refused when the bag is opened; depth in another frame is warned about.
 - Intrinsics: the first ``sensor_msgs/msg/CameraInfo`` of the colour camera (``K``, width,
   height). The images are taken as undistorted pinhole images: a non-zero distortion is
   warned about (use the rectified ``image_rect`` topics).
@@ -60,6 +61,7 @@ import functools
 import os
 import struct
 import threading
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -350,6 +352,7 @@ class RosBagSequence(_ImageSequence):
             msg = self._first_message(info)
             intrinsics = camera_info_intrinsics(msg, where=f"{self.path}: {info}")
         self.intrinsics = intrinsics
+        self._check_registered()
         self.labels_dir = Path(labels) if labels is not None else None
         self.check_units = check_units
         if check_units:
@@ -416,6 +419,24 @@ class RosBagSequence(_ImageSequence):
         rgb = decode_colour(self._message(self._colour, ci), rp)
         depth = decode_depth(self._message(self._depth_ix, di), dp)
         return rgb, depth, rp, dp
+
+    def _check_registered(self) -> None:
+        """Refuse depth of another size than the colour; warn when the two name different frames.
+
+        semmatch reads depth pixel by pixel with the colour image: depth that is not registered to
+        the colour camera (a RealSense's ``/camera/depth/image_rect_raw``) puts every label in the
+        wrong place.
+        """
+        rgb, depth, rp, dp = self._read_images(0)
+        hint = ("the depth is not registered to the colour camera; record and pass (--depth-topic) the registered "
+                "depth (RealSense: aligned_depth_to_color, OpenNI: depth_registered)")
+        if depth.shape != rgb.shape[:2]:
+            raise ValueError(f"{dp}: depth images are {depth.shape[1]}x{depth.shape[0]}, the colour images "
+                             f"{rgb.shape[1]}x{rgb.shape[0]} ({self._colour.topic}): {hint}")
+        depth_frame = tf_frame(self._message(self._depth_ix, int(self._pairs[0, 1])).header.frame_id)
+        if depth_frame and self.camera_frame and depth_frame != self.camera_frame:
+            warnings.warn(f"{self.path}: depth topic {self._depth_ix.topic} is in frame {depth_frame!r}, colour topic "
+                          f"{self._colour.topic} in {self.camera_frame!r}: if {hint}", UserWarning, stacklevel=3)
 
     def __len__(self) -> int:
         return len(self._pairs)
