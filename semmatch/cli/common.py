@@ -431,7 +431,9 @@ frame_range.__name__ = "START:STOP"  # argparse names the type in its messages
 #: the bag topic options (:func:`add_recording_options`), passed to a recording's reader only when given
 TOPIC_OPTIONS: tuple[tuple[str, str], ...] = (
     ("--color-topic", "colour image topic"), ("--depth-topic", "depth image topic"),
-    ("--camera-info-topic", "camera_info topic (intrinsics)"), ("--pose-topic", "pose topic (/tf or odometry)"))
+    ("--camera-info-topic", "camera_info topic (intrinsics)"),
+    ("--pose-topic", "pose topic (odometry, PoseStamped, TransformStamped, or /tf)"),
+    ("--pose-frames", "poses from /tf + /tf_static: WORLD:CAMERA (or WORLD: the images' frame as CAMERA)"))
 
 
 def add_recording_options(parser, *, frames: bool = True,

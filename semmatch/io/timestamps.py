@@ -2,19 +2,21 @@
 
 The time side of :mod:`semmatch.io.recordings` (which exports these names too):
 :func:`read_file_list` reads a TUM list (``timestamp filename``), :func:`associate` pairs two
-timestamp lists as TUM's ``associate.py`` does (closest pairs first, one-to-one), and
-:func:`interpolate_poses` gives ground-truth poses at other timestamps (linear translation,
+timestamp lists as TUM's ``associate.py`` does (closest pairs first, one-to-one),
+:func:`associate_frames` pairs a recording's colour and depth frames with it (refusing a recording
+that barely pairs), and :func:`interpolate_poses` gives ground-truth poses at other timestamps (linear translation,
 slerp rotation; NaN where no sample brackets the time closely enough).
 """
 
 from __future__ import annotations
 
 import os
+import warnings
 from pathlib import Path
 
 import numpy as np
 
-__all__ = ["read_file_list", "associate", "interpolate_poses"]
+__all__ = ["read_file_list", "associate", "associate_frames", "interpolate_poses"]
 
 PathLike = str | os.PathLike
 
@@ -82,6 +84,62 @@ def associate(a: np.ndarray, b: np.ndarray, max_difference: float = 0.02) -> np.
             pairs.append((i, order[j]))
     out = np.asarray(sorted(pairs), dtype=np.int64).reshape(-1, 2)
     return out
+
+
+def _span(t: np.ndarray) -> str:
+    return f"{t.min():.3f}..{t.max():.3f}" if len(t) else "empty"
+
+
+def associate_frames(t_rgb: np.ndarray, t_depth: np.ndarray, max_difference: float, max_unmatched: float, *,
+                     rgb_where: str, depth_where: str) -> np.ndarray:
+    """Pair a recording's colour and depth frames by timestamp (:func:`associate`); few may stay unmatched.
+
+    Parameters
+    ----------
+    t_rgb, t_depth : ndarray (N,), (M,)
+        Colour and depth timestamps (seconds).
+    max_difference : float
+        Association window (seconds).
+    max_unmatched : float
+        Fraction of colour frames allowed to have no depth partner (they are skipped with a warning).
+    rgb_where, depth_where : str
+        Where the colour and depth timestamps come from (list files, bag topics), for the messages.
+
+    Returns
+    -------
+    ndarray of int, shape (K, 2)
+        Index pairs ``(colour, depth)`` sorted by colour index.
+
+    Raises
+    ------
+    ValueError
+        No pair within ``max_difference`` (the message gives both time ranges), or more than
+        ``max_unmatched`` of the colour frames unmatched.
+
+    Warns
+    -----
+    UserWarning
+        Some colour frames have no depth partner (the first three times are named).
+    """
+    pairs = associate(t_rgb, t_depth, max_difference)
+    if len(pairs) == 0:
+        raise ValueError(
+            f"{rgb_where} and {depth_where}: no colour/depth pair within {max_difference} s "
+            f"(colour times {_span(t_rgb)}, depth times {_span(t_depth)}); unmatched timestamps"
+        )
+    n_bad = len(t_rgb) - len(pairs)
+    if n_bad:
+        matched = np.zeros(len(t_rgb), dtype=bool)
+        matched[pairs[:, 0]] = True
+        first = ", ".join(f"{t:.6f}" for t in t_rgb[~matched][:3])
+        msg = (
+            f"{rgb_where}: {n_bad} of {len(t_rgb)} colour frames have no depth image in {depth_where} "
+            f"within {max_difference} s (first: {first})"
+        )
+        if n_bad > max_unmatched * len(t_rgb):
+            raise ValueError(msg + f"; more than {max_unmatched:.0%} unmatched timestamps")
+        warnings.warn(msg + "; they are skipped", UserWarning, stacklevel=3)
+    return pairs
 
 
 def interpolate_poses(

@@ -107,6 +107,9 @@ register_layout("sequence", "semmatch.io.readers.sequence_folder", "is_sequence_
                 "a semmatch sequence folder (intrinsics.json, poses.txt, rgb/, depth/)")
 register_layout("plain", "semmatch.io.readers.plain", "is_plain_folder", "PlainFolderSequence",
                 "a plain folder (rgb/ or color/, depth/, intrinsics.json [poses.txt])")
+register_layout("rosbag", "semmatch.io.bags", "is_rosbag", "RosBagSequence",
+                "a ROS bag (a ROS 1 .bag file, a ROS 2 bag folder with metadata.yaml and *.db3 or *.mcap, or an "
+                ".mcap file)")
 
 
 def layouts_text() -> str:

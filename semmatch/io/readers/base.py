@@ -70,13 +70,17 @@ class ImageSequence(_SequenceABC):
             UserWarning, stacklevel=3)
         return assumed
 
+    def _read_images(self, i: int) -> tuple[np.ndarray, np.ndarray, str, str]:
+        """Frame ``i``'s colour (uint8 RGB) and depth (float32 metres), and where each came from (for messages)."""
+        rp, dp = self._rgb[i], self._depth[i]
+        # 16-bit colour scaled, not wrapped to its low byte
+        return read_rgb(rp), read_raw_depth(dp, self.intrinsics.depth_scale), str(rp), str(dp)
+
     def __getitem__(self, i):  # type: ignore[override]
         if isinstance(i, slice):
             return [self[j] for j in range(*i.indices(len(self)))]
         i = frame_index(i, len(self))
-        rp, dp = self._rgb[i], self._depth[i]
-        rgb = read_rgb(rp)  # 16-bit colour scaled, not wrapped to its low byte
-        depth = read_raw_depth(dp, self.intrinsics.depth_scale)
+        rgb, depth, rp, dp = self._read_images(i)
         shape = self.intrinsics.shape
         for p, arr in ((rp, rgb), (dp, depth)):
             if arr.shape[:2] != shape:

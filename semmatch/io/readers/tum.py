@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import os
 import re
-import warnings
 from pathlib import Path
 
 import numpy as np
@@ -21,7 +20,7 @@ import numpy as np
 from ...geometry import Intrinsics
 from ..reading_checks import check_depth_scale
 from ..sequences import listed_file, read_tum
-from ..timestamps import associate, interpolate_poses, read_file_list
+from ..timestamps import associate_frames, interpolate_poses, read_file_list
 from .base import ImageSequence
 
 __all__ = ["TUM_INTRINSICS", "tum_camera", "is_tum_rgbd", "TumRgbdSequence", "read_tum_rgbd"]
@@ -58,10 +57,6 @@ def is_tum_rgbd(path: PathLike) -> bool:
     """True when ``path`` is a folder with ``rgb.txt`` and ``depth.txt``."""
     p = Path(path)
     return (p / "rgb.txt").is_file() and (p / "depth.txt").is_file()
-
-
-def _span(t: np.ndarray) -> str:
-    return f"{t.min():.3f}..{t.max():.3f}" if len(t) else "empty"
 
 
 class TumRgbdSequence(ImageSequence):
@@ -166,24 +161,8 @@ class TumRgbdSequence(ImageSequence):
         rgb_txt, dep_txt = self.path / "rgb.txt", self.path / "depth.txt"
         t_rgb, f_rgb = read_file_list(rgb_txt)
         t_dep, f_dep = read_file_list(dep_txt)
-        pairs = associate(t_rgb, t_dep, max_difference)
-        if len(pairs) == 0:
-            raise ValueError(
-                f"{rgb_txt} and {dep_txt}: no colour/depth pair within {max_difference} s "
-                f"(colour times {_span(t_rgb)}, depth times {_span(t_dep)}); unmatched timestamps"
-            )
-        n_bad = len(t_rgb) - len(pairs)
-        if n_bad:
-            matched = np.zeros(len(t_rgb), dtype=bool)
-            matched[pairs[:, 0]] = True
-            first = ", ".join(f"{t:.6f}" for t in t_rgb[~matched][:3])
-            msg = (
-                f"{rgb_txt}: {n_bad} of {len(t_rgb)} colour frames have no depth image in {dep_txt} "
-                f"within {max_difference} s (first: {first})"
-            )
-            if n_bad > max_unmatched * len(t_rgb):
-                raise ValueError(msg + f"; more than {max_unmatched:.0%} unmatched timestamps")
-            warnings.warn(msg + "; they are skipped", UserWarning, stacklevel=3)
+        pairs = associate_frames(t_rgb, t_dep, max_difference, max_unmatched, rgb_where=str(rgb_txt),
+                                 depth_where=str(dep_txt))
         return pairs, (t_rgb, f_rgb), (t_dep, f_dep)
 
 
