@@ -1,4 +1,4 @@
-"""Every verb that takes a sequence opens every recording layout (TUM RGB-D, 7-Scenes, plain folder) through
+"""Every verb that takes a sequence opens every recording layout (TUM RGB-D, 7-Scenes, plain folder, ROS 2 bag) through
 the reader registry; ``convert``; ``--estimate-poses`` and its cache; recordings without poses."""
 
 from __future__ import annotations
@@ -15,14 +15,15 @@ from test_bad_input import make_corpus
 
 from semmatch.cli import main
 from semmatch.io import read_sequence, write_depth, write_image, write_intrinsics, write_tum
+from semmatch.io.bags import write_rosbag
 
-LAYOUTS = ("tum-rgbd", "7scenes", "plain")
+LAYOUTS = ("tum-rgbd", "7scenes", "plain", "rosbag")
 
 
 def export_layouts(seq_dir: Path, root: Path) -> dict[str, Path]:
     """The frames of a simulated sequence folder as a TUM RGB-D folder (1/5000 m depth, ground truth), a
-    7-Scenes folder (millimetres, pose files), a plain folder with its ground truth (``poses.txt``) and one
-    without (``bare``)."""
+    7-Scenes folder (millimetres, pose files), a plain folder with its ground truth (``poses.txt``), one
+    without (``bare``) and a ROS 2 bag (raw images, 16UC1 millimetre depth, poses on ``/tf``)."""
     seq = read_sequence(seq_dir)
     cam = seq.intrinsics
     tum, seven, plain = root / "tum", root / "seven", root / "plain"
@@ -47,7 +48,8 @@ def export_layouts(seq_dir: Path, root: Path) -> dict[str, Path]:
     write_intrinsics(plain / "intrinsics.json", cam)
     shutil.copytree(plain, root / "bare")
     write_tum(plain / "poses.txt", np.arange(len(seq), dtype=float), seq.poses)
-    return {"tum-rgbd": tum, "7scenes": seven, "plain": plain, "bare": root / "bare"}
+    write_rosbag(root / "bag", [seq[i] for i in range(len(seq))], cam, version=2, poses="tf")
+    return {"tum-rgbd": tum, "7scenes": seven, "plain": plain, "bare": root / "bare", "rosbag": root / "bag"}
 
 
 @pytest.fixture(scope="module")
@@ -65,8 +67,9 @@ def home(tmp_path_factory):
 
 
 def _poses(layout: str) -> list[str]:
-    """The folder without poses is posed by odometry (the first call runs it, the others read its cache)."""
-    return ["--estimate-poses"] if layout == "bare" else []
+    """The folder without poses is posed by odometry (the first call runs it, the others read its cache); the
+    bag's poses are its camera's frame in /tf."""
+    return {"bare": ["--estimate-poses"], "rosbag": ["--pose-frames", "odom:camera_color_optical_frame"]}.get(layout, [])
 
 
 def _verbs(h, layout: str, w: Path) -> dict[str, list[str]]:
