@@ -20,7 +20,8 @@ from pathlib import Path
 
 from .outputs import writer_alive, writer_tag
 
-__all__ = ['atomic_path', 'atomic_write_text', 'save_figure', 'write_json', 'OUTPUT_MARKER', 'output_kind', 'check_output_dir', 'replace_output_dir']
+__all__ = ['atomic_path', 'atomic_write_text', 'save_figure', 'write_json', 'OUTPUT_MARKER', 'output_kind', 'check_output_dir', 'replace_output_dir',
+           'output_dir_writer']
 
 PathLike = str | os.PathLike
 
@@ -217,3 +218,48 @@ def replace_output_dir(tmp: PathLike, path: PathLike, kind: str) -> Path:
     return path
 
 
+@contextlib.contextmanager
+def output_dir_writer(path: PathLike, kind: str, *, overwrite: bool = False,
+                      inputs: _SequenceABC[PathLike] = ()) -> Iterator[Path]:
+    """Write the output folder ``path`` of ``kind``: yield a new temporary folder beside it, swapped
+    in (:func:`replace_output_dir`) when the block succeeds and removed when it fails.
+
+    The output is checked (:func:`check_output_dir`) before and again under the writer's lock,
+    and what a killed writer left beside it is cleaned up first. Whoever writes into the
+    temporary folder (this process, or its worker processes) must have finished when the block ends.
+
+    Parameters
+    ----------
+    path : path
+        The output folder.
+    kind : str
+        Its kind, recorded in its :data:`OUTPUT_MARKER` (e.g. ``"labels"``).
+    overwrite : bool
+        Replace an existing semmatch output of this kind.
+    inputs : sequence of paths
+        Inputs of the command (the output may not be, lie inside or contain one).
+
+    Yields
+    ------
+    Path
+        The temporary folder to fill.
+
+    Raises
+    ------
+    FileExistsError, ValueError
+        See :func:`check_output_dir`; also a second process writing the same folder.
+    """
+    from .outputs import temp_dir
+
+    path = Path(path)
+    check_output_dir(path, kind, overwrite=overwrite, inputs=inputs)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with _writer_lock(path):
+        _recover(path)
+        check_output_dir(path, kind, overwrite=overwrite, inputs=inputs)
+        tmp = temp_dir(path)
+        try:
+            yield tmp
+            replace_output_dir(tmp, path, kind)
+        finally:
+            shutil.rmtree(tmp, ignore_errors=True)
