@@ -21,7 +21,8 @@ import pytest
 
 from semmatch.cli import main
 
-pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+pytestmark = [pytest.mark.slow,  # three runs of a separate process (about 15 s each on a quiet machine)
+              pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")]
 
 FRAMES = 20000  # hard links: the run needs minutes, the test acts in its first seconds
 

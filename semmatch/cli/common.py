@@ -247,8 +247,10 @@ def number(kind: type = float, *, lo: float | None = None, hi: float | None = No
                                              f"got {text!r}") from None
         if not math.isfinite(v):
             raise argparse.ArgumentTypeError(f"must be a finite number{f' ({span})' if span else ''}, got {text!r}")
-        if (lo is not None and (v <= lo if lo_open else v < lo)) or (hi is not None and (v >= hi if hi_open else v > hi)):
-            raise argparse.ArgumentTypeError(f"must be {span}, got {text}")
+        if lo is not None and (v <= lo if lo_open else v < lo):
+            raise argparse.ArgumentTypeError(f"must be {low}, got {text}")
+        if hi is not None and (v >= hi if hi_open else v > hi):
+            raise argparse.ArgumentTypeError(f"must be {high}, got {text}")
         return v
 
     parse.__name__ = kind.__name__  # argparse names the type in its messages
