@@ -124,3 +124,20 @@ def test_an_output_folder_on_a_special_file_is_refused(inputs, tmp_path, capsys)
         assert "is not a folder" in capsys.readouterr().err
     assert stat.S_ISFIFO(os.lstat(fifo).st_mode) and link.is_symlink()
     assert stat.S_ISCHR(os.stat("/dev/null").st_mode)
+
+
+def test_output_folders_get_the_users_umask_not_0700(inputs, tmp_path):
+    from semmatch.io import write_labels_folder
+
+    old = os.umask(0o022)
+    try:
+        write_labels_folder(tmp_path / "labels", [np.zeros((4, 5), np.uint8)])
+        with SequenceWriter(tmp_path / "seq", Intrinsics(8, 6, 5.0, 5.0, 4.0, 3.0)) as w:
+            w.add(np.zeros((6, 8, 3), np.uint8), np.ones((6, 8)), np.eye(4))
+        os.umask(0o027)
+        write_labels_folder(tmp_path / "private", [np.zeros((4, 5), np.uint8)])
+    finally:
+        os.umask(old)
+    assert stat.S_IMODE(os.stat(tmp_path / "labels").st_mode) == 0o755
+    assert stat.S_IMODE(os.stat(tmp_path / "seq").st_mode) == 0o755
+    assert stat.S_IMODE(os.stat(tmp_path / "private").st_mode) == 0o750
