@@ -15,6 +15,7 @@ import warnings
 import cv2
 import numpy as np
 
+from ..geometry import MAX_PIXELS as MAX_FRAME_PIXELS  # semmatch.io.contract.MAX_FRAME_PIXELS
 from .files import atomic_path
 
 __all__ = ['read_image', 'read_rgb', 'write_image', 'read_label_image', 'write_label_image', 'read_depth', 'write_depth',
@@ -67,8 +68,6 @@ _PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
 
 def _too_large(path: PathLike, size: str, pixels: int | None) -> ValueError:
-    from .contract import MAX_FRAME_PIXELS
-
     count = f" ({pixels:,} pixels)" if pixels is not None else ""
     return ValueError(f"{path}: the image is {size}{count}, larger than the largest frame semmatch reads "
                       f"({MAX_FRAME_PIXELS:,} pixels, semmatch.io.contract.MAX_FRAME_PIXELS); refusing to decode it")
@@ -101,8 +100,6 @@ def image_size(path: PathLike) -> tuple[int, int] | None:
         No such file.
     """
     from PIL import Image, UnidentifiedImageError
-
-    from .contract import MAX_FRAME_PIXELS
 
     with open(path, "rb") as fh:
         head = fh.read(24)
