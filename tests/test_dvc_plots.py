@@ -65,6 +65,14 @@ def _marks(dom: str, div: str, role: str) -> list[tuple[str, str]]:
     return out
 
 
+def _numeric_labels(dom: str, div: str) -> list[float]:
+    """The numbers among the text labels drawn inside the plot ``div`` (axis ticks)."""
+    start = dom.index(f'id="{div}"')
+    end = dom.find('<div id="', start + 10)
+    texts = re.findall(r"<text[^>]*>([^<]*)</text>", dom[start:end if end > 0 else len(dom)])
+    return [float(t.replace(",", "")) for t in texts if re.fullmatch(r"-?[\d,]*\.?\d+", t.strip())]
+
+
 def _xs_increase(path: str) -> bool:
     """True when the x coordinates of an SVG polyline (M/L commands) never go back."""
     xs = [float(x) for x in re.findall(r"[ML](-?[\d.]+),", path)]
@@ -102,5 +110,10 @@ def test_dvc_plots_page_draws_one_mark_per_series(tmp_path):
         bars = _marks(dom, div, "bar")
         assert len(bars) == len(pd.read_csv(FIGURES / name)), name
         assert all(d and "NaN" not in d for d, _ in bars), name
+        heights = [abs(float(v)) for d, _ in bars for v in re.findall(r"v(-?[\d.]+)", d)]
+        assert len(heights) == len(bars) and min(heights) > 0, f"{name}: bars drawn without height: {heights}"
+    for div in ("figures_full_fig3_height_csv", "figures_full_misregistration_csv", "figures_full_table1_speed_csv",
+                "figures_full_support_per_scene_csv"):
+        assert len(_numeric_labels(dom, div)) >= 2, f"{div}: no numbered axis ticks drawn"
     routes = {c for _, c in _marks(dom, "figures_full_support_per_scene_csv", "bar")}
     assert len(routes) == pd.read_csv(FIGURES / "support_per_scene.csv")["route"].nunique()
