@@ -49,11 +49,18 @@ def long_sequence(tmp_path_factory) -> Path:
 
 
 def _start(d: Path, out: str) -> subprocess.Popen:
-    env = {**os.environ, "OMP_NUM_THREADS": "1", "SEMMATCH_NO_INDEX_CACHE": "1"}
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "SEMMATCH_NO_INDEX_CACHE": "1", "PYTHONFAULTHANDLER": "1"}
     return subprocess.Popen([sys.executable, "-m", "semmatch", "transfer", "seq", "--map", "scene.ply",
                              "--method", "3d-neighborhood", "--jobs", "2", "--quiet", "--out", out],
                             cwd=d, env=env, start_new_session=True, stdout=subprocess.DEVNULL,
-                            stderr=subprocess.PIPE, text=True)
+                            stderr=subprocess.PIPE, text=True, preexec_fn=_sigint_as_in_a_terminal)
+
+
+def _sigint_as_in_a_terminal() -> None:
+    """In the child before it runs semmatch: SIGINT as a command typed in a terminal has it. A
+    test run started in the background of a script (``pytest ... &``) ignores SIGINT, and Python
+    then keeps it ignored: Ctrl-C would not reach the command at all."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 def _group(pgid: int) -> list[int]:
@@ -91,9 +98,12 @@ def _ends_within(proc: subprocess.Popen, seconds: float) -> tuple[int, str, floa
     try:
         _, err = proc.communicate(timeout=seconds)
     except subprocess.TimeoutExpired:
-        os.killpg(proc.pid, signal.SIGKILL)
-        proc.communicate()
-        pytest.fail(f"the run was still going {seconds:g} s later")
+        os.kill(proc.pid, signal.SIGABRT)  # faulthandler prints where every thread waits
+        try:
+            _, err = proc.communicate(timeout=30)
+        finally:
+            os.killpg(proc.pid, signal.SIGKILL)
+        pytest.fail(f"the run was still going {seconds:g} s later; its threads:\n{err[-5000:]}")
     return proc.returncode, err, time.monotonic() - t
 
 
