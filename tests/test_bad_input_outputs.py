@@ -324,7 +324,7 @@ INPUT_CASES = [
     ("reconstruct-min-weight-negative", "reconstruct {b}/seq --out {w}/m.ply --min-weight=-1",
      r"--min-weight: must be >= 0"),
     ("reconstruct-trunc-voxels-nan", "reconstruct {b}/seq --out {w}/m.ply --trunc-voxels nan",
-     r"--trunc-voxels: must be finite"),
+     r"--trunc-voxels: must be a finite number"),
     ("reconstruct-voxel-over-budget", "reconstruct {b}/seq --out {w}/m.ply --voxel-size 0.0015 --memory-budget 0.25",
      r"seq: a 0\.0015 m voxel grid over this scene .* is estimated at .* GiB, above the budget of 0\.2 GiB"),
     ("checkpoint-100000-pixels", lambda b, w: f"predict {b}/seq --model {_huge_checkpoint(w)} --out {w}/p",

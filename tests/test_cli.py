@@ -63,6 +63,8 @@ def test_simulate_camera_step(tmp_path, capsys):
         xy = np.stack([f.pose[:2, 3] for f in read_sequence(tmp_path / "pair" / name)])
         steps = np.linalg.norm(np.diff(xy, axis=0), axis=1)
         assert steps.max() <= 0.4 + 1e-6 and steps.max() > 0.15  # longer than the default step allows
-    assert main(["simulate", "--scene-kind", "office", "--camera-step", "0", "--frames", "3",
-                 "--out", str(tmp_path / "x"), "--quiet"]) == 2
-    assert "--camera-step" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as e:  # refused while parsing (semmatch.cli.common.number)
+        main(["simulate", "--scene-kind", "office", "--camera-step", "0", "--frames", "3",
+              "--out", str(tmp_path / "x"), "--quiet"])
+    assert e.value.code == 2
+    assert "--camera-step: must be > 0" in capsys.readouterr().err

@@ -61,7 +61,7 @@ def work(tmp_path_factory) -> Path:
     _run("simulate", *common, "--frames", "24", "--out", "seq", cwd=d)
     _run("simulate", *common, "--frames", "24", "--height", "0.3", "--out", "low", cwd=d)
     _run("reconstruct", "seq", "--out", "map.ply", "--quiet", cwd=d)
-    _run("train", "--profile", "smoke", "--steps", "2", "--out", "model.pt", "--quiet", cwd=d)
+    _run("train", "--recipe", "smoke", "--steps", "2", "--out", "model.pt", "--quiet", cwd=d)
     return d
 
 
@@ -97,7 +97,7 @@ def test_a_killed_run_leaves_the_old_or_no_output_and_a_rerun_equals_an_uninterr
 def test_a_killed_training_leaves_no_checkpoint_or_a_loadable_one(work):
     from semmatch.segment import load_model
 
-    argv = ["train", "--profile", "smoke", "--steps", "2", "--quiet", "--out", "killed.pt"]
+    argv = ["train", "--recipe", "smoke", "--steps", "2", "--quiet", "--out", "killed.pt"]
     duration = _run(*argv[:-1], "ref.pt", cwd=work)
     for f in FRACTIONS:
         _kill_after(argv, work, f * duration)

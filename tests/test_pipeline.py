@@ -489,6 +489,32 @@ def test_snapshot_shrinks_figures_and_drops_interactive_outputs(tmp_path):
         snapshot_notebook(tmp_path / "bad.ipynb", tmp_path / "o.ipynb")
 
 
+def test_snapshots_leave_out_machine_notices_and_machine_paths(tmp_path):
+    from semmatch.experiments.snapshot import snapshot_notebook
+
+    text = ("/home/u/.venv/lib/python3.11/site-packages/numba/np/ufunc/parallel.py:373: NumbaWarning: "
+            "\x1b[1mThe TBB threading layer requires TBB version 2021 update 6 or later\x1b[0m\n"
+            "  warnings.warn(problem)\n"
+            "/work/clone/semmatch/experiments/real_poses.py:200: UserWarning: /work/clone/data/full/scenes/eval/"
+            "bedroom_7001/lower_noisy: RGB-D odometry found no solution for 1 frame(s)\n"
+            "  est = estimate_poses(seq)\n"
+            "transfer: 100%\n")
+    nb = nbformat.v4.new_notebook()
+    cell = nbformat.v4.new_code_cell("run()")
+    cell.outputs = [nbformat.v4.new_output("stream", name="stderr", text=text),
+                    nbformat.v4.new_output("stream", name="stderr", text=text.split("  warnings.warn(problem)\n")[0]
+                                           + "  warnings.warn(problem)\n")]
+    nb.cells = [cell]
+    nb.metadata["papermill"] = {"input_path": "/work/clone/notebooks/04_x.ipynb", "parameters": {"seed": 1}}
+    nbformat.write(nb, tmp_path / "04_x.ipynb")
+    out = nbformat.read(snapshot_notebook(tmp_path / "04_x.ipynb", tmp_path / "s.ipynb"), as_version=4)
+    [stream] = out.cells[0].outputs  # the second held only the notice: gone
+    assert stream["text"] == ("semmatch/experiments/real_poses.py:200: UserWarning: data/full/scenes/eval/bedroom_7001/"
+                              "lower_noisy: RGB-D odometry found no solution for 1 frame(s)\n"
+                              "  est = estimate_poses(seq)\ntransfer: 100%\n")
+    assert out.metadata["papermill"] == {"input_path": "notebooks/04_x.ipynb", "parameters": {"seed": 1}}
+
+
 def test_a_notebook_run_with_another_parameter_file_reads_that_file(tmp_path):
     nb = nbformat.v4.new_notebook()
     nb.metadata["kernelspec"] = {"name": "python3", "display_name": "Python 3", "language": "python"}

@@ -222,7 +222,7 @@ def test_cli_train_and_bench(tmp_path, capsys):
     from semmatch.cli import main
 
     out = tmp_path / "m.pt"
-    assert main(["train", "--profile", "smoke", "--arch", "strong", "--out", str(out), "--steps", "2",
+    assert main(["train", "--recipe", "smoke", "--arch", "strong", "--out", str(out), "--steps", "2",
                  "--width", "64", "--height", "48", "--net-width", "32", "--net-height", "24", "--zoom", "1.5", "2",
                  "--kinds", "living_room", "--train-seeds", "11", "--val-seeds", "511", "--quiet"]) == 0
     assert "val mIoU" in capsys.readouterr().out
@@ -336,16 +336,16 @@ def test_cli_bench_train(capsys):
     from semmatch.cli import main
 
     before = torch.are_deterministic_algorithms_enabled()
-    assert main(["bench", "train", "--json", "--profile", "smoke", "--arch", "compact", "--steps", "1",
+    assert main(["bench", "train", "--json", "--recipe", "smoke", "--arch", "compact", "--steps", "1",
                  "--schedule", "compact=600"]) == 0
     res = json.loads(capsys.readouterr().out)["networks"]["compact"]
     assert torch.are_deterministic_algorithms_enabled() == before  # the benchmark restores the setting
     assert res["seconds_per_step"] > 0 and res["schedule_steps"] == 600 and res["batch_size"] == 8
     assert abs(res["projected_minutes"] - res["seconds_per_step"] * 600 / 60.0) <= 0.06
-    assert main(["bench", "train", "--profile", "smoke", "--arch", "compact", "--steps", "1",
+    assert main(["bench", "train", "--recipe", "smoke", "--arch", "compact", "--steps", "1",
                  "--schedule", "strong=10"]) == 2
     assert "not timed" in capsys.readouterr().err
-    assert main(["bench", "train", "--profile", "smoke", "--arch", "compact", "--schedule", "compact=x"]) == 2
+    assert main(["bench", "train", "--recipe", "smoke", "--arch", "compact", "--schedule", "compact=x"]) == 2
     assert "ARCH=STEPS" in capsys.readouterr().err
 
 

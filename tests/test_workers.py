@@ -114,3 +114,33 @@ def test_a_forked_pool_after_opencv_threads_does_not_hang(tmp_path):
         pytest.fail("the forked pool hung after OpenCV had run its thread pool in the parent")
     assert out.returncode == 0, out.stderr[-2000:]
     assert out.stdout.split() == ["[1.0,", "2.0]", "2"]  # the parent's OpenCV setting is back after the pool
+
+
+def _worker_signals(_: int) -> tuple[bool, bool]:
+    return signal.getsignal(signal.SIGTERM) == signal.SIG_DFL, signal.getsignal(signal.SIGINT) == signal.SIG_IGN
+
+
+def test_workers_die_on_sigterm_and_ignore_sigint_whatever_the_parent_set():
+    """A forked worker would inherit the command's SIGTERM handler (which raises instead of
+    dying) and survive the SIGTERM its pool ends it with."""
+    from semmatch.io.outputs import terminate_as_interrupt
+
+    with terminate_as_interrupt(), process_pool(2) as pool:
+        assert set(pool.ordered(_worker_signals, range(4))) == {(True, True)}
+
+
+def test_ordered_yields_in_order():
+    with process_pool(2) as pool:
+        assert list(pool.ordered(_square, range(30), ahead=2)) == [x * x for x in range(30)]
+
+
+def test_an_exception_in_the_block_ends_the_workers_at_once():
+    t = time.monotonic()
+    with pytest.raises(RuntimeError, match="stop"):
+        with process_pool(2) as pool:
+            running = [pool.submit(time.sleep, 60) for _ in range(6)]
+            while not any(f.running() for f in running):
+                time.sleep(0.01)
+            raise RuntimeError("stop")
+    assert time.monotonic() - t < 20, "the pool waited for its tasks instead of ending its workers"
+    assert all(f.done() for f in running)

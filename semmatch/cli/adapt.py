@@ -54,35 +54,35 @@ def register(sub) -> None:
     p.add_argument("--model", required=True, help="checkpoint of the network to adapt (.pt)")
     p.add_argument("--source", default=None, choices=list(LABEL_SOURCES), metavar="SOURCE",
                    help=f"labels of the robot's frames: training scenes (required): one of {', '.join(LABEL_SOURCES)}; "
-                        f"in a home: one of {', '.join(HOME_SOURCES)} (default 3d-neighborhood)")
+                        f"in a home: one of {', '.join(HOME_SOURCES)} (default: 3d-neighborhood)")
     p.add_argument("--out", required=True, help="adapted checkpoint to write (.pt)")
     home = p.add_argument_group("in a home")
     home.add_argument("--home", default=None, metavar="LOWER_SEQ",
                       help="the robot's sequence folder of the home (selects this mode)")
     home.add_argument("--map", default=None, metavar="PERSON_MAP", help="the person's semantic map of the home (PLY)")
     home.add_argument("--frame-step", type=number(int, lo=1), default=1,
-                      help="use every N-th frame of LOWER_SEQ (default %(default)s)")
+                      help="use every N-th frame of LOWER_SEQ")
     train = p.add_argument_group("training scenes")
     add_scene_kinds(train, default=None, nargs="+",
-                    help="scene kinds (scene i has kind i mod len(kinds); default living_room bedroom office "
+                    help="scene kinds; scene i has kind i mod len(kinds) (default: living_room bedroom office "
                          "apartment)")
-    train.add_argument("--seeds", nargs="+", type=int, default=None,
+    train.add_argument("--seeds", nargs="+", type=number(int, lo=0), default=None,
                        help="training scenes to adapt on (never the network's validation/evaluation seeds)")
     p.add_argument("--frames", type=_count_or_range, default=None, metavar="N|START:STOP",
                    help="training scenes: frames of each camera's tour (40 when not given); in a home: use at most N "
                         "frames of LOWER_SEQ, or its frames START..STOP-1 (all when not given)")
     p.add_argument("--steps", type=number(int, lo=1), default=AdaptRecipe.steps,
-                   help="fine-tuning steps (default %(default)s)")
-    p.add_argument("--batch-size", type=number(int, lo=2), default=AdaptRecipe.batch_size, help="default %(default)s")
+                   help="fine-tuning steps")
+    p.add_argument("--batch-size", type=number(int, lo=2), default=AdaptRecipe.batch_size, help="views per step")
     p.add_argument("--lr", type=number(float, lo=0.0, lo_open=True), default=AdaptRecipe.lr,
-                   help="peak learning rate (default %(default)s)")
-    p.add_argument("--upper-share", type=float, default=AdaptRecipe.upper_share,
-                   help="share of each batch from human-height training views (default %(default)s)")
-    p.add_argument("--seed", type=int, default=AdaptRecipe.seed, help="default %(default)s")
+                   help="peak learning rate")
+    p.add_argument("--upper-share", type=number(float, lo=0.0, hi=1.0), default=AdaptRecipe.upper_share,
+                   help="share of each batch from human-height training views")
+    p.add_argument("--seed", type=number(int, lo=0), default=AdaptRecipe.seed, help="seed of the batches")
     home.add_argument("--views-cache", default=None, metavar="DIR",
                       help="cache of the network's human-height training views (rendered on the first run, "
-                           "minutes); default: the folder recorded in the checkpoint where it exists on this "
-                           "machine, else none (rendered each run)")
+                           "minutes) (default: the folder recorded in the checkpoint where it exists on this "
+                           "machine, else none: rendered each run)")
     add_recording_options(home, frames=False)
     add_output_flags(p, json_what="the adapted checkpoint and its data", quiet="the progress bars")
     declare_paths(p, inputs=("model", "home", "map", "intrinsics"), outputs=("out", "views_cache"))

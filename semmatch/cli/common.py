@@ -46,20 +46,35 @@ LONG_VERBS: tuple[str, ...] = ("simulate", "train", "adapt", "predict", "reconst
 
 # ----------------------------------------------------------------------------- help
 class HelpFormatter(argparse.HelpFormatter):
-    """States an option's default once: appends ``(default: X)`` only where the help text does
-    not mention a default already, and only for a default worth stating (not None, False, True
-    or empty)."""
+    """One style for every help line: what an option takes and its default, in one parenthesis at
+    the end, ``(RANGE; default: X)``.
+
+    The range is that of a :func:`number` option (``> 0``, ``0 to 1``, ...) unless the text states
+    it already; ``default: X`` is appended only where the help text does not mention a default
+    itself (help texts that describe one write ``(default: ...)`` too) and only for a default
+    worth stating (not None, False, True or empty).
+    """
 
     def _get_help_string(self, action: argparse.Action) -> str:
         text = action.help or ""
-        default = action.default
-        if (text == argparse.SUPPRESS or re.search(r"\bdefault", text, re.IGNORECASE)
-                or default is None or default is argparse.SUPPRESS or isinstance(default, bool)
-                or (isinstance(default, list | tuple) and not default)):
+        if text == argparse.SUPPRESS:
             return text
-        if action.option_strings or action.nargs in (argparse.OPTIONAL, argparse.ZERO_OR_MORE):
-            return f"{text} (default: %(default)s)" if text else "default: %(default)s"
-        return text
+        parts = []
+        span = getattr(action.type, "range_text", None)
+        if span and span not in text:
+            described = re.search(r"\(default: [^()]*\)$", text)  # a default the text describes itself
+            if described:
+                return f"{text[:described.start()]}({span}; {text[described.start() + 1:]}"
+            parts.append(span.replace("%", "%%"))
+        default = action.default
+        if not (re.search(r"\bdefault", text, re.IGNORECASE)
+                or default is None or default is argparse.SUPPRESS or isinstance(default, bool)
+                or (isinstance(default, list | tuple) and not default)
+                or not (action.option_strings or action.nargs in (argparse.OPTIONAL, argparse.ZERO_OR_MORE))):
+            parts.append("default: %(default)s")
+        if not parts:
+            return text
+        return f"{text} ({'; '.join(parts)})" if text else "; ".join(parts)
 
 
 class RawDescriptionHelpFormatter(argparse.RawDescriptionHelpFormatter, HelpFormatter):
@@ -68,10 +83,21 @@ class RawDescriptionHelpFormatter(argparse.RawDescriptionHelpFormatter, HelpForm
 
 class Parser(argparse.ArgumentParser):
     """The ``semmatch`` parser class: :class:`HelpFormatter` unless a verb names another
-    (sub-parsers are made of the same class)."""
+    (sub-parsers are made of the same class).
+
+    A verb's parser refuses an argument it does not know itself, with the verb's usage line
+    (argparse would hand it up to ``semmatch``'s parser, whose usage says nothing of the verb).
+    """
 
     def __init__(self, *args: Any, formatter_class: type = HelpFormatter, **kwargs: Any) -> None:
         super().__init__(*args, formatter_class=formatter_class, **kwargs)
+
+    def parse_known_args(self, args=None, namespace=None):
+        namespace, extras = super().parse_known_args(args, namespace)
+        verb = not any(isinstance(a, argparse._SubParsersAction) for a in self._actions)
+        if extras and verb and self.prog.count(" ") >= 1:  # a verb (not ``semmatch`` itself)
+            self.error(f"unrecognized arguments: {' '.join(extras)}")
+        return namespace, extras
 
 
 def walk_parsers(parser: argparse.ArgumentParser, name: str = "semmatch"):
@@ -190,40 +216,55 @@ def image_size(text: str) -> ImageSize:
 image_size.__name__ = "WxH"  # argparse names the type in its messages
 
 
-def number(kind: type = float, *, lo: float | None = None, hi: float | None = None, lo_open: bool = False):
+def number(kind: type = float, *, lo: float | None = None, hi: float | None = None, lo_open: bool = False,
+           hi_open: bool = False):
     """An argparse ``type`` that parses a ``kind`` (int or float) and refuses it outside its range.
+
+    Every numeric option of every verb takes its values through this type: NaN and infinities are
+    always refused, and the help line states the range (:class:`HelpFormatter`).
 
     Parameters
     ----------
     kind : type
-        ``int`` or ``float``; NaN and infinities are refused.
+        ``int`` or ``float``.
     lo, hi : float, optional
-        Inclusive bounds (``lo`` exclusive with ``lo_open``).
-    lo_open : bool
-        ``lo`` itself is refused.
+        Bounds, inclusive unless ``lo_open`` / ``hi_open``.
+    lo_open, hi_open : bool
+        ``lo`` (``hi``) itself is refused.
 
     Returns
     -------
     callable
         For ``add_argument(type=...)``: argparse turns its ``ArgumentTypeError`` into a usage
-        error (exit 2) that names the flag.
+        error (exit 2) that names the flag. It carries ``kind``, ``lo``, ``hi``, ``lo_open``,
+        ``hi_open`` and ``range_text`` (e.g. ``"> 0"``, ``"0 to 1"``; empty when unbounded).
     """
+    if kind not in (int, float):
+        raise TypeError(f"number() parses int or float, not {kind!r}")
+    low = "" if lo is None else f"{'>' if lo_open else '>='} {lo:g}"
+    high = "" if hi is None else f"{'<' if hi_open else '<='} {hi:g}"
+    if low and high and not (lo_open or hi_open):
+        span = f"{lo:g} to {hi:g}"
+    else:
+        span = ", ".join(t for t in (low, high) if t)
 
     def parse(text: str):
         try:
             v = kind(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected {'an integer' if kind is int else 'a number'}, "
+        except (TypeError, ValueError):
+            raise argparse.ArgumentTypeError(f"expected {'a whole number' if kind is int else 'a number'}, "
                                              f"got {text!r}") from None
         if not math.isfinite(v):
-            raise argparse.ArgumentTypeError(f"must be finite, got {text!r}")
+            raise argparse.ArgumentTypeError(f"must be a finite number{f' ({span})' if span else ''}, got {text!r}")
         if lo is not None and (v <= lo if lo_open else v < lo):
-            raise argparse.ArgumentTypeError(f"must be {'>' if lo_open else '>='} {lo:g}, got {text}")
-        if hi is not None and v > hi:
-            raise argparse.ArgumentTypeError(f"must be <= {hi:g}, got {text}")
+            raise argparse.ArgumentTypeError(f"must be {low}, got {text}")
+        if hi is not None and (v >= hi if hi_open else v > hi):
+            raise argparse.ArgumentTypeError(f"must be {high}, got {text}")
         return v
 
     parse.__name__ = kind.__name__  # argparse names the type in its messages
+    parse.kind, parse.lo, parse.hi, parse.lo_open, parse.hi_open = kind, lo, hi, lo_open, hi_open
+    parse.range_text = span
     return parse
 
 
@@ -281,9 +322,10 @@ def add_camera_height(parser, *, default: float | None, help: str = "camera heig
         Old spellings (``--height``).
     """
     dest = flag.lstrip("-").replace("-", "_")
-    parser.add_argument(flag, dest=dest, type=float, default=default, metavar="M", help=help)
+    metres = number(float, lo=0.0, lo_open=True)
+    parser.add_argument(flag, dest=dest, type=metres, default=default, metavar="M", help=help)
     if old:
-        add_alias(parser, *old, canonical=flag, dest=dest, type=float, metavar="M")
+        add_alias(parser, *old, canonical=flag, dest=dest, type=metres, metavar="M")
 
 
 def add_scene_kind(parser, *, default: str | None, help: str = "procedural scene kind",

@@ -11,7 +11,7 @@ import numpy as np
 
 def register(sub) -> None:
     """Add ``semmatch evaluate``."""
-    from semmatch.cli.common import add_output_flags
+    from semmatch.cli.common import add_output_flags, number
     from semmatch.io.outputs import declare_paths
 
     p = sub.add_parser(
@@ -23,11 +23,11 @@ def register(sub) -> None:
     )
     p.add_argument("gt", help="ground-truth semantic PLY (mesh or point cloud)")
     p.add_argument("pred", nargs="+", help="predicted semantic PLY files")
-    p.add_argument("--voxel-size", type=float, default=0.05, help="voxel edge in metres (default 0.05)")
+    p.add_argument("--voxel-size", type=number(float, lo=0.0, lo_open=True), default=0.05, help="voxel edge in metres")
     p.add_argument("--union", choices=("restrict", "plain"), default="restrict",
-                   help="Jaccard union: the authors' 'restrict' (default) or plain |G u P|")
-    p.add_argument("--min-overlap", type=float, default=0.1,
-                   help="refuse maps whose occupied voxels overlap less than this (default 0.1)")
+                   help="Jaccard union: the authors' 'restrict' or plain |G u P|")
+    p.add_argument("--min-overlap", type=number(float, lo=0.0, hi=1.0), default=0.1,
+                   help="refuse maps whose occupied voxels overlap less than this")
     p.add_argument("--transform", help="4x4 rigid transform (text/.npy) applied to every prediction")
     p.add_argument("--per-class", action="store_true", help="add per-class IoU columns")
     p.add_argument("--csv", help="write the table as CSV")

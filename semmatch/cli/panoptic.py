@@ -34,10 +34,10 @@ def register(sub) -> None:
                        description="Cluster each thing class of MAP (Open3D DBSCAN) into instances.")
     seg.add_argument("map", help="semantic PLY (mesh or point cloud)")
     seg.add_argument("--out", required=True, help="panoptic PLY to write")
-    seg.add_argument("--eps", type=float, default=0.16,
-                     help="clustering radius in metres (default %(default)s; notebook 10 chooses it on "
-                     "validation scenes: figures/<profile>/validation_panoptic_clustering.csv)")
-    seg.add_argument("--min-vertices", type=int, default=50, help="smallest instance kept (default %(default)s)")
+    seg.add_argument("--eps", type=number(float, lo=0.0, lo_open=True), default=0.16,
+                     help="clustering radius in metres; notebook 10 chooses it on validation scenes: "
+                     "figures/<profile>/validation_panoptic_clustering.csv")
+    seg.add_argument("--min-vertices", type=number(int, lo=1), default=50, help="smallest instance kept")
     add_output_flags(seg, json_what="the instances written")
     declare_paths(seg, inputs=("map",), outputs=("out",))
     seg.set_defaults(func=run_segment)
@@ -47,8 +47,8 @@ def register(sub) -> None:
                        "onto the map's vertices (the panoptic reference of a robot sequence).")
     add_sequence(ref, "sequence folder with labels/ and instances/ (any registered layout that has them)")
     ref.add_argument("--out", required=True, help="panoptic PLY to write")
-    ref.add_argument("--voxel-size", type=float, default=0.04, help="TSDF voxel in metres (default %(default)s)")
-    ref.add_argument("--step", type=number(int, lo=1), default=1, help="use every n-th frame for the instances (default 1)")
+    ref.add_argument("--voxel-size", type=number(float, lo=0.0, lo_open=True), default=0.04, help="TSDF voxel in metres")
+    ref.add_argument("--step", type=number(int, lo=1), default=1, help="use every n-th frame for the instances")
     add_output_flags(ref, json_what="the map written", quiet="the progress bars")
     declare_paths(ref, inputs=("sequence", "sequence_flag", "intrinsics"), outputs=("out",))
     ref.set_defaults(func=run_reference)
@@ -62,13 +62,13 @@ def register(sub) -> None:
     tr.add_argument("--method", required=True, choices=[m for m in available_methods() if m != "fused"],
                     help="transfer method")
     tr.add_argument("--out", required=True, help="lower panoptic PLY to write")
-    tr.add_argument("--voxel-size", type=float, default=0.04, help="TSDF voxel in metres (default %(default)s)")
-    tr.add_argument("--max-distance", type=float, default=DEFAULT_MAX_DISTANCE,
-                    help="metres; pixels farther than this from the map get 0 (default %(default)s)")
-    tr.add_argument("--eps", type=float, default=0.05,
-                    help="fragments joining a touching instance: linking radius, metres (default %(default)s)")
-    tr.add_argument("--min-vertices", type=int, default=50,
-                    help="fragments smaller than this may join a touching instance (default %(default)s)")
+    tr.add_argument("--voxel-size", type=number(float, lo=0.0, lo_open=True), default=0.04, help="TSDF voxel in metres")
+    tr.add_argument("--max-distance", type=number(float, lo=0.0, lo_open=True), default=DEFAULT_MAX_DISTANCE,
+                    help="metres; pixels farther than this from the map get 0")
+    tr.add_argument("--eps", type=number(float, lo=0.0, lo_open=True), default=0.05,
+                    help="fragments joining a touching instance: linking radius, metres")
+    tr.add_argument("--min-vertices", type=number(int, lo=1), default=50,
+                    help="fragments smaller than this may join a touching instance")
     add_output_flags(tr, json_what="the map written", quiet="the progress bars")
     declare_paths(tr, inputs=("map", "sequence", "sequence_flag", "intrinsics"), outputs=("out",))
     tr.set_defaults(func=run_transfer)
@@ -78,12 +78,12 @@ def register(sub) -> None:
                       "print PQ = SQ x RQ over thing classes, stuff classes and all classes.")
     ev.add_argument("gt", help="ground-truth panoptic PLY")
     ev.add_argument("pred", nargs="+", help="predicted panoptic PLY files")
-    ev.add_argument("--voxel-size", type=float, default=0.05, help="voxel edge in metres (default %(default)s)")
+    ev.add_argument("--voxel-size", type=number(float, lo=0.0, lo_open=True), default=0.05, help="voxel edge in metres")
     ev.add_argument("--per-class", action="store_true", help="add PQ per class")
     ev.add_argument("--csv", help="write the table as CSV")
-    ev.add_argument("--warn-overlap", type=float, default=0.5, metavar="FRACTION",
+    ev.add_argument("--warn-overlap", type=number(float, lo=0.0, hi=1.0), default=0.5, metavar="FRACTION",
                     help="warn when the occupied voxels of a prediction and the ground truth overlap less than "
-                         "this (partial maps score low PQ for want of overlap; default %(default)s)")
+                         "this (partial maps score low PQ for want of overlap)")
     add_output_flags(ev, json_what="the table (prediction -> measure -> value)")
     declare_paths(ev, inputs=("gt", "pred"), outputs=("csv",))
     ev.set_defaults(func=run_evaluate)

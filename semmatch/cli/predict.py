@@ -7,7 +7,7 @@ import argparse
 
 def register(sub) -> None:
     """Add ``semmatch predict``."""
-    from semmatch.cli.common import add_output_flags, add_recording_options
+    from semmatch.cli.common import add_output_flags, add_recording_options, number
     from semmatch.io.outputs import declare_paths
 
     p = sub.add_parser(
@@ -21,10 +21,10 @@ def register(sub) -> None:
                    help="checkpoint (.pt), 'oracle' (ground truth) or 'noisy:RATE' (noisy oracle, e.g. noisy:0.2)")
     p.add_argument("--out", required=True, help="labels folder to write")
     p.add_argument("--probs", action="store_true", help="also write probabilities to OUT/probs/*.npy (float16)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the noisy oracle")
-    p.add_argument("--device", choices=("auto", "cpu", "cuda"), default="auto", help="auto: CUDA when present (default %(default)s)")
+    p.add_argument("--seed", type=number(int, lo=0), default=0, help="seed of the noisy oracle")
+    p.add_argument("--device", choices=("auto", "cpu", "cuda"), default="auto", help="auto: CUDA when present")
     p.add_argument("--no-flip", action="store_true",
-                   help="one network pass (default: average with the mirror image, twice the time)")
+                   help="one network pass (default: the average with the mirror image, twice the time)")
     p.add_argument("--overwrite", action="store_true",
                    help="replace an existing labels folder semmatch wrote at --out (anything else is refused)")
     add_output_flags(p, json_what="where the labels went", quiet="the progress bar")

@@ -27,15 +27,15 @@ def register(sub) -> None:
     p.add_argument("--out", required=True, help="semantic mesh PLY")
     p.add_argument("--rgb-out", help="also write the RGB mesh here")
     p.add_argument("--points-out", help="also write the semantic point cloud here")
-    p.add_argument("--voxel-size", type=float, default=0.04,
-                   help="voxel edge in metres (default 0.04); the TSDF's memory is estimated from it and the "
+    p.add_argument("--voxel-size", type=number(float, lo=0.0, lo_open=True), default=0.04,
+                   help="voxel edge in metres; the TSDF's memory is estimated from it and the "
                         "scene's extent before any allocation and refused above --memory-budget")
-    p.add_argument("--depth-max", type=float, default=6.0, help="ignore depth beyond this (m, default 6)")
+    p.add_argument("--depth-max", type=number(float, lo=0.0, lo_open=True), default=6.0, help="ignore depth beyond this (m)")
     p.add_argument("--trunc-voxels", type=number(float, lo=1.0, hi=64.0), default=4.0,
-                   help="TSDF truncation in voxels, 1..64 (default 4)")
-    p.add_argument("--label-stride", type=int, default=2, help="label evidence every Nth pixel (default 2)")
+                   help="TSDF truncation in voxels")
+    p.add_argument("--label-stride", type=number(int, lo=1), default=2, help="label evidence every Nth pixel")
     p.add_argument("--min-weight", type=number(float, lo=0.0, hi=1e6), default=1.0,
-                   help="minimum surface weight, >= 0 (default 1)")
+                   help="minimum surface weight")
     p.add_argument("--memory-budget", type=number(float, lo=0.0, lo_open=True), default=None, metavar="GIB",
                    help="largest estimated TSDF memory in GiB (default: 80 %% of the memory available now)")
     add_recording_options(p, estimate_help="ignore the recorded poses and estimate them by RGB-D odometry, starting "
@@ -47,8 +47,8 @@ def register(sub) -> None:
     from semmatch.poses.rgbd_odometry import METHODS
 
     p.add_argument("--residual", choices=METHODS, default="hybrid",
-                   help="with --estimate-poses: residual of the frame-to-frame odometry (default hybrid; "
-                        "point-to-plane is the fallback where it fails)")
+                   help="with --estimate-poses: residual of the frame-to-frame odometry; point-to-plane is the "
+                        "fallback where it fails")
     p.add_argument("--no-pose-graph", dest="pose_graph", action="store_false",
                    help="with --estimate-poses: chained odometry only, no pose-graph refinement")
     p.add_argument("--device", help="Open3D device (default: CUDA:0 when available, else CPU:0)")

@@ -27,10 +27,10 @@ def register(sub) -> None:
     p.add_argument("--plotlyjs", choices=("inline", "directory", "cdn"), default="inline",
                    help="inline: plotly.js inside the page (self-contained, several MB); directory: one "
                         "shared plotly.min.js beside the pages (small pages, offline); cdn: loaded from "
-                        "the internet (default %(default)s)")
-    p.add_argument("--voxel-size", type=float, default=0.05, help="voxels of --reference (default %(default)s)")
+                        "the internet")
+    p.add_argument("--voxel-size", type=number(float, lo=0.0, lo_open=True), default=0.05, help="voxels of --reference")
     p.add_argument("--max-vertices", type=number(int, lo=1), default=150_000,
-                   help="display budget; larger maps are decimated (default %(default)s)")
+                   help="display budget; larger maps are decimated")
     add_recording_options(p)
     add_output_flags(p, json_what="the page written")
     declare_paths(p, inputs=("map", "reference", "trajectory", "intrinsics"), outputs=("html",))

@@ -59,6 +59,7 @@ def register(sub) -> None:
         add_output_flags,
         add_scene_kind,
         add_scene_kinds,
+        number,
     )
     from semmatch.io.outputs import declare_paths
 
@@ -70,18 +71,19 @@ def register(sub) -> None:
     src = p.add_mutually_exclusive_group()
     add_scene_kind(src, default="living_room", old=("--kind",))
     src.add_argument("--ply", type=Path, help="semantic PLY mesh to use as the scene")
-    p.add_argument("--seed", type=int, default=0, help="scene seed (and trajectory seed)")
+    p.add_argument("--seed", type=number(int, lo=0), default=0, help="scene seed (and trajectory seed)")
     add_camera_height(p, default=1.6, old=("--height",))
-    p.add_argument("--frames", type=int, default=300, help="frames of the trajectory (default %(default)s)")
-    p.add_argument("--tilt", type=float, default=20.0, help="periodic camera tilt amplitude (degrees)")
+    p.add_argument("--frames", type=number(int, lo=1), default=300, help="frames of the trajectory")
+    p.add_argument("--tilt", type=number(float, lo=0.0, hi=90.0), default=20.0, help="periodic camera tilt amplitude (degrees)")
     p.add_argument("--trajectory", default=None,
-                   help="trajectory name (upper/lower/...); default: upper above 1 m, else lower")
-    p.add_argument("--margin", type=float, default=0.3, help="clearance from obstacles (m)")
+                   help="trajectory name (upper/lower/...) (default: upper above 1 m, else lower)")
+    p.add_argument("--margin", type=number(float, lo=0.0), default=0.3, help="clearance from obstacles (m)")
     p.add_argument("--noise", default=None, help="none | kinect | JSON of NoiseConfig parameters | file.json")
-    add_image_size(p, help="image size in pixels (intrinsics scaled from the default camera's 640x480)",
+    add_image_size(p, help="image size in pixels (intrinsics scaled from those of the 640x480 camera)",
                    old=("--size",))
-    p.add_argument("--fx", type=float, default=None, help="focal length (pixels)")
-    p.add_argument("--fy", type=float, default=None, help="vertical focal length (pixels; default: --fx)")
+    p.add_argument("--fx", type=number(float, lo=0.0, lo_open=True), default=None, help="focal length (pixels)")
+    p.add_argument("--fy", type=number(float, lo=0.0, lo_open=True), default=None,
+                   help="vertical focal length (pixels) (default: --fx)")
     p.add_argument("--intrinsics", type=Path, default=None, help="intrinsics.json to use")
     p.add_argument("--save-scene", type=Path, default=None, help="also write the GT semantic mesh here")
     p.add_argument("--fast", action="store_true",
@@ -94,29 +96,30 @@ def register(sub) -> None:
                         "and DIR/lower (--lower-camera-height) of one scene, routes as --routes")
     add_camera_height(p, default=0.2, flag="--lower-camera-height", old=("--lower-height",),
                       help="robot camera height for --pair in metres")
-    p.add_argument("--camera-step", type=float, default=0.15,  # sim.DEFAULT_CAMERA_STEP (not imported at start-up)
-                   help="largest camera step between frames (m, default %(default)s): a tour is at most "
-                        "(frames - 1) x this long, so fewer frames at a larger step fly the same tour")
+    p.add_argument("--camera-step", type=number(float, lo=0.0, lo_open=True), default=0.15,  # sim.DEFAULT_CAMERA_STEP (not imported at start-up)
+                   help="largest camera step between frames (m): a tour is at most (frames - 1) x this long, so fewer "
+                        "frames at a larger step fly the same tour")
     p.add_argument("--overwrite", action="store_true", help="replace an existing sequence at --out")
     add_output_flags(p, json_what="what was written", quiet="the progress bars")
     dst = p.add_mutually_exclusive_group(required=True)
     dst.add_argument("--out", type=Path, help="sequence folder to write")
     dst.add_argument("--dataset", type=Path, help="write the generated data layout under this root")
     d = p.add_argument_group("data set (--dataset)")
-    d.add_argument("--train-seeds", type=int, nargs="*", default=[0, 1],
+    d.add_argument("--train-seeds", type=number(int, lo=0), nargs="*", default=[0, 1],
                    help="training scenes: the i-th seed gives one scene of kind KINDS[i %% len(KINDS)] "
                         "(KINDS: --scene-kinds)")
-    d.add_argument("--eval-seeds", type=int, nargs="*", default=[100], help="evaluation scenes: every kind per seed")
+    d.add_argument("--eval-seeds", type=number(int, lo=0), nargs="*", default=[100], help="evaluation scenes: every kind per seed")
     add_scene_kinds(d, default=["living_room", "bedroom", "office"], help="scene kinds of the data set")
-    d.add_argument("--frames-lower", type=int, default=None, help="default: --frames")
-    d.add_argument("--frames-sweep", type=int, default=100, help="frames of each height-sweep sequence (default %(default)s)")
-    d.add_argument("--sweep", type=float, nargs="*", default=None,
-                   help="height-sweep heights (m); default 0.2 .. 1.6; give none to skip")
-    d.add_argument("--jobs", type=int, default=1, help="scenes written in parallel (local worker processes)")
+    d.add_argument("--frames-lower", type=number(int, lo=1), default=None,
+                   help="frames of each lower sequence (default: --frames)")
+    d.add_argument("--frames-sweep", type=number(int, lo=1), default=100, help="frames of each height-sweep sequence")
+    d.add_argument("--sweep", type=number(float, lo=0.0, lo_open=True), nargs="*", default=None,
+                   help="height-sweep heights (m); give none to skip (default: 0.2 .. 1.6)")
+    d.add_argument("--jobs", type=number(int, lo=1), default=1, help="scenes written in parallel (local worker processes)")
     d.add_argument("--scheduler", default=None,
-                   help="Dask scheduler address (tcp://host:8786) to write the scenes on; default "
-                        "SEMMATCH_SCHEDULER, else --jobs local processes")
-    d.add_argument("--val-seeds", type=int, nargs="*", default=[],
+                   help="Dask scheduler address (tcp://host:8786) to write the scenes on (default: "
+                        "SEMMATCH_SCHEDULER, else --jobs local processes)")
+    d.add_argument("--val-seeds", type=number(int, lo=0), nargs="*", default=[],
                    help="validation scenes (laid out as evaluation scenes): the i-th seed gives one scene "
                         "of kind KINDS[i %% len(KINDS)]")
     d.add_argument("--routes", choices=("own", "shared"), default="own",

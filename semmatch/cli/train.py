@@ -7,7 +7,7 @@ import argparse
 
 def register(sub) -> None:
     """Add ``semmatch train``."""
-    from semmatch.cli.common import add_image_size, add_output_flags, add_scene_kinds
+    from semmatch.cli.common import add_alias, add_image_size, add_output_flags, add_scene_kinds, number
     from semmatch.io.outputs import declare_paths
 
     p = sub.add_parser(
@@ -16,32 +16,34 @@ def register(sub) -> None:
         description="Train a segmentation network on upper views (camera 1.2-1.8 m, tilting) of "
         "training scenes; validate on held-out scenes; write a checkpoint.",
     )
-    p.add_argument("--profile", choices=("smoke", "full"), default="smoke", help="size of the run (default smoke)")
-    p.add_argument("--arch", choices=("compact", "strong"), default="compact", help="network architecture (default %(default)s)")
+    p.add_argument("--recipe", choices=("smoke", "full"), default="smoke",
+                   help="training recipe: the size of the run (semmatch.segment.PROFILES; not a params.yaml profile)")
+    add_alias(p, "--profile", canonical="--recipe", dest="recipe", choices=("smoke", "full"))
+    p.add_argument("--arch", choices=("compact", "strong"), default="compact", help="network architecture")
     p.add_argument("--out", required=True, help="checkpoint path (.pt)")
     p.add_argument("--depth", action="store_true", help="add the depth channel to the input")
-    p.add_argument("--steps", type=int, help="optimisation steps (profile default otherwise)")
-    p.add_argument("--batch-size", type=int, help="views per step (profile default otherwise)")
-    p.add_argument("--lr", type=float, help="peak learning rate (profile default otherwise)")
-    p.add_argument("--eval-every", type=int, help="validate every N steps")
-    add_image_size(p, help="render size of the views (profile default otherwise)", old_split=("--width", "--height"))
+    p.add_argument("--steps", type=number(int, lo=1), help="optimisation steps (default: the recipe's)")
+    p.add_argument("--batch-size", type=number(int, lo=1), help="views per step (default: the recipe's)")
+    p.add_argument("--lr", type=number(float, lo=0.0, lo_open=True), help="peak learning rate (default: the recipe's)")
+    p.add_argument("--eval-every", type=number(int, lo=1), help="validate every N steps (default: the recipe's)")
+    add_image_size(p, help="render size of the views (default: the recipe's)", old_split=("--width", "--height"))
     add_image_size(p, flag="--net-size", dest="net_size", old_split=("--net-width", "--net-height"),
-                   help="network input size (default: the profile's, else --image-size); smaller than the views "
-                        "= whole frames at reduced scale")
-    p.add_argument("--zoom", nargs=2, type=float, metavar=("LO", "HI"),
-                   help="scale augmentation range; must hold view width / network width (profile default otherwise)")
+                   help="network input size; smaller than the views = whole frames at reduced scale (default: the "
+                        "recipe's, else --image-size)")
+    p.add_argument("--zoom", nargs=2, type=number(float, lo=0.0, lo_open=True), metavar=("LO", "HI"),
+                   help="scale augmentation range; must hold view width / network width (default: the recipe's)")
     add_scene_kinds(p, default=None, nargs="+", help="scene kinds")
-    p.add_argument("--train-seeds", nargs="+", type=int, help="training scene seeds")
-    p.add_argument("--val-seeds", nargs="+", type=int, help="validation scene seeds")
-    p.add_argument("--eval-seeds", nargs="+", type=int, help="evaluation scene seeds (checked to be disjoint)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the views, the weights and the batches (default 0)")
-    p.add_argument("--device", choices=("auto", "cpu", "cuda"), default="auto", help="auto: CUDA when present (default %(default)s)")
-    p.add_argument("--threads", type=int, help="torch threads")
+    p.add_argument("--train-seeds", nargs="+", type=number(int, lo=0), help="training scene seeds")
+    p.add_argument("--val-seeds", nargs="+", type=number(int, lo=0), help="validation scene seeds")
+    p.add_argument("--eval-seeds", nargs="+", type=number(int, lo=0), help="evaluation scene seeds (checked to be disjoint)")
+    p.add_argument("--seed", type=number(int, lo=0), default=0, help="seed of the views, the weights and the batches")
+    p.add_argument("--device", choices=("auto", "cpu", "cuda"), default="auto", help="auto: CUDA when present")
+    p.add_argument("--threads", type=number(int, lo=1), help="torch threads (default: left as the command set them, semmatch.threads)")
     p.add_argument("--cache-dir", help="cache rendered views here")
-    p.add_argument("--jobs", type=int, default=1, help="scenes rendered in parallel (local worker processes; default 1)")
+    p.add_argument("--jobs", type=number(int, lo=1), default=1, help="scenes rendered in parallel (local worker processes)")
     p.add_argument("--scheduler", default=None,
-                   help="Dask scheduler address (tcp://host:8786) to render the views on; default "
-                        "SEMMATCH_SCHEDULER, else --jobs local processes")
+                   help="Dask scheduler address (tcp://host:8786) to render the views on (default: "
+                        "SEMMATCH_SCHEDULER, else --jobs local processes)")
     add_output_flags(p, json_what="the checkpoint and its validation scores", quiet="the progress bars")
     declare_paths(p, outputs=("out",))  # no file inputs (the views are rendered; --cache-dir is read and written)
     p.set_defaults(func=run)
@@ -68,7 +70,7 @@ def run(args: argparse.Namespace) -> int:
     width, height = args.image_size or (None, None)
     net_width, net_height = args.net_size or (None, None)
     cfg = make_config(
-        args.profile, out=args.out, arch=args.arch, use_depth=args.depth or None, steps=args.steps,
+        args.recipe, out=args.out, arch=args.arch, use_depth=args.depth or None, steps=args.steps,
         batch_size=args.batch_size, lr=args.lr, eval_every=args.eval_every, width=width, height=height,
         net_width=net_width, net_height=net_height, zoom=args.zoom, kinds=args.scene_kinds,
         train_seeds=args.train_seeds, val_seeds=args.val_seeds, eval_seeds=args.eval_seeds, seed=args.seed,

@@ -7,7 +7,7 @@ import json
 
 def register(sub) -> None:
     """Add the ``transfer`` verb."""
-    from semmatch.cli.common import add_index_cache, add_output_flags, add_sequence
+    from semmatch.cli.common import add_index_cache, add_output_flags, add_sequence, number
     from semmatch.io.outputs import declare_paths
     from semmatch.transfer import DEFAULT_MAX_DISTANCE, available_methods
 
@@ -26,12 +26,12 @@ def register(sub) -> None:
     p.add_argument("--out", required=True, help="labels folder to write")
     p.add_argument("--overwrite", action="store_true",
                    help="replace an existing labels folder semmatch wrote at --out (anything else is refused)")
-    p.add_argument("--max-distance", type=float, default=DEFAULT_MAX_DISTANCE,
-                   help="metres; pixels farther than this from the map get 0 (default %(default)s)")
-    p.add_argument("--voxel-size", type=float, default=0.02, help="map index grid voxel (metres)")
+    p.add_argument("--max-distance", type=number(float, lo=0.0, lo_open=True), default=DEFAULT_MAX_DISTANCE,
+                   help="metres; pixels farther than this from the map get 0")
+    p.add_argument("--voxel-size", type=number(float, lo=0.0, lo_open=True), default=0.02, help="map index grid voxel (metres)")
     p.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
                    help="method parameter (JSON value), e.g. --param n_segments=256; repeatable")
-    p.add_argument("--jobs", type=int, default=1, help="worker processes (default 1)")
+    p.add_argument("--jobs", type=number(int, lo=1), default=1, help="worker processes")
     add_output_flags(p, json_what="the statistics", quiet="the progress bar")
     p.add_argument("--strict", action="store_true",
                    help="exit with an error when the map supports (almost) no pixel (default: a warning)")

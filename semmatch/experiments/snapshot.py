@@ -6,6 +6,9 @@ writes a small copy of each for git (``reports/snapshot/<profile>/``; GitHub and
 viewer render them): figures re-encoded as JPEG no wider than ``max_width`` pixels (kept as PNG
 where that is smaller), interactive outputs (plotly maps, widgets) replaced by a line saying how
 to get them, and the commit and profile they were executed with in the notebook's metadata.
+Printed warnings say nothing of the machine they ran on (:func:`clean_stream`): a library's
+start-up warning that is no result (numba's TBB threading-layer notice) is left out, and paths
+are shown from the repository or from ``site-packages`` instead of from the machine's root.
 """
 
 from __future__ import annotations
@@ -13,14 +16,86 @@ from __future__ import annotations
 import base64
 import io
 import os
+import re
 import subprocess
 from pathlib import Path
 
-__all__ = ["snapshot_notebook", "snapshot_reports"]
+__all__ = ["snapshot_notebook", "snapshot_reports", "clean_stream", "clean_streams"]
 
 _INTERACTIVE = ("application/vnd.plotly.v1+json", "application/vnd.jupyter.widget-view+json")
 _NOTE = ("*(interactive output left out of this snapshot: run the notebook, or view a map with "
          "`semmatch show MAP.ply --html OUT.html`)*")
+
+
+#: a warning as Python prints it: ``FILE:LINE: CATEGORY: message`` (its source line follows, indented)
+_WARNING_LINE = re.compile(r"^\S.*?:\d+: (\w+Warning): ")
+#: warnings of no result that only say how a library was set up on the machine that ran the notebook
+_MACHINE_NOTICES = (("NumbaWarning", "TBB"),)
+#: an absolute path into an installed package: shown from the package (``numba/np/...``)
+_SITE_PACKAGES = re.compile(r"/[^\s:'\"]*/(?:site|dist)-packages/")
+#: an absolute path into a clone of the repository: shown from the repository (``semmatch/...``)
+_REPOSITORY = re.compile(r"(?<![\w.~-])/[^\s:'\"]*?/(?=(?:semmatch|data|figures|reports|models|notebooks|scripts)/)")
+
+
+def clean_stream(text: str) -> str:
+    """A notebook's printed output without what only describes the machine that ran it.
+
+    Warnings listed in :data:`_MACHINE_NOTICES` (category and a word of their message) are left
+    out with their source line; absolute paths into ``site-packages`` or into the repository
+    lose the machine's part (``/work/clone/semmatch/x.py`` -> ``semmatch/x.py``).
+
+    Parameters
+    ----------
+    text : str
+        A ``stream`` output's text.
+
+    Returns
+    -------
+    str
+    """
+    records: list[list[str]] = []  # a line that is not indented starts a record; indented ones join it
+    for line in text.splitlines(keepends=True):
+        if records and line[:1].isspace():
+            records[-1].append(line)
+        else:
+            records.append([line])
+    out = []
+    for record in records:
+        joined = "".join(record)
+        m = _WARNING_LINE.match(joined)
+        if not (m and any(m[1] == category and word in joined for category, word in _MACHINE_NOTICES)):
+            out.append(joined)
+    return _REPOSITORY.sub("", _SITE_PACKAGES.sub("", "".join(out)))
+
+
+def _machine_free(value):
+    """``value`` (papermill metadata: strings, lists, dicts) with its paths shown from the repository."""
+    if isinstance(value, str):
+        return _REPOSITORY.sub("", _SITE_PACKAGES.sub("", value))
+    if isinstance(value, list):
+        return [_machine_free(v) for v in value]
+    if isinstance(value, dict):
+        return {k: _machine_free(v) for k, v in value.items()}
+    return value
+
+
+def clean_streams(nb) -> None:
+    """Apply :func:`clean_stream` to every ``stream`` output of a notebook (in place; outputs
+    left empty are removed), and show the paths of its papermill metadata from the repository."""
+    if "papermill" in nb.metadata:
+        nb.metadata["papermill"] = _machine_free(nb.metadata["papermill"])
+    for cell in nb.cells:
+        if cell.get("cell_type") != "code":
+            continue
+        outputs = []
+        for out in cell.get("outputs", []):
+            if out.get("output_type") == "stream":
+                text = out["text"] if isinstance(out["text"], str) else "".join(out["text"])
+                out["text"] = clean_stream(text)
+                if not out["text"]:
+                    continue
+            outputs.append(out)
+        cell.outputs = outputs
 
 
 def _small_image(png_b64: str, max_width: int, quality: int) -> tuple[str, str]:
@@ -94,6 +169,7 @@ def snapshot_notebook(src: str | os.PathLike, dst: str | os.PathLike, *, max_wid
             outputs.append(out)
         if cell.cell_type == "code":
             cell.outputs = outputs
+    clean_streams(nb)
     nb.metadata.pop("widgets", None)
     nb.metadata["semmatch_snapshot"] = dict(meta or {})
     dst = Path(dst)

@@ -16,10 +16,15 @@ from typing import Any
 
 import numpy as np
 
-from ..geometry import Intrinsics
+from ..geometry import MAX_PIXELS, Intrinsics
 from .images import check_depth_units
 
-__all__ = ["check_intrinsics", "check_rgb", "check_depth", "check_labels"]
+__all__ = ["check_intrinsics", "check_rgb", "check_depth", "check_labels", "MAX_FRAME_PIXELS"]
+
+#: the largest frame semmatch reads or makes, in pixels (64 Mi, e.g. 8192 x 8192: beyond any RGB-D
+#: camera); the same limit as :class:`~semmatch.geometry.Intrinsics`. Image files are measured
+#: from their headers and refused above it before they are decoded (:func:`semmatch.io.images.image_size`).
+MAX_FRAME_PIXELS = MAX_PIXELS
 
 
 def _wxh(shape: tuple[int, ...]) -> str:

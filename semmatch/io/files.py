@@ -13,6 +13,8 @@ import json
 import os
 import re
 import shutil
+import stat
+import sys
 import uuid
 from collections.abc import Iterator
 from collections.abc import Sequence as _SequenceABC
@@ -20,12 +22,101 @@ from pathlib import Path
 
 from .outputs import writer_alive, writer_tag
 
-__all__ = ['atomic_path', 'atomic_write_text', 'save_figure', 'write_json', 'OUTPUT_MARKER', 'output_kind', 'check_output_dir', 'replace_output_dir']
+__all__ = ['atomic_path', 'atomic_write_text', 'save_figure', 'write_json', 'OUTPUT_MARKER', 'output_kind', 'check_output_dir', 'replace_output_dir',
+           'output_dir_writer', 'writes_through']
 
 PathLike = str | os.PathLike
 
 
 # ----------------------------------------------------------------------------- atomic writes
+#: links to an open file of a process: written through, never replaced (``/dev/stdout`` is a link
+#: to ``/proc/self/fd/1``, which may be a terminal, a pipe or the file a shell redirected it to)
+_OPEN_FILE_LINK = re.compile(r"^/dev/(stdout|stderr|fd/\d+)$|^/proc/(self|thread-self|\d+)/fd/\d+$")
+
+
+def _open_file_link(path: Path) -> re.Match | None:
+    """The first link to an open file on the way from ``path`` (any number of hops), else None."""
+    hop = os.path.abspath(path)
+    for _ in range(40):  # the kernel's own limit on nested links
+        m = _OPEN_FILE_LINK.match(hop)
+        if m or not os.path.islink(hop):
+            return m
+        hop = os.path.normpath(os.path.join(os.path.dirname(hop), os.readlink(hop)))
+    return None
+
+
+def _own_descriptor(path: Path) -> int | None:
+    """The descriptor of this process that ``path`` names (``/dev/stdout``: 1), else None."""
+    m = _open_file_link(path)
+    if m is None:
+        return None
+    if m[1]:  # /dev/stdout, /dev/stderr, /dev/fd/N
+        return {"stdout": 1, "stderr": 2}.get(m[1]) or int(m[1].split("/")[1])
+    if m[2] in ("self", "thread-self", str(os.getpid())):
+        return int(m[0].rsplit("/", 1)[1])
+    return None
+
+
+def writes_through(path: PathLike) -> bool:
+    """Whether an output at ``path`` is written through (streamed into) rather than replaced.
+
+    A FIFO, a character device (a terminal, ``/dev/null``) and a link to an open file
+    (``/dev/stdout``, ``/dev/fd/N``, ``/proc/self/fd/N``) are written through; replacing them
+    would put a regular file where the reader, or the system, expects them. Anything else
+    (a regular file, a new path) is replaced atomically.
+
+    Parameters
+    ----------
+    path : path
+
+    Returns
+    -------
+    bool
+
+    Raises
+    ------
+    ValueError
+        ``path`` is a block device (a disk) or a socket: semmatch writes neither.
+    """
+    path = Path(path)
+    try:
+        mode = os.stat(path).st_mode
+    except OSError:  # not there (or not reachable): an ordinary new file, or the writer's own error
+        return False
+    if stat.S_ISBLK(mode) or stat.S_ISSOCK(mode):
+        what = "a block device (a disk)" if stat.S_ISBLK(mode) else "a socket"
+        raise ValueError(f"{path}: is {what}; semmatch writes its outputs to files, FIFOs and character devices "
+                         "(such as /dev/stdout), never to a disk or a socket: choose a file")
+    if stat.S_ISFIFO(mode) or stat.S_ISCHR(mode):
+        return True
+    return stat.S_ISREG(mode) and _open_file_link(path) is not None
+
+
+@contextlib.contextmanager
+def _written_through(path: Path) -> Iterator[Path]:
+    """Yield a temporary file (in a private temporary folder); copy it into ``path`` when the
+    block succeeds, opened for appending (a FIFO's reader, a terminal or the file behind
+    ``/dev/stdout`` receives the bytes; nothing is created or replaced where ``path`` is)."""
+    import tempfile
+
+    with tempfile.TemporaryDirectory(prefix="semmatch-out-") as folder:
+        tmp = Path(folder) / (path.name or "output")
+        yield tmp
+        fd = _own_descriptor(path)
+        try:
+            with open(tmp, "rb") as src:
+                if fd is None:
+                    with open(path, "ab") as dst:
+                        shutil.copyfileobj(src, dst)
+                else:  # this process's own stdout (...): write at its position, after what was printed
+                    for stream in (sys.stdout, sys.stderr):
+                        stream.flush()
+                    with os.fdopen(os.dup(fd), "wb") as dst:
+                        shutil.copyfileobj(src, dst)
+        except OSError as e:
+            raise type(e)(e.errno, f"cannot write {path}: {e.strerror}", str(path)) from None
+
+
 @contextlib.contextmanager
 def atomic_path(path: PathLike) -> Iterator[Path]:
     """Yield a temporary path beside ``path``; rename it to ``path`` when the block succeeds.
@@ -34,10 +125,18 @@ def atomic_path(path: PathLike) -> Iterator[Path]:
     extension (OpenCV, Open3D, matplotlib) still work. On error it is removed; its name carries
     the writer's machine and process id, so the temporary files of a killed writer are removed by the next
     process that writes into the same folder.
+
+    A FIFO, a character device or ``/dev/stdout`` at ``path`` is never replaced: the finished
+    temporary file is written through into it (:func:`writes_through`); a block device or a
+    socket is refused.
     """
     path = Path(path)
     if path.is_dir():
         raise ValueError(f"{path}: is a folder; give the name of the file to write")
+    if writes_through(path):
+        with _written_through(path) as tmp:
+            yield tmp
+        return
     path.parent.mkdir(parents=True, exist_ok=True)
     _sweep_stale_files(path.parent)
     tmp = path.with_name(f".{path.stem}.{writer_tag()}-{uuid.uuid4().hex[:8]}.tmp{path.suffix}")
@@ -217,3 +316,48 @@ def replace_output_dir(tmp: PathLike, path: PathLike, kind: str) -> Path:
     return path
 
 
+@contextlib.contextmanager
+def output_dir_writer(path: PathLike, kind: str, *, overwrite: bool = False,
+                      inputs: _SequenceABC[PathLike] = ()) -> Iterator[Path]:
+    """Write the output folder ``path`` of ``kind``: yield a new temporary folder beside it, swapped
+    in (:func:`replace_output_dir`) when the block succeeds and removed when it fails.
+
+    The output is checked (:func:`check_output_dir`) before and again under the writer's lock,
+    and what a killed writer left beside it is cleaned up first. Whoever writes into the
+    temporary folder (this process, or its worker processes) must have finished when the block ends.
+
+    Parameters
+    ----------
+    path : path
+        The output folder.
+    kind : str
+        Its kind, recorded in its :data:`OUTPUT_MARKER` (e.g. ``"labels"``).
+    overwrite : bool
+        Replace an existing semmatch output of this kind.
+    inputs : sequence of paths
+        Inputs of the command (the output may not be, lie inside or contain one).
+
+    Yields
+    ------
+    Path
+        The temporary folder to fill.
+
+    Raises
+    ------
+    FileExistsError, ValueError
+        See :func:`check_output_dir`; also a second process writing the same folder.
+    """
+    from .outputs import temp_dir
+
+    path = Path(path)
+    check_output_dir(path, kind, overwrite=overwrite, inputs=inputs)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with _writer_lock(path):
+        _recover(path)
+        check_output_dir(path, kind, overwrite=overwrite, inputs=inputs)
+        tmp = temp_dir(path)
+        try:
+            yield tmp
+            replace_output_dir(tmp, path, kind)
+        finally:
+            shutil.rmtree(tmp, ignore_errors=True)

@@ -1,17 +1,25 @@
 """Images of the data contract: RGB, 16-bit depth and palette label PNGs, written atomically.
+
+Every image is measured from its header before it is decoded (:func:`image_size`): one larger
+than the frame contract's maximum (:data:`semmatch.io.contract.MAX_FRAME_PIXELS`) is refused
+with a message naming the file and both sizes, so a small file that claims a huge canvas (an
+"image bomb") never reaches the decoder.
 """
 
 from __future__ import annotations
 
 import os
+import struct
+import warnings
 
 import cv2
 import numpy as np
 
+from ..geometry import MAX_PIXELS as MAX_FRAME_PIXELS  # semmatch.io.contract.MAX_FRAME_PIXELS
 from .files import atomic_path
 
 __all__ = ['read_image', 'read_rgb', 'write_image', 'read_label_image', 'write_label_image', 'read_depth', 'write_depth',
-           'depth_to_uint16', 'check_depth_units', 'DEPTH_UNIT_RANGE']
+           'depth_to_uint16', 'check_depth_units', 'DEPTH_UNIT_RANGE', 'image_size']
 
 PathLike = str | os.PathLike
 
@@ -56,6 +64,62 @@ def write_label_image(path: PathLike, labels: np.ndarray) -> None:
         img.save(tmp, format="PNG", compress_level=1)
 
 
+_PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+
+
+def _too_large(path: PathLike, size: str, pixels: int | None) -> ValueError:
+    count = f" ({pixels:,} pixels)" if pixels is not None else ""
+    return ValueError(f"{path}: the image is {size}{count}, larger than the largest frame semmatch reads "
+                      f"({MAX_FRAME_PIXELS:,} pixels, semmatch.io.contract.MAX_FRAME_PIXELS); refusing to decode it")
+
+
+def image_size(path: PathLike) -> tuple[int, int] | None:
+    """The ``(width, height)`` of an image file, read from its header only, checked against the
+    frame contract's maximum before anything is decoded.
+
+    PNG headers are read directly; other formats through Pillow, which opens files lazily (its
+    decompression-bomb limit, an error or a warning, becomes the same clear error).
+
+    Parameters
+    ----------
+    path : path
+        A regular file.
+
+    Returns
+    -------
+    tuple of int, or None
+        None when the header is not one of an image format Pillow knows (the reader then
+        reports the file as unreadable).
+
+    Raises
+    ------
+    ValueError
+        More pixels than :data:`semmatch.io.contract.MAX_FRAME_PIXELS` (the message names the file,
+        the image's size and the maximum).
+    FileNotFoundError
+        No such file.
+    """
+    from PIL import Image, UnidentifiedImageError
+
+    with open(path, "rb") as fh:
+        head = fh.read(24)
+    if head[:8] == _PNG_SIGNATURE and head[12:16] == b"IHDR":
+        width, height = struct.unpack(">II", head[16:24])
+    else:
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("error", Image.DecompressionBombWarning)
+                with Image.open(path) as img:
+                    width, height = img.size
+        except (Image.DecompressionBombError, Image.DecompressionBombWarning) as e:
+            raise _too_large(path, f"larger than Pillow decodes safely ({e})", None) from None
+        except (UnidentifiedImageError, OSError):
+            return None  # not an image Pillow knows: its reader says so
+    if width * height > MAX_FRAME_PIXELS:
+        raise _too_large(path, f"{width}x{height}", width * height)
+    return width, height
+
+
 def read_label_image(path: PathLike) -> np.ndarray:
     """Read a label PNG as category ids (uint8 (H,W)): palette PNGs (their indices) and 8-bit
     grayscale PNGs (their values).
@@ -70,6 +134,7 @@ def read_label_image(path: PathLike) -> np.ndarray:
     from PIL import Image, UnidentifiedImageError
 
     try:
+        image_size(path)
         with Image.open(path) as img:
             if img.mode not in ("P", "L"):
                 raise ValueError(f"{path}: labels must be an 8-bit single-channel or palette PNG, got mode {img.mode}")
@@ -88,10 +153,13 @@ def read_image(path: PathLike, *, flags: int = cv2.IMREAD_UNCHANGED) -> np.ndarr
     FileNotFoundError
         No such file, or not an image OpenCV can read.
     ValueError
-        Not a regular file (a FIFO would block the reader forever, a device never end).
+        Not a regular file (a FIFO would block the reader forever, a device never end), or an
+        image larger than the frame contract allows (:func:`image_size`).
     """
     if os.path.exists(path) and not os.path.isfile(path):
         raise ValueError(f"{path}: not a regular file (a folder, a FIFO or a device); refusing to read it as an image")
+    if os.path.isfile(path):
+        image_size(path)  # before decoding: an image larger than any frame is refused
     img = cv2.imread(str(path), flags)
     if img is None:
         raise FileNotFoundError(f"cannot read image {path}")

@@ -31,7 +31,7 @@ from collections.abc import Iterable, Iterator
 from pathlib import Path
 
 __all__ = ["declare_paths", "check_paths", "check_cli_paths", "temp_dir", "sweep_stale",
-           "terminate_as_interrupt", "Terminated", "writer_tag", "writer_alive", "HOST_TAG"]
+           "terminate_as_interrupt", "Terminated", "writer_tag", "writer_alive", "HOST_TAG", "umask"]
 
 PathLike = str | os.PathLike
 
@@ -147,16 +147,35 @@ def writer_alive(pid: int, host: str | None = None) -> bool:
     return True
 
 
+def umask() -> int:
+    """This process's file mode creation mask (read without changing it where Linux tells it)."""
+    try:
+        with open("/proc/self/status") as fh:
+            for line in fh:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError):
+        pass
+    mask = os.umask(0o022)  # elsewhere: set and restore (the only portable way to read it)
+    os.umask(mask)
+    return mask
+
+
 def temp_dir(path: PathLike, tag: str = "") -> Path:
     """A new temporary folder beside ``path``: ``.NAME[.TAG].HOST_PID-RANDOM.partial``.
 
     The machine and process id let :func:`sweep_stale` tell the folders of a killed writer from
-    those of a live one, also where several machines write into one shared folder.
+    those of a live one, also where several machines write into one shared folder. The folder
+    gets the permissions of any folder the user makes (``0o777`` less the umask), not
+    ``mkdtemp``'s private ``0o700``: it becomes the output folder, which colleagues on a shared
+    disk should be able to read as they read the user's other folders.
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     prefix = f".{path.name}.{tag + '.' if tag else ''}{writer_tag()}-"
-    return Path(tempfile.mkdtemp(prefix=prefix, suffix=".partial", dir=path.parent))
+    tmp = Path(tempfile.mkdtemp(prefix=prefix, suffix=".partial", dir=path.parent))
+    os.chmod(tmp, 0o777 & ~umask())
+    return tmp
 
 
 def sweep_stale(path: PathLike) -> list[Path]:

@@ -28,7 +28,7 @@ from .files import (
     _recover,
     _writer_lock,
     atomic_write_text,
-    check_output_dir,
+    output_dir_writer,
     output_kind,
     replace_output_dir,
     write_json,
@@ -560,27 +560,18 @@ def write_labels_folder(path: PathLike, labels: Iterator[np.ndarray] | list[np.n
         See :func:`check_output_dir`; also a second process writing the same folder.
     """
     path = Path(path)
-    check_output_dir(path, "labels", overwrite=overwrite, inputs=inputs)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with _writer_lock(path):
-        _recover(path)
-        check_output_dir(path, "labels", overwrite=overwrite, inputs=inputs)
-        tmp = temp_dir(path)
-        try:
-            # PNG encoding releases the GIL: a writer thread overlaps it with making the next label
-            # image (a prediction, a transfer) or with the other writer
-            with ThreadPoolExecutor(max_workers=2) as ex:
-                pending = [ex.submit(write_label_image, tmp / _frame_name(i), np.asarray(lab, dtype=np.uint8))
-                           for i, lab in enumerate(labels)]
-                for fut in pending:
-                    fut.result()
-            if not pending:
-                raise ValueError(f"{path}: no label images to write (a sequence without frames?)")
-            for name, src in (extra_dirs or {}).items():
-                os.replace(src, tmp / name)
-            replace_output_dir(tmp, path, "labels")
-        finally:
-            shutil.rmtree(tmp, ignore_errors=True)
+    with output_dir_writer(path, "labels", overwrite=overwrite, inputs=inputs) as tmp:
+        # PNG encoding releases the GIL: a writer thread overlaps it with making the next label
+        # image (a prediction, a transfer) or with the other writer
+        with ThreadPoolExecutor(max_workers=2) as ex:
+            pending = [ex.submit(write_label_image, tmp / _frame_name(i), np.asarray(lab, dtype=np.uint8))
+                       for i, lab in enumerate(labels)]
+            for fut in pending:
+                fut.result()
+        if not pending:
+            raise ValueError(f"{path}: no label images to write (a sequence without frames?)")
+        for name, src in (extra_dirs or {}).items():
+            os.replace(src, tmp / name)
     return path
 
 

@@ -17,8 +17,11 @@ from ..io import (
     SequenceReader,
     check_output_dir,
     read_sequence,
+    write_label_image,
     write_labels_folder,
 )
+from ..io.files import output_dir_writer
+from ..io.sequences import _frame_name
 from ..progress import tqdm
 from ..workers import process_pool
 from .index import MapIndex, as_map_index
@@ -54,9 +57,9 @@ def _frame(frames, poses: np.ndarray | None, i: int):
     return f if poses is None else replace(f, pose=np.array(poses[i], dtype=np.float64))
 
 
-def _init_worker(index: MapIndex, source, method: str, params: dict, poses) -> None:
+def _init_worker(index: MapIndex, source, method: str, params: dict, poses, out: Path) -> None:
     seq = source if isinstance(source, InMemorySequence) else read_sequence(source)
-    _WORKER.update(index=index, seq=seq, method=method, params=params, poses=poses)
+    _WORKER.update(index=index, seq=seq, method=method, params=params, poses=poses, out=out)
 
 
 #: a frame with fewer valid depth pixels than this share is a sensor dropout (as in fusion)
@@ -73,8 +76,14 @@ def _transfer_one(frames, poses, index, method: str, params: dict, i: int):
 
 
 def _run_one(i: int):
+    """In a worker: transfer frame ``i``, write its labels into the output's temporary folder
+    (an image is not sent back through the pool's pipe), and return ``(i, None, coverage,
+    seconds, dropout)``."""
     w = _WORKER
-    return _transfer_one(w["seq"], w["poses"], w["index"], w["method"], w["params"], i)
+    i, labels, coverage, seconds, dropout = _transfer_one(w["seq"], w["poses"], w["index"], w["method"],
+                                                          w["params"], i)
+    write_label_image(w["out"] / _frame_name(i), labels)
+    return i, None, coverage, seconds, dropout
 
 
 def transfer_sequence(
@@ -166,8 +175,9 @@ def transfer_sequence(
     bar = tqdm(total=n, desc=f"transfer {method}", disable=not progress, unit="frame")
 
     def streamed(results):
-        """Each frame's labels as they come, their statistics kept: the writer saves each image
-        at once, so memory does not grow with the sequence; nothing is swapped in if this raises."""
+        """Each frame's labels as they come (None where a worker wrote them), their statistics kept:
+        each image is saved at once, so memory does not grow with the sequence; nothing is swapped
+        in if this raises."""
         done = 0  # results come in frame order: the first missing one names where a dead worker stopped
         try:
             for i, lab, c, s, d in results:
@@ -184,11 +194,15 @@ def transfer_sequence(
     write = dict(overwrite=overwrite, inputs=inputs)
     try:
         if int(jobs) > 1 and source is not None:
-            with process_pool(int(jobs), initializer=_init_worker,
-                              initargs=(index, source, method, params, poses)) as ex:
-                # map() forks every worker now, before the label writer starts its threads
-                results = ex.map(_run_one, range(n), chunksize=max(1, n // (4 * int(jobs))))
-                out = write_labels_folder(out_dir, streamed(results), **write)
+            # the workers write the label images into the output's temporary folder themselves and
+            # send back a few numbers per frame; the pool ends before the folder is swapped in or
+            # removed (on an error, Ctrl-C or SIGTERM its workers are stopped at once)
+            with output_dir_writer(out_dir, "labels", **write) as tmp, \
+                    process_pool(int(jobs), initializer=_init_worker,
+                                 initargs=(index, source, method, params, poses, tmp)) as ex:
+                for _ in streamed(ex.ordered(_run_one, range(n))):
+                    pass
+            out = Path(out_dir)
         else:
             results = (_transfer_one(frames, poses, index, method, params, i) for i in range(n))
             out = write_labels_folder(out_dir, streamed(results), **write)

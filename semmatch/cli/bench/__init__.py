@@ -39,13 +39,15 @@ THREAD_ROWS = (
 
 def add_thread_flags(parser, what: str) -> None:
     """``--threads N`` and ``--thread-rows`` of a benchmark that runs torch / Open3D / BLAS code."""
-    parser.add_argument("--threads", type=int, default=None,
-                        help="CPU threads of torch, Open3D, OpenMP and the BLAS (default: semmatch's setting, "
-                             "SEMMATCH_THREADS, else 1; semmatch.threads)")
+    from semmatch.cli.common import number
+
+    parser.add_argument("--threads", type=number(int, lo=0), default=None,
+                        help="CPU threads of torch, Open3D, OpenMP and the BLAS; 0: the libraries' own (default: "
+                             "semmatch's setting, SEMMATCH_THREADS, else 1; semmatch.threads)")
     parser.add_argument("--thread-rows", action="store_true",
                         help=f"run this {what} benchmark in fresh processes with no thread variable set (semmatch's "
-                             "default), with OMP_NUM_THREADS=1, and with no limit (SEMMATCH_THREADS=0: the "
-                             "libraries' defaults), and print one row each")
+                             "own setting), with OMP_NUM_THREADS=1, and with no limit (SEMMATCH_THREADS=0: the "
+                             "libraries' own), and print one row each")
     parser.set_defaults(_bench_parser=parser)
 
 

@@ -10,6 +10,15 @@ import time
 
 def register(sub) -> None:
     """Add ``semmatch bench fusion``."""
+    from semmatch.cli.common import (
+        ImageSize,
+        add_camera_height,
+        add_image_size,
+        add_json,
+        add_scene_kind,
+        number,
+    )
+
     p = sub.add_parser(
         "fusion",
         help="semantic TSDF integration: frames/s at 640x480 with labels, peak memory",
@@ -19,22 +28,20 @@ def register(sub) -> None:
         "the CPU; on one thread, semmatch's default, both measure one core). --thread-rows compares "
         "thread settings, each in a fresh process.",
     )
-    p.add_argument("--frames", type=int, default=60, help="timed frames (default 60)")
-    p.add_argument("--voxel-size", type=float, default=0.04, help="voxel edge, metres (default 0.04)")
-    from semmatch.cli.common import ImageSize, add_camera_height, add_image_size, add_json, add_scene_kind
-
+    p.add_argument("--frames", type=number(int, lo=1), default=60, help="timed frames")
+    p.add_argument("--voxel-size", type=number(float, lo=0.0, lo_open=True), default=0.04, help="voxel edge, metres")
     add_image_size(p, default=ImageSize(640, 480), old_split=("--width", "--height"))
-    add_camera_height(p, default=0.2, help="camera height above the floor in metres (default 0.2: the robot view)")
+    add_camera_height(p, default=0.2, help="camera height above the floor in metres; 0.2: the robot view")
     add_scene_kind(p, default="living_room", old=("--scene",))
-    p.add_argument("--trunc-voxels", type=float, default=4.0, help="TSDF truncation in voxels (default 4)")
-    p.add_argument("--label-stride", type=int, default=2, help="label evidence every Nth pixel (default 2)")
+    p.add_argument("--trunc-voxels", type=number(float, lo=1.0, hi=64.0), default=4.0, help="TSDF truncation in voxels")
+    p.add_argument("--label-stride", type=number(int, lo=1), default=2, help="label evidence every Nth pixel")
     p.add_argument("--probabilities", action="store_true",
                    help="fuse (H,W,21) class probabilities instead of label images")
-    p.add_argument("--labelings", type=int, default=0,
+    p.add_argument("--labelings", type=number(int, lo=0), default=0,
                    help="also fuse this many labelings of the frames (the labels with 0%%, 10%%, ... "
                    "of the pixels set to random ids) as separate reconstruct() calls and as one "
-                   "reconstruct_many() call, and time both (default 0: skip)")
-    p.add_argument("--seed", type=int, default=0, help="scene seed (default 0)")
+                   "reconstruct_many() call, and time both; 0: skip")
+    p.add_argument("--seed", type=number(int, lo=0), default=0, help="scene seed")
     from semmatch.cli.bench import add_thread_flags
 
     add_thread_flags(p, "fusion")

@@ -10,7 +10,7 @@ import numpy as np
 
 def register(sub) -> None:
     """Add ``semmatch bench metrics``."""
-    from semmatch.cli.common import add_json, add_scene_kind
+    from semmatch.cli.common import add_json, add_scene_kind, number
 
     p = sub.add_parser(
         "metrics",
@@ -19,12 +19,12 @@ def register(sub) -> None:
         "scene (the prediction with 1 cm noise and 10%% wrong labels), then time "
         "semmatch.evaluate.metrics.compare and the plain per-voxel dictionary evaluator on them.",
     )
-    p.add_argument("--vertices", type=int, default=500_000, help="vertices per map (default 500000)")
-    p.add_argument("--voxel-size", type=float, default=0.05, help="voxel edge, metres (default 0.05)")
-    p.add_argument("--repeat", type=int, default=3, help="timed runs of the vectorised version (best)")
+    p.add_argument("--vertices", type=number(int, lo=1), default=500_000, help="vertices per map")
+    p.add_argument("--voxel-size", type=number(float, lo=0.0, lo_open=True), default=0.05, help="voxel edge, metres")
+    p.add_argument("--repeat", type=number(int, lo=1), default=3, help="timed runs of the vectorised version (best)")
     p.add_argument("--no-dict-loop", action="store_true", help="skip the (slow) dict-loop reference")
     add_scene_kind(p, default="apartment", old=("--scene",))
-    p.add_argument("--seed", type=int, default=0, help="seed of the scene and of the sampled maps (default 0)")
+    p.add_argument("--seed", type=number(int, lo=0), default=0, help="seed of the scene and of the sampled maps")
     add_json(p, "the timings")
     p.set_defaults(func=run)
 

@@ -19,7 +19,15 @@ import tempfile
 import time
 from pathlib import Path
 
-from semmatch.cli.common import ImageSize, add_camera_height, add_image_size, add_json, add_scene_kind, emit
+from semmatch.cli.common import (
+    ImageSize,
+    add_camera_height,
+    add_image_size,
+    add_json,
+    add_scene_kind,
+    emit,
+    number,
+)
 
 
 def _rss_mb() -> float:
@@ -51,15 +59,15 @@ def register(sub) -> None:
     """Add ``semmatch bench render``."""
     p = sub.add_parser("render", help="renderer frames/s (RGB + depth + labels)")
     add_scene_kind(p, default="apartment", old=("--kind",))
-    p.add_argument("--seed", type=int, default=0, help="scene seed (default 0)")
-    p.add_argument("--triangles", type=int, default=200_000, help="densify the scene to at least this many")
-    p.add_argument("--frames", type=int, default=30, help="timed frames (default %(default)s)")
+    p.add_argument("--seed", type=number(int, lo=0), default=0, help="scene seed")
+    p.add_argument("--triangles", type=number(int, lo=0), default=200_000, help="densify the scene to at least this many")
+    p.add_argument("--frames", type=number(int, lo=1), default=30, help="timed frames")
     add_image_size(p, default=ImageSize(640, 480), old=("--size",))
-    p.add_argument("--threads", type=int, default=1, help="ray-casting threads (0 = all cores)")
+    p.add_argument("--threads", type=number(int, lo=0), default=1, help="ray-casting threads (0 = all cores)")
     add_camera_height(p, default=1.6, old=("--height",))
     p.add_argument("--mode", choices=("exact", "fast", "raster"), default="exact",
                    help="which renderer mode 'fps' reports (both are measured)")
-    p.add_argument("--stream", type=int, default=0, help="also stream this many frames to disk, report memory")
+    p.add_argument("--stream", type=number(int, lo=0), default=0, help="also stream this many frames to disk, report memory")
     add_json(p, "the timings")
     p.set_defaults(func=run)
 

@@ -6,7 +6,7 @@ import argparse
 import os
 import time
 
-from semmatch.cli.common import add_json, emit
+from semmatch.cli.common import add_json, emit, number
 
 from . import add_thread_flags, apply_threads, thread_rows
 
@@ -17,10 +17,10 @@ def register(sub) -> None:
     p.add_argument("--model", nargs="*", default=[],
                    help="checkpoints to time (default: untrained compact and strong networks at the full "
                         "training profile's input size; speed does not depend on the weights)")
-    p.add_argument("--frames", type=int, default=20, help="timed frames per size (default 20)")
-    p.add_argument("--device", choices=("auto", "cpu", "cuda"), default="cpu", help="default %(default)s")
+    p.add_argument("--frames", type=number(int, lo=1), default=20, help="timed frames per size")
+    p.add_argument("--device", choices=("auto", "cpu", "cuda"), default="cpu", help="where the networks run")
     p.add_argument("--no-flip", action="store_true",
-                   help="time one network pass (default: with the mirror-image average, as predictions run)")
+                   help="time one network pass (default: two, with the mirror-image average, as predictions run)")
     add_thread_flags(p, "segment")
     add_json(p, "the timings")
     p.set_defaults(func=run)

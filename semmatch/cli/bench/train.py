@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 import time
 
-from semmatch.cli.common import add_json, emit
+from semmatch.cli.common import add_alias, add_json, emit, number
 
 
 def register(sub) -> None:
@@ -19,13 +19,14 @@ def register(sub) -> None:
                                      "reference for pipeline budgets)")
     p.add_argument("--arch", nargs="*", default=["compact", "strong"],
                    help="architectures to time (default: compact strong)")
-    p.add_argument("--profile", default="full", help="training profile whose batch, crop and schedule are timed "
-                                                    "(default %(default)s)")
-    p.add_argument("--steps", type=int, default=20, help="timed steps per network (default 20, after 3 warm-up)")
+    p.add_argument("--recipe", choices=("smoke", "full"), default="full",
+                   help="training recipe whose batch, crop and schedule are timed (semmatch train --recipe)")
+    add_alias(p, "--profile", canonical="--recipe", dest="recipe", choices=("smoke", "full"))
+    p.add_argument("--steps", type=number(int, lo=1), default=20, help="timed steps per network, after 3 warm-up steps")
     p.add_argument("--schedule", nargs="*", default=[], metavar="ARCH=STEPS",
                    help="steps to project the training time for, e.g. compact=2000 strong=1000 (the pipeline's "
-                        "full profile; default: the training profile's steps)")
-    p.add_argument("--threads", type=int, help="torch threads (default: torch's choice)")
+                        "full profile) (default: the training recipe's steps)")
+    p.add_argument("--threads", type=number(int, lo=1), help="torch threads (default: torch's choice)")
     add_json(p, "the timings")
     p.set_defaults(func=run)
 
@@ -137,9 +138,9 @@ def run(args: argparse.Namespace) -> int:
     unknown = set(schedule) - set(args.arch)
     if unknown:
         raise ValueError(f"--schedule names {', '.join(sorted(unknown))}, not timed (--arch {' '.join(args.arch)})")
-    result = {"networks": {a: time_training_steps(a, args.profile, args.steps, schedule=schedule.get(a))
+    result = {"networks": {a: time_training_steps(a, args.recipe, args.steps, schedule=schedule.get(a))
                            for a in args.arch},
-              "threads": torch.get_num_threads(), "profile": args.profile, "steps": args.steps}
+              "threads": torch.get_num_threads(), "recipe": args.recipe, "steps": args.steps}
     rows = [f"{a:<10} {r['crop']:>8} {r['batch_size']:>6} {r['seconds_per_step']:>8.3f} "
             f"{r['schedule_steps']:>6} {r['projected_minutes']:>9.1f}" for a, r in result["networks"].items()]
     table = "\n".join([f"{'network':<10} {'crop':>8} {'batch':>6} {'s/step':>8} {'steps':>6} {'minutes':>9}", *rows,

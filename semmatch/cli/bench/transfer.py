@@ -8,7 +8,7 @@ from __future__ import annotations
 import os
 import time
 
-from semmatch.cli.common import add_camera_height, add_json, emit
+from semmatch.cli.common import add_camera_height, add_json, emit, number
 
 
 def register(sub) -> None:
@@ -26,8 +26,8 @@ def register(sub) -> None:
         "Open3D closest point, the authors' approach) runs in the same process. fused runs on "
         "3d-projected-sp with a stand-in network's 21-class probabilities.",
     )
-    p.add_argument("--frames", type=int, default=10, help="frames per method (default %(default)s)")
-    p.add_argument("--seed", type=int, default=0, help="scene and trajectory seed")
+    p.add_argument("--frames", type=number(int, lo=1), default=10, help="frames per method")
+    p.add_argument("--seed", type=number(int, lo=0), default=0, help="scene and trajectory seed")
     add_camera_height(p, default=0.25, help="lower camera height in metres", old=("--height",))
     p.add_argument("--methods", nargs="*", default=None, choices=available_methods(), metavar="METHOD",
                    help=f"subset of methods, of {', '.join(available_methods())} (default: the paper's five and "
@@ -35,12 +35,11 @@ def register(sub) -> None:
     p.add_argument("--map", choices=("mesh", "fused", "both"), default="both",
                    help="what the methods transfer from: the scene's own mesh, the person's fused ground-truth map "
                         "of it (a TSDF reconstruction of the upper tour, as Table 1 indexes: denser, so slower), "
-                        "or both (default)")
-    p.add_argument("--repeat", type=int, default=1,
+                        "or both")
+    p.add_argument("--repeat", type=number(int, lo=1), default=1,
                    help="time every method this many times in a row against each map (index built once) and "
                         "report each method's median and range over the runs, and in how many runs every method "
-                        "reached the analysis plan's sensor rate (P3); the main table is the first run's "
-                        "(default %(default)s)")
+                        "reached the analysis plan's sensor rate (P3); the main table is the first run's")
     add_json(p, "the timings")
     p.set_defaults(func=run)
 
