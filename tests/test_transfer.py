@@ -491,7 +491,10 @@ def test_bench_transfer_repeat_reports_the_spread(capsys):
     assert out["methods"]["3d-neighborhood"]["cpu_fps"] == rates[0]  # the main table is the first run
     assert main(args) == 0
     assert "runs with every method at >= 30 CPU FPS" in capsys.readouterr().out
-    assert main(["bench", "transfer", "--repeat", "0"]) == 2
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as e:  # a number outside its range is refused by the parser (exit 2)
+        main(["bench", "transfer", "--repeat", "0"])
+    assert e.value.code == 2 and "--repeat: must be >= 1" in capsys.readouterr().err
 
 
 def test_time_methods_reports_cpu_and_wall_rates_on_one_thread(frames, index):
