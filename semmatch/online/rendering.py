@@ -35,7 +35,8 @@ class ModelView:
     ----------
     depth : float32 (H, W)
         Metres along the optical axis, 0 where the model has no surface.
-    rgb : uint8 (H, W, 3)
+    rgb : uint8 (H, W, 3) or None
+        None when rendered without colour.
     source : str
         ``"person"``, ``"robot"`` or ``"person+robot"`` (which model(s) filled it).
     person_share : float
@@ -82,8 +83,10 @@ class MeshRenderer:
                        else np.asarray(cols, dtype=np.float32))
         self.faces = np.asarray(semantic_map.faces, dtype=np.int64)
 
-    def render(self, pose: np.ndarray, intrinsics: Intrinsics, depth_max: float) -> tuple[np.ndarray, np.ndarray]:
-        """Depth (metres, 0 = no hit) and colour (uint8) of the mesh seen from ``pose`` (``T_world_camera``)."""
+    def render(self, pose: np.ndarray, intrinsics: Intrinsics, depth_max: float, *,
+               colour: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
+        """Depth (metres, 0 = no hit) and colour (uint8; None without ``colour``) of the mesh seen
+        from ``pose`` (``T_world_camera``)."""
         import open3d.core as o3c
 
         H, W = intrinsics.shape
@@ -95,6 +98,8 @@ class MeshRenderer:
         depth = np.where(hit, t, 0).astype(np.float32)
         depth[depth > depth_max] = 0
         hit &= depth > 0
+        if not colour:
+            return depth, None
         rgb = np.zeros((H, W, 3), np.uint8)
         if hit.any():
             prim = ans["primitive_ids"].numpy()[hit].astype(np.int64)
@@ -118,9 +123,11 @@ def _quiet_open3d() -> Iterator[None]:
         o3d.utility.set_verbosity_level(level)
 
 
-def render_tsdf(vol, pose: np.ndarray, intrinsics: Intrinsics, depth_max: float) -> tuple[np.ndarray, np.ndarray]:
-    """Depth (metres, 0 = no surface) and colour (uint8) of a :class:`~semmatch.fusion.tsdf.SemanticTSDF`
-    ray cast from ``pose`` (``T_world_camera``), as KinectFusion renders its model.
+def render_tsdf(vol, pose: np.ndarray, intrinsics: Intrinsics, depth_max: float, *,
+                colour: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
+    """Depth (metres, 0 = no surface) and colour (uint8; None without ``colour``) of a
+    :class:`~semmatch.fusion.tsdf.SemanticTSDF` ray cast from ``pose`` (``T_world_camera``), as
+    KinectFusion renders its model.
 
     All allocated blocks are offered to the ray caster (which culls them to the view); voxels need
     an integration weight of ``min(frames fused, 3)``.
@@ -136,20 +143,23 @@ def render_tsdf(vol, pose: np.ndarray, intrinsics: Intrinsics, depth_max: float)
     shift[:3, 3] = 0.5 * vol.voxel_size
     pose = shift @ np.asarray(pose, dtype=np.float64)
     if int(hm.size()) == 0:
-        return np.zeros((H, W), np.float32), np.zeros((H, W, 3), np.uint8)
+        return np.zeros((H, W), np.float32), np.zeros((H, W, 3), np.uint8) if colour else None
     keys = hm.key_tensor()[hm.active_buf_indices().to(o3c.int64)]
     with _quiet_open3d():  # it reports every growth of its range-map buffer
         r = vol.vbg.ray_cast(keys, o3c.Tensor(intrinsics.K), o3c.Tensor(np.linalg.inv(pose)), W, H,
-                             render_attributes=["depth", "color"], depth_scale=1000.0, depth_min=0.1,
+                             render_attributes=["depth", "color"] if colour else ["depth"], depth_scale=1000.0, depth_min=0.1,
                              depth_max=float(depth_max), weight_threshold=float(min(vol.n_frames, 3)),
                              trunc_voxel_multiplier=float(vol.trunc_voxels), range_map_down_factor=8)
     depth = np.nan_to_num(r["depth"].numpy()[..., 0] / 1000.0, nan=0.0, posinf=0.0, neginf=0.0).astype(np.float32)
+    if not colour:
+        return depth, None
     rgb = np.clip(np.rint(np.nan_to_num(r["color"].numpy()) * 255.0), 0, 255).astype(np.uint8)
     return depth, rgb
 
 
 def render_view(pose: np.ndarray, intrinsics: Intrinsics, *, person: MeshRenderer | None, robot=None,
-                depth_max: float = 4.0, min_person_share: float = 0.6, frame_valid: int | None = None) -> ModelView:
+                depth_max: float = 4.0, min_person_share: float = 0.6, frame_valid: int | None = None,
+                colour: bool = True) -> ModelView:
     """The model view at ``pose``: the person's map, filled from the robot's TSDF where it is empty.
 
     Parameters
@@ -167,6 +177,8 @@ def render_view(pose: np.ndarray, intrinsics: Intrinsics, *, person: MeshRendere
         Ray cast the robot's map too when the person's map fills fewer pixels than this share of
         ``frame_valid`` (the frame's pixels with depth; default: all pixels).
     frame_valid : int, optional
+    colour : bool
+        Render colour too (the photometric residuals need it; without it ``rgb`` is None).
 
     Returns
     -------
@@ -177,17 +189,18 @@ def render_view(pose: np.ndarray, intrinsics: Intrinsics, *, person: MeshRendere
     depth = rgb = None
     n_person = 0
     if person is not None:
-        depth, rgb = person.render(pose, intrinsics, depth_max)
+        depth, rgb = person.render(pose, intrinsics, depth_max, colour=colour)
         n_person = int(np.count_nonzero(depth > 0))
         if n_person >= need or robot is None or robot.n_frames == 0:
             return ModelView(depth, rgb, "person", 1.0 if n_person else 0.0)
     if robot is None or robot.n_frames == 0:
-        return ModelView(np.zeros((H, W), np.float32), np.zeros((H, W, 3), np.uint8), "none", 0.0)
-    d_r, c_r = render_tsdf(robot, pose, intrinsics, depth_max)
+        return ModelView(np.zeros((H, W), np.float32), np.zeros((H, W, 3), np.uint8) if colour else None, "none", 0.0)
+    d_r, c_r = render_tsdf(robot, pose, intrinsics, depth_max, colour=colour)
     if depth is None:
         return ModelView(d_r, c_r, "robot", 0.0)
     fill = (depth == 0) & (d_r > 0)
     depth = np.where(fill, d_r, depth)
-    rgb = np.where(fill[..., None], c_r, rgb)
+    if colour:
+        rgb = np.where(fill[..., None], c_r, rgb)
     n = int(np.count_nonzero(depth > 0))
     return ModelView(depth, rgb, "person+robot", n_person / n if n else 0.0)

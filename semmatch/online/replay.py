@@ -137,7 +137,7 @@ def frame_schedule(n: int, rate: float, busy: Callable[[int], float]) -> tuple[l
 
 
 def replay(session: RobotSession, frames: Sequence, *, rate: float = 30.0, poses: np.ndarray | None = None,
-           probs: Callable[[int], np.ndarray] | None = None, keep_labels: bool = False,
+           priors: np.ndarray | None = None, probs: Callable[[int], np.ndarray] | None = None, keep_labels: bool = False,
            on_frame: Callable[[int, object, FrameResult], None] | None = None, progress: bool = False) -> ReplayReport:
     """Play ``frames`` through ``session`` at ``rate`` frames per second.
 
@@ -150,6 +150,8 @@ def replay(session: RobotSession, frames: Sequence, *, rate: float = 30.0, poses
         Sensor rate in frames per second; 0 processes every frame as fast as it can.
     poses : ndarray (N, 4, 4), optional
         Poses to give the session instead of tracking (e.g. the true ones).
+    priors : ndarray (N, 4, 4), optional
+        Odometry priors of the frames (:meth:`RobotSession.step`'s ``prior``).
     probs : callable, optional
         ``probs(i)``: class probabilities of frame ``i`` (``fused``).
     keep_labels : bool
@@ -174,7 +176,8 @@ def replay(session: RobotSession, frames: Sequence, *, rate: float = 30.0, poses
 
     def busy(i: int) -> float:
         f = frames[i]
-        r = session.step(f, pose=None if poses is None else poses[i], probs=None if probs is None else probs(i))
+        r = session.step(f, pose=None if poses is None else poses[i], prior=None if priors is None else priors[i],
+                         probs=None if probs is None else probs(i))
         if on_frame is not None:
             on_frame(i, f, r)
         if not keep_labels:

@@ -133,14 +133,19 @@ class ModelTracker:
 
         return rgbd_pyramid(depth_to_uint16(depth), rgb, intr.K, levels=len(self.iterations), depth_max=self.depth_max)
 
-    def shrink(self, frame: Frame) -> tuple[np.ndarray, np.ndarray | None, Intrinsics]:
-        """The frame's depth and colour at the tracking size, and their camera."""
+    def shrink(self, frame: Frame, *, colour: bool = True) -> tuple[np.ndarray, np.ndarray | None, Intrinsics]:
+        """The frame's depth (nearest pixel, as :func:`semmatch.poses.odometry.shrink_frame`) and
+        colour (area-averaged; None without ``colour``) at the tracking size, and their camera."""
         from ..poses.odometry import shrink_frame
 
-        small = shrink_frame(frame, self.factor(frame.intrinsics))
+        s = self.factor(frame.intrinsics)
         intr = self.tracking_intrinsics(frame.intrinsics)
-        depth = np.where(np.isfinite(small.depth), small.depth, 0).astype(np.float32)
-        return depth, small.rgb, intr
+        if colour:
+            small = shrink_frame(frame, s)
+            depth, rgb = small.depth, small.rgb
+        else:  # depth alone: shrink_frame's nearest pixel is the top-left one of each block
+            depth, rgb = frame.depth[: intr.height * s: s, : intr.width * s: s], None
+        return np.where(np.isfinite(depth), depth, 0).astype(np.float32), rgb, intr
 
     def track(self, frame: Frame, predicted: np.ndarray, robot=None) -> TrackingResult:
         """Register ``frame`` onto the model view at ``predicted`` (``T_world_camera``).
@@ -160,19 +165,20 @@ class ModelTracker:
         """
         from ..poses.rgbd_odometry import multi_scale_odometry
 
-        depth, rgb, intr = self.shrink(frame)
+        photometric = self.residual != "point-to-plane" and frame.rgb is not None
+        depth, rgb, intr = self.shrink(frame, colour=photometric)
         valid = int(np.count_nonzero((depth > 0) & (depth <= self.depth_max)))
         if valid < 0.01 * depth.size:
             return TrackingResult(None, LOST, reason="no depth in the frame")
         view = render_view(predicted, intr, person=self.person, robot=robot, depth_max=self.depth_max,
-                           min_person_share=self.min_person_share, frame_valid=valid)
+                           min_person_share=self.min_person_share, frame_valid=valid, colour=photometric)
         share = min(view.n_valid / valid, 1.0)
         if share < self.min_model_share:
             return TrackingResult(None, LOST, model=view.source, model_share=share, view=view,
                                   reason=f"the model covers {share:.0%} of the view")
-        residual = self.residual if rgb is not None else "point-to-plane"
+        residual = self.residual if photometric else "point-to-plane"
         src = self._pyramid(depth, rgb, intr)
-        tgt = self._pyramid(view.depth, view.rgb if rgb is not None else None, intr)
+        tgt = self._pyramid(view.depth, view.rgb, intr)
         try:
             T, fitness, rmse = multi_scale_odometry(src, tgt, np.eye(4), method=residual, iterations=self.iterations)
         except RuntimeError:

@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import resource
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -56,6 +57,8 @@ def register(sub) -> None:
     p.add_argument("--no-baseline", action="store_true", help="skip plain Open3D frame-to-frame odometry")
     p.add_argument("--no-offline", action="store_true",
                    help="skip the offline estimate (estimate_poses with its pose graph: about 0.7 CPU-s per frame)")
+    p.add_argument("--figure", default=None, metavar="PNG",
+                   help="draw each frame's CPU time by stage (pose, transfer, fusion) and wall latency over the replay")
     from semmatch.cli.bench import add_thread_flags
 
     add_thread_flags(p, "online")
@@ -224,7 +227,38 @@ def run(args: argparse.Namespace) -> int:
         cpu = time.process_time() - c0
         s["offline_estimate"] = {"ate_m": ate(P, gt), "frames_per_cpu_second": len(P) / cpu}
     s["ate_frames"] = trajectory_error(report, gt).get("ate_frames", 0)
+    if args.figure:
+        latency_figure(report, args.figure, title=f"{Path(args.recording).name} frames {args.frames}, "
+                                                  f"{method}, one thread")
     return emit(s, args.json, _table(s))
+
+
+def latency_figure(report, path, *, title: str = "") -> Path:
+    """Per-frame CPU time by stage (stacked) and wall latency (line) of a replay, as a PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from semmatch.io import save_figure
+
+    res = report.results
+    x = np.arange(len(res))
+    fig, ax = plt.subplots(figsize=(7.0, 2.8))
+    bottom = np.zeros(len(res))
+    for stage, colour in (("pose", "#4477aa"), ("transfer", "#ee6677"), ("fusion", "#228833")):
+        v = np.array([r.cpu.get(stage, 0.0) * 1000.0 for r in res])
+        ax.fill_between(x, bottom, bottom + v, step="mid", color=colour, alpha=0.8, lw=0, label=f"{stage} (CPU)")
+        bottom += v
+    ax.plot(x, report.latencies_ms(), color="k", lw=0.5, alpha=0.6, label="latency (wall)")
+    ax.axhline(100, color="grey", ls="--", lw=0.8)
+    ax.set_xlabel("frame")
+    ax.set_ylabel("ms")
+    ax.set_ylim(0, max(120.0, float(np.percentile(report.latencies_ms(), 99)) * 1.1))
+    ax.set_title(title, fontsize=9)
+    ax.legend(fontsize=7, ncol=4, loc="upper right")
+    fig.tight_layout()
+    return save_figure(fig, path, dpi=100)
 
 
 def _table(s: dict) -> str:
