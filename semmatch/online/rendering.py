@@ -129,8 +129,8 @@ def render_tsdf(vol, pose: np.ndarray, intrinsics: Intrinsics, depth_max: float,
     :class:`~semmatch.fusion.tsdf.SemanticTSDF` ray cast from ``pose`` (``T_world_camera``), as
     KinectFusion renders its model.
 
-    All allocated blocks are offered to the ray caster (which culls them to the view); voxels need
-    an integration weight of ``min(frames fused, 3)``.
+    All allocated blocks are offered to the ray caster (which culls them to the view); every
+    integrated voxel counts (weight >= 1).
     """
     import open3d.core as o3c
 
@@ -148,7 +148,7 @@ def render_tsdf(vol, pose: np.ndarray, intrinsics: Intrinsics, depth_max: float,
     with _quiet_open3d():  # it reports every growth of its range-map buffer
         r = vol.vbg.ray_cast(keys, o3c.Tensor(intrinsics.K), o3c.Tensor(np.linalg.inv(pose)), W, H,
                              render_attributes=["depth", "color"] if colour else ["depth"], depth_scale=1000.0, depth_min=0.1,
-                             depth_max=float(depth_max), weight_threshold=float(min(vol.n_frames, 3)),
+                             depth_max=float(depth_max), weight_threshold=1.0,
                              trunc_voxel_multiplier=float(vol.trunc_voxels), range_map_down_factor=8)
     depth = np.nan_to_num(r["depth"].numpy()[..., 0] / 1000.0, nan=0.0, posinf=0.0, neginf=0.0).astype(np.float32)
     if not colour:

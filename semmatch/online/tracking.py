@@ -173,6 +173,13 @@ class ModelTracker:
         view = render_view(predicted, intr, person=self.person, robot=robot, depth_max=self.depth_max,
                            min_person_share=self.min_person_share, frame_valid=valid, colour=photometric)
         share = min(view.n_valid / valid, 1.0)
+        if share < 0.5 and view.source != "person" and robot is not None:
+            # Open3D's ray caster leaves its view incomplete on the call that outgrows its range-map
+            # buffer (it warns and reallocates for the next call): render once more
+            again = render_view(predicted, intr, person=self.person, robot=robot, depth_max=self.depth_max,
+                                min_person_share=self.min_person_share, frame_valid=valid, colour=photometric)
+            if again.n_valid > view.n_valid:
+                view, share = again, min(again.n_valid / valid, 1.0)
         if share < self.min_model_share:
             return TrackingResult(None, LOST, model=view.source, model_share=share, view=view,
                                   reason=f"the model covers {share:.0%} of the view")
