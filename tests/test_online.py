@@ -4,6 +4,8 @@ live frame schedule, and the replay verb's outputs."""
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
@@ -175,3 +177,20 @@ def test_replay_writes_a_rerun_log_that_reads_back(room, tmp_path):
     for entity in ("/world/camera/image/rgb", "/world/camera/image/labels", "/world/camera/image/depth",
                    "/tracking/status", "/world/trajectory", "/world/map"):
         assert entity in paths, (entity, sorted(paths))
+
+
+def test_bench_online_prints_the_chain_beside_plain_open3d(room, tmp_path, capsys):
+    from semmatch.cli import main
+    from semmatch.cli.bench.online import _played
+
+    assert _played(list(range(10)), slice(2, 5), 3) == [2, 3, 4, 3, 2, 3, 4]
+    _, lower = room
+    w = SequenceWriter(tmp_path / "lower", INTR)
+    for f in lower[:6]:
+        w.add(f.rgb, f.depth, f.pose, timestamp=f.timestamp)
+    w.close()
+    capsys.readouterr()
+    assert main(["bench", "online", str(tmp_path / "lower"), "--frames", "0:6", "--no-offline", "--json"]) == 0
+    s = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert s["played"] == 6 and s["processed"] == 6 and s["frames_per_cpu_second"] > 0
+    assert s["plain_open3d"]["ate_m"] >= 0 and "online_ate_m" in s and s["peak_rss_gb"] > 0

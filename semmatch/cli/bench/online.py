@@ -71,7 +71,8 @@ def _played(seq, sl: slice, passes: int) -> list[int]:
     idx = list(range(*sl.indices(len(seq))))
     out: list[int] = []
     for k in range(passes):
-        out += idx if k % 2 == 0 else idx[::-1][1:] if out else idx
+        seg = idx if k % 2 == 0 else idx[::-1]
+        out += seg[1:] if out else seg  # the turning frame once
     return out
 
 
@@ -92,15 +93,14 @@ class _Frames:
 
 
 def standin_map(seq, indices: list[int], voxel_size: float):
-    """The stand-in person's map: every 10th frame fused with its ground-truth pose, labelled by
-    depth bands of 0.5 m (ids 1..20; the labels' content does not change the transfer's cost)."""
-    import numpy as np
-
+    """The stand-in person's map: every 10th frame (every frame of a recording under 100 frames)
+    fused with its ground-truth pose, labelled by depth bands of 0.5 m (ids 1..20; the labels'
+    content does not change the transfer's cost)."""
     from semmatch.fusion import reconstruct
 
-    frames = [seq[i] for i in indices[::10]]
+    frames = [seq[i] for i in indices[:: 10 if len(indices) >= 100 else 1]]
     labels = [np.clip(1 + (f.depth / 0.5).astype(np.int64), 1, 20).astype(np.uint8) * (f.depth > 0) for f in frames]
-    return reconstruct(frames, labels=labels, voxel_size=voxel_size, depth_max=4.0)
+    return reconstruct(frames, labels=labels, voxel_size=voxel_size)
 
 
 def plain_open3d_odometry(frames, start: np.ndarray, depth_max: float = 4.0) -> tuple[np.ndarray, int, float]:
