@@ -129,6 +129,15 @@ def test_frame_schedule_drops_what_arrives_while_busy():
     assert frame_schedule(5, 0.0, lambda i: 1.0) == ([0, 1, 2, 3, 4], [])
 
 
+def test_replay_drops_frames_by_the_chosen_clock(room):
+    person, lower = room
+    truth = [f.pose for f in lower[:6]]
+    report = replay(RobotSession(person), lower[:6], rate=1e6, poses=truth, clock="cpu")
+    assert len(report.results) + len(report.dropped) == 6 and report.dropped  # a million frames per second
+    with pytest.raises(ValueError, match="clock"):
+        replay(RobotSession(person), lower[:2], clock="gpu")
+
+
 def test_replay_reports_latency_drops_and_trajectory_error(room):
     person, lower = room
     session = RobotSession(person, init_pose=lower[0].pose)

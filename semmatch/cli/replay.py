@@ -31,6 +31,9 @@ def register(sub) -> None:
                    help="method parameter (JSON value); repeatable")
     p.add_argument("--rate", type=number(float, lo=0.0), default=30.0,
                    help="sensor rate in frames per second; 0: every frame, as fast as possible (default %(default)s)")
+    p.add_argument("--clock", default="wall", choices=["wall", "cpu"],
+                   help="processing time on the simulated clock that decides the dropped frames: wall time, or "
+                        "CPU time (one free core; for a machine shared with other work) (default %(default)s)")
     p.add_argument("--frames", default=None, metavar="START:STOP",
                    help="play only these frames of the recording (Python slice, e.g. 0:500; default: all)")
     p.add_argument("--init", default="auto", choices=INITS,
@@ -182,10 +185,10 @@ def run(args) -> int:
                        inputs=[p for p in (args.recording, args.map) if p], overwrite=args.overwrite,
                        session=session) as outputs:
         report = replay(session, frames, rate=args.rate, poses=gt if args.true_poses else None, probs=probs,
-                        on_frame=outputs.on_frame, progress=not args.quiet)
+                        on_frame=outputs.on_frame, clock=args.clock, progress=not args.quiet)
         outputs.finish(report, session)
     s = report.summary(gt)
-    s.update(recording=str(args.recording), method=args.method if args.map else None,
+    s.update(recording=str(args.recording), method=args.method if args.map else None, clock=args.clock,
              mode="true poses" if args.true_poses else ("person's map" if args.map else "self-tracking"))
     if args.map_out:
         write_map(args.map_out, session.semantic_map())
