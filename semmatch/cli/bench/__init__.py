@@ -1,4 +1,4 @@
-"""``semmatch bench {render,transfer,fusion,metrics,segment,train} [--json]``.
+"""``semmatch bench {render,transfer,fusion,metrics,segment,train,online} [--json]``.
 
 Each benchmark lives in ``semmatch/cli/bench/<what>.py`` with ``register(subparsers)``; it
 prints a human table, or one JSON object with ``--json`` (:func:`semmatch.cli.common.add_json`,
@@ -11,7 +11,7 @@ import importlib
 import json
 import sys
 
-WHATS = ("render", "transfer", "fusion", "metrics", "segment", "train")
+WHATS = ("render", "transfer", "fusion", "metrics", "segment", "train", "online")
 
 
 def register(sub) -> None:

@@ -1,0 +1,103 @@
+"""How a robot session finds its first pose in the person's map (pluggable).
+
+An *initialiser* is any callable ``init(frame, person_map) -> Initialisation``: the session calls
+it on its first frame and, while tracking is lost, again as a relocalisation attempt. Two are
+provided: :func:`given_pose` (a known start pose, e.g. from the robot's docking station or a
+recording's first ground-truth pose) and :func:`register_frame` (the frame's point cloud
+registered onto the person's map by :func:`semmatch.poses.registration.register_maps`, FPFH +
+RANSAC + ICP). A floor-constrained global registration can replace it by passing another callable.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..geometry import backproject, check_pose
+from ..io import Frame, SemanticMap
+
+__all__ = ["Initialisation", "Initialiser", "given_pose", "register_frame"]
+
+
+@dataclass(frozen=True)
+class Initialisation:
+    """An initialiser's answer.
+
+    Attributes
+    ----------
+    pose : (4, 4) or None
+        ``T_world_camera`` in the person's map frame; None: not found (try again later).
+    quality : float
+        The initialiser's own score (registration fitness; 1 for a given pose).
+    method : str
+        Which initialiser answered.
+    """
+
+    pose: np.ndarray | None
+    quality: float
+    method: str
+
+
+#: the signature of an initialiser
+Initialiser = Callable[[Frame, "SemanticMap | None"], Initialisation]
+
+
+def given_pose(pose: np.ndarray) -> Initialiser:
+    """An initialiser that returns a known pose (checked once).
+
+    Parameters
+    ----------
+    pose : (4, 4)
+        ``T_world_camera`` of the first frame.
+
+    Returns
+    -------
+    callable
+    """
+    T = check_pose(pose, what="initial pose").copy()
+
+    def init(frame: Frame, person_map: SemanticMap | None) -> Initialisation:
+        return Initialisation(T.copy(), 1.0, "given")
+
+    return init
+
+
+def register_frame(frame: Frame, person_map: SemanticMap | None, *, voxel_size: float = 0.05,
+                   min_fitness: float = 0.3, depth_max: float = 4.0, seed: int = 0,
+                   restarts: int = 3) -> Initialisation:
+    """The frame's pose in the person's map by global registration of its point cloud.
+
+    Parameters
+    ----------
+    frame : Frame
+    person_map : SemanticMap
+    voxel_size : float
+        Feature voxel of :func:`~semmatch.poses.registration.register_maps` (metres).
+    min_fitness : float
+        Below this registration fitness the answer is "not found".
+    depth_max : float
+    seed, restarts : int
+        As :func:`~semmatch.poses.registration.register_maps`.
+
+    Returns
+    -------
+    Initialisation
+    """
+    from ..poses.registration import register_maps
+
+    if person_map is None:
+        return Initialisation(None, 0.0, "register")
+    pts, _ = backproject(np.where(np.isfinite(frame.depth), frame.depth, 0), frame.intrinsics, stride=2,
+                         max_depth=depth_max)
+    if len(pts) < 100:
+        return Initialisation(None, 0.0, "register")
+    cloud = SemanticMap(pts, np.zeros(len(pts), np.uint8), source=f"frame {frame.index}")
+    try:
+        reg = register_maps(cloud, person_map, voxel_size=voxel_size, seed=seed, restarts=restarts)
+    except ValueError:  # too few points after downsampling
+        return Initialisation(None, 0.0, "register")
+    if reg.fitness < min_fitness:
+        return Initialisation(None, float(reg.fitness), "register")
+    return Initialisation(np.asarray(reg.transform, dtype=np.float64), float(reg.fitness), "register")
