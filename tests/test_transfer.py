@@ -253,7 +253,7 @@ def test_paint_without_groups():
 
 
 # ----------------------------------------------------------------------------- building blocks
-@pytest.mark.parametrize("backend", ["cv2-slic", "cv2-slico", "cv2-seeds", "skimage-slic"])
+@pytest.mark.parametrize("backend", ["cv2-slic", "cv2-slico", "cv2-lsc", "cv2-seeds", "skimage-slic"])
 def test_superpixel_backends(backend, frames):
     seg = superpixels(frames[0].rgb, 64, backend=backend)
     assert seg.shape == frames[0].rgb.shape[:2] and seg.dtype == np.int32
