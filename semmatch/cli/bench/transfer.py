@@ -42,7 +42,7 @@ def register(sub) -> None:
                         "reached the analysis plan's sensor rate (P3); the main table is the first run's "
                         "(default %(default)s)")
     p.add_argument("--variant", action="append", default=[], metavar="METHOD:KEY=VALUE[,KEY=VALUE]",
-                   help="time METHOD again with these parameters (JSON values) beside its default row, in the same "
+                   help="time METHOD again with these parameters (JSON values) beside its plain row, in the same "
                         "runs, e.g. --variant 2d-slic:iterations=3; repeatable (rows are summarised, not counted "
                         "for the sensor rate; default: none)")
     add_json(p, "the timings")
