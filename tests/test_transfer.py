@@ -509,6 +509,22 @@ def test_bench_transfer_repeat_reports_the_spread(capsys):
     assert main(["bench", "transfer", "--repeat", "0"]) == 2
 
 
+def test_bench_variant_times_a_method_again_with_its_parameters(frames, index):
+    from semmatch.cli.bench.transfer import parse_variant
+    from semmatch.transfer.benchmark import time_methods
+
+    row = parse_variant("2d-slic:iterations=3,backend=cv2-slic")
+    assert row == ("2d-slic [iterations=3,backend=cv2-slic]", "2d-slic", {"iterations": 3, "backend": "cv2-slic"})
+    with pytest.raises(ValueError, match="METHOD:KEY=VALUE"):
+        parse_variant("2d-slic")
+    with pytest.raises(ValueError, match="unknown method 'slic'"):
+        parse_variant("slic:iterations=3")
+    out = time_methods(frames[:1], index, ["2d-slic"], exact_variant=False, variants=[row])
+    assert list(out["methods"]) == ["2d-slic", row[0]] and out["methods"][row[0]]["coverage"] > 0.9
+    with pytest.raises(ValueError, match="unknown method 'nope'"):
+        time_methods(frames[:1], index, [], variants=[("x", "nope", {})])
+
+
 def test_time_methods_reports_cpu_and_wall_rates_on_one_thread(frames, index):
     """The timing behind ``bench transfer`` and Table 1: the rate from the CPU time of the
     method, the wall rate and the load beside it, on one OpenCV / BLAS / torch thread, restored
