@@ -243,7 +243,7 @@ def test_paint_without_groups():
 
 
 # ----------------------------------------------------------------------------- building blocks
-@pytest.mark.parametrize("backend", ["cv2-slic", "cv2-slico", "cv2-seeds", "skimage-slic"])
+@pytest.mark.parametrize("backend", ["cv2-slic", "cv2-slico", "cv2-lsc", "cv2-seeds", "skimage-slic"])
 def test_superpixel_backends(backend, frames):
     seg = superpixels(frames[0].rgb, 64, backend=backend)
     assert seg.shape == frames[0].rgb.shape[:2] and seg.dtype == np.int32
@@ -495,6 +495,22 @@ def test_bench_transfer_repeat_reports_the_spread(capsys):
     with pytest.raises(SystemExit) as e:  # a number outside its range is refused by the parser (exit 2)
         main(["bench", "transfer", "--repeat", "0"])
     assert e.value.code == 2 and "--repeat: must be >= 1" in capsys.readouterr().err
+
+
+def test_bench_variant_times_a_method_again_with_its_parameters(frames, index):
+    from semmatch.cli.bench.transfer import parse_variant
+    from semmatch.transfer.benchmark import time_methods
+
+    row = parse_variant("2d-slic:iterations=3,backend=cv2-slic")
+    assert row == ("2d-slic [iterations=3,backend=cv2-slic]", "2d-slic", {"iterations": 3, "backend": "cv2-slic"})
+    with pytest.raises(ValueError, match="METHOD:KEY=VALUE"):
+        parse_variant("2d-slic")
+    with pytest.raises(ValueError, match="unknown method 'slic'"):
+        parse_variant("slic:iterations=3")
+    out = time_methods(frames[:1], index, ["2d-slic"], exact_variant=False, variants=[row])
+    assert list(out["methods"]) == ["2d-slic", row[0]] and out["methods"][row[0]]["coverage"] > 0.9
+    with pytest.raises(ValueError, match="unknown method 'nope'"):
+        time_methods(frames[:1], index, [], variants=[("x", "nope", {})])
 
 
 def test_time_methods_reports_cpu_and_wall_rates_on_one_thread(frames, index):

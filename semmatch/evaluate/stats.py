@@ -18,6 +18,12 @@ Two families of intervals of a mean over scenes (or of a paired mean difference)
 :func:`interval` dispatches between these and BCa / stratified percentile variants (used by the
 coverage study, :mod:`semmatch.experiments.coverage`). Degenerate samples (one value, or all
 values equal) get the zero-width interval ``(v, v, v)``.
+
+With several trained networks per architecture (training seeds), each comparison has one value
+per scene *and* network; :func:`two_level_bootstrap` resamples both (the networks, then the
+scenes within their kinds) and :func:`two_component_t_ci` is the matching t interval with a
+between-network and a between-scene variance component (checked by simulation in
+:mod:`semmatch.experiments.two_level_coverage`).
 """
 
 from __future__ import annotations
@@ -44,6 +50,12 @@ __all__ = [
     "paired_difference_ci",
     "ratio_of_means_ci",
     "ratio_lower_bound",
+    "NetworkSceneInterval",
+    "network_scene_grid",
+    "two_level_bootstrap",
+    "two_component_t_ci",
+    "grid_bootstrap",
+    "grid_two_component_t",
 ]
 
 
@@ -531,3 +543,276 @@ def ratio_lower_bound(num: ArrayLike, den: ArrayLike, *, confidence: float = 0.9
     disc = max(qb * qb - qa * qc, 0.0)
     return float((qb - np.sqrt(disc)) / qa)
 
+
+
+# ------------------------------------------------------------------------------------------------
+# several networks per architecture: intervals over networks and scenes
+
+
+@dataclass(frozen=True)
+class NetworkSceneInterval:
+    """The mean of a networks x scenes grid of values with its confidence bounds.
+
+    Attributes
+    ----------
+    mean : float
+        Mean over every network and scene (each network and scene weighted equally).
+    lo, hi : float
+        Two-sided interval at the requested confidence.
+    lower, upper : float
+        One-sided bounds at the same confidence (``mean >= lower`` and ``mean <= upper``), the
+        bounds behind the one-sided tests of the analysis plan.
+    n_networks, n_scenes : int
+        Networks and scenes used (scenes with a missing network are left out).
+    """
+
+    mean: float
+    lo: float
+    hi: float
+    lower: float
+    upper: float
+    n_networks: int
+    n_scenes: int
+
+
+def network_scene_grid(values: ArrayLike, networks: ArrayLike, scenes: ArrayLike,
+                       strata: ArrayLike | None = None, *, fn: str = "network_scene_grid"
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """A networks x scenes matrix of long-form values, and each scene's stratum.
+
+    Parameters
+    ----------
+    values : array_like
+        One value per (network, scene) row (e.g. a per-scene paired difference of one network).
+    networks, scenes : array_like
+        The row's network (e.g. its training seed) and scene labels.
+    strata : array_like, optional
+        The row's stratum (e.g. :func:`scene_kind` of its scene); must be the same on every row
+        of a scene. None: one stratum.
+    fn : str, optional
+        Function name for error messages.
+
+    Returns
+    -------
+    grid : ndarray (n_networks, n_scenes)
+        Networks and scenes in sorted label order. A scene without a value (or with a NaN) for
+        some network is left out.
+    scene_strata : ndarray of str (n_scenes,)
+
+    Raises
+    ------
+    ValueError
+        Lengths differ, a (network, scene) pair occurs twice, a scene has two strata, or no
+        scene has a value for every network.
+    """
+    x = _as_1d(values, f"{fn} (values)")
+    net = np.asarray(networks, dtype=object).ravel().astype(str)
+    sc = np.asarray(scenes, dtype=object).ravel().astype(str)
+    g = np.zeros(x.size, dtype=str) if strata is None else np.asarray(strata, dtype=object).ravel().astype(str)
+    if not (x.size == net.size == sc.size == g.size):
+        raise ValueError(f"{fn}: values, networks, scenes and strata must have equal lengths, got "
+                         f"{x.size}, {net.size}, {sc.size} and {g.size}")
+    nets, ni = np.unique(net, return_inverse=True)
+    scs, si = np.unique(sc, return_inverse=True)
+    if np.unique(ni * scs.size + si).size != x.size:
+        raise ValueError(f"{fn}: a (network, scene) pair occurs more than once")
+    grid = np.full((nets.size, scs.size), np.nan)
+    grid[ni, si] = x
+    scene_strata = np.empty(scs.size, dtype=object)
+    for j in range(scs.size):
+        labels = np.unique(g[si == j])
+        if labels.size > 1:
+            raise ValueError(f"{fn}: scene {scs[j]!r} is in several strata ({', '.join(labels)})")
+        scene_strata[j] = labels[0]
+    keep = ~np.isnan(grid).any(axis=0)
+    if not keep.any():
+        raise ValueError(f"{fn}: no scene has a value for every network ({', '.join(nets)})")
+    return grid[:, keep], scene_strata[keep].astype(str)
+
+
+def _resample_counts(n_resamples: int, groups: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """How often each unit is drawn in ``n_resamples`` resamples drawn within each group of ``groups``
+    (shape ``(n_resamples, groups.size)``)."""
+    n = groups.size
+    drawn = np.empty((n_resamples, n), dtype=np.int64)
+    for label in np.unique(groups):
+        members = np.flatnonzero(groups == label)
+        drawn[:, members] = members[rng.integers(0, members.size, size=(n_resamples, members.size))]
+    flat = (np.arange(n_resamples)[:, None] * n + drawn).ravel()
+    return np.bincount(flat, minlength=n_resamples * n).reshape(n_resamples, n).astype(np.float64)
+
+
+def two_level_bootstrap(
+    values: ArrayLike,
+    networks: ArrayLike,
+    scenes: ArrayLike,
+    strata: ArrayLike | None = None,
+    *,
+    confidence: float = 0.95,
+    n_resamples: int = 10000,
+    seed: int = 0,
+    resample_networks: bool = True,
+) -> NetworkSceneInterval:
+    """Percentile bootstrap of the mean over networks and scenes, resampling both.
+
+    Each resample draws the networks with replacement, then the scenes with replacement within
+    their stratum (the same scene draw for every network: the scenes are shared), and takes the
+    mean of the resampled grid. ``resample_networks=False`` keeps the networks fixed: the
+    one-level (scenes only) bootstrap, the analysis plan v1's view of a single network.
+
+    Parameters
+    ----------
+    values, networks, scenes, strata : array_like
+        Long form, one row per network and scene (:func:`network_scene_grid`); ``strata`` e.g.
+        the scene kinds (None: scenes resampled as one group).
+    confidence : float, optional
+        Level of the two-sided interval and of each one-sided bound, in (0, 1).
+    n_resamples : int, optional
+        Bootstrap resamples.
+    seed : int, optional
+        Seed of the resampling generator.
+    resample_networks : bool, optional
+        Resample the networks too (the two-level bootstrap).
+
+    Returns
+    -------
+    NetworkSceneInterval
+        A grid with a single value, or all values equal, gives zero-width bounds.
+
+    Raises
+    ------
+    ValueError
+        As :func:`network_scene_grid`, or ``confidence`` not in (0, 1), or ``n_resamples`` < 1.
+
+    Notes
+    -----
+    With few networks the bootstrap under-states the between-network variance by the factor
+    ``(N - 1) / N`` (2/3 for three networks) and its percentiles come from at most
+    ``N^N`` network draws; docs/analysis_plan_v2_coverage.md measures the coverage this gives.
+    """
+    grid, g = network_scene_grid(values, networks, scenes, strata, fn="two_level_bootstrap")
+    return grid_bootstrap(grid, g, confidence=confidence, n_resamples=n_resamples, seed=seed,
+                          resample_networks=resample_networks)
+
+
+def grid_bootstrap(
+    grid: np.ndarray,
+    scene_strata: ArrayLike | None = None,
+    *,
+    confidence: float = 0.95,
+    n_resamples: int = 10000,
+    seed: int | np.random.Generator = 0,
+    resample_networks: bool = True,
+) -> NetworkSceneInterval:
+    """:func:`two_level_bootstrap` on a networks x scenes matrix (:func:`network_scene_grid`).
+
+    Parameters
+    ----------
+    grid : ndarray (n_networks, n_scenes)
+        No NaN.
+    scene_strata : array_like, optional
+        Stratum of each scene (column); None: one stratum.
+    confidence, n_resamples, resample_networks
+        As in :func:`two_level_bootstrap`.
+    seed : int or numpy Generator
+        Seed of (or the) resampling generator.
+
+    Returns
+    -------
+    NetworkSceneInterval
+
+    Raises
+    ------
+    ValueError
+        ``confidence`` not in (0, 1), ``n_resamples`` < 1, a NaN or an empty grid, or
+        ``scene_strata`` not one label per column.
+    """
+    if not 0.0 < confidence < 1.0:
+        raise ValueError(f"two_level_bootstrap: confidence must be in (0, 1), got {confidence}")
+    if n_resamples < 1:
+        raise ValueError(f"two_level_bootstrap: n_resamples must be >= 1, got {n_resamples}")
+    grid = np.asarray(grid, dtype=np.float64)
+    if grid.ndim != 2 or grid.size == 0 or np.isnan(grid).any():
+        raise ValueError(f"two_level_bootstrap: expected a non-empty networks x scenes matrix without NaN, "
+                         f"got shape {grid.shape}")
+    n_net, n_sc = grid.shape
+    g = np.zeros(n_sc, dtype=int) if scene_strata is None else np.asarray(scene_strata, dtype=object).ravel().astype(str)
+    if g.size != n_sc:
+        raise ValueError(f"two_level_bootstrap: {n_sc} scenes but {g.size} stratum labels")
+    mean = float(grid.mean())
+    if grid.size == 1 or np.all(grid == grid.flat[0]):
+        return NetworkSceneInterval(mean, mean, mean, mean, mean, n_net, n_sc)
+    rng = np.random.default_rng(seed)
+    net_w = (_resample_counts(n_resamples, np.zeros(n_net, dtype=int), rng) if resample_networks
+             else np.ones((n_resamples, n_net)))
+    scene_w = _resample_counts(n_resamples, g, rng)
+    means = np.einsum("bn,ns,bs->b", net_w, grid, scene_w) / (n_net * n_sc)
+    alpha = 1.0 - confidence
+    lo, hi, lower, upper = np.quantile(means, [alpha / 2, 1 - alpha / 2, alpha, 1 - alpha])
+    return NetworkSceneInterval(mean, float(lo), float(hi), float(lower), float(upper), n_net, n_sc)
+
+def two_component_t_ci(
+    values: ArrayLike,
+    networks: ArrayLike,
+    scenes: ArrayLike,
+    *,
+    confidence: float = 0.95,
+) -> NetworkSceneInterval:
+    """t interval of the mean over networks and scenes with a network and a scene variance component.
+
+    For a grid ``d[n, s] = mu + a_n + b_s + e_ns`` (network, scene and interaction effects), the
+    grid mean has variance ``var(a)/N + var(b)/S + var(e)/(N S)``. Its estimate here is
+    ``v_net + v_scene`` with ``v_net`` the variance of the N network means over N and ``v_scene``
+    the variance of the S network-averaged scene values over S (the v1 plan's t over scenes,
+    applied to the network average). Each term also holds ``var(e)/(N S)``, so the sum counts the
+    interaction twice (conservative). Degrees of freedom: Welch-Satterthwaite, ``(v_net +
+    v_scene)^2 / (v_net^2/(N-1) + v_scene^2/(S-1))``; with one network, the plain t over scenes.
+
+    Parameters
+    ----------
+    values, networks, scenes : array_like
+        Long form, one row per network and scene (:func:`network_scene_grid`).
+    confidence : float, optional
+        Level of the two-sided interval and of each one-sided bound, in (0, 1).
+
+    Returns
+    -------
+    NetworkSceneInterval
+
+    Raises
+    ------
+    ValueError
+        As :func:`network_scene_grid`, or ``confidence`` not in (0, 1).
+    """
+    grid, _ = network_scene_grid(values, networks, scenes, None, fn="two_component_t_ci")
+    return grid_two_component_t(grid, confidence=confidence)
+
+
+def grid_two_component_t(grid: np.ndarray, *, confidence: float = 0.95) -> NetworkSceneInterval:
+    """:func:`two_component_t_ci` on a networks x scenes matrix (:func:`network_scene_grid`).
+
+    Raises
+    ------
+    ValueError
+        ``confidence`` not in (0, 1), or a NaN or an empty grid.
+    """
+    if not 0.0 < confidence < 1.0:
+        raise ValueError(f"two_component_t_ci: confidence must be in (0, 1), got {confidence}")
+    grid = np.asarray(grid, dtype=np.float64)
+    if grid.ndim != 2 or grid.size == 0 or np.isnan(grid).any():
+        raise ValueError(f"two_component_t_ci: expected a non-empty networks x scenes matrix without NaN, "
+                         f"got shape {grid.shape}")
+    n_net, n_sc = grid.shape
+    mean = float(grid.mean())
+    parts = []  # (variance term, degrees of freedom)
+    if n_net > 1:
+        parts.append((float(np.var(grid.mean(axis=1), ddof=1)) / n_net, n_net - 1))
+    if n_sc > 1:
+        parts.append((float(np.var(grid.mean(axis=0), ddof=1)) / n_sc, n_sc - 1))
+    var = sum(v for v, _ in parts)
+    if var == 0.0:
+        return NetworkSceneInterval(mean, mean, mean, mean, mean, n_net, n_sc)
+    df = var**2 / sum(v**2 / d for v, d in parts if v > 0)
+    se = float(np.sqrt(var))
+    two, one = (float(_st.t.ppf(q, df)) * se for q in (0.5 + confidence / 2, confidence))
+    return NetworkSceneInterval(mean, mean - two, mean + two, mean - one, mean + one, n_net, n_sc)

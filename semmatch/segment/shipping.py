@@ -12,6 +12,13 @@ torch thread count (the thread count sets the order of the floating-point sums, 
 reproduces a one-thread run's weights bit for bit), and says whether the weights came out the
 same as the shipped ones (:func:`weights_sha256`). ``python -m semmatch.experiments ship`` writes a
 shipped folder from trained checkpoints.
+
+Several training seeds of an architecture are shipped under the pipeline's network names
+(:func:`~semmatch.segment.train_config.network_spec`): ``compact.pt`` is training seed 0,
+``compact@1.pt`` and ``compact@2.pt`` seeds 1 and 2 of the same configuration, each with its
+manifest (``compact@1.json``). Notebook 02 finds them as it finds ``compact.pt`` (a network
+``compact@1`` of ``params.yaml`` looks for ``compact@1.pt``); :func:`shipped_seeds` lists an
+architecture's seeds and :func:`load_shipped_network` loads one after checking its digests.
 """
 
 from __future__ import annotations
@@ -29,6 +36,7 @@ from ..io import atomic_path, atomic_write_text
 __all__ = [
     "MANIFEST_FORMAT", "file_sha256", "weights_sha256", "network_manifest", "ship_networks", "shipped_checkpoint",
     "install_checkpoint", "provide_networks", "shipped_run", "apply_shipped_recipe",
+    "check_shipped_checkpoint", "shipped_seeds", "load_shipped_network",
 ]
 
 #: the ``format`` entry of a manifest
@@ -218,16 +226,7 @@ def shipped_checkpoint(config, shipped_dir: str | os.PathLike | None) -> tuple[P
     path = Path(shipped_dir) / Path(config.out).name
     if not path.is_file():
         return None, f"no shipped checkpoint {path}"
-    manifest_path = path.with_suffix(".json")
-    if not manifest_path.is_file():
-        raise ValueError(f"{path}: shipped checkpoint without its manifest {manifest_path.name}")
-    try:
-        manifest = json.loads(manifest_path.read_text())
-    except json.JSONDecodeError as e:
-        raise ValueError(f"{manifest_path}: not valid JSON ({e})") from None
-    if manifest.get("checkpoint_sha256") != file_sha256(path):
-        raise ValueError(f"{path}: its SHA-256 differs from the one in {manifest_path.name} (a changed, truncated or "
-                         f"Git LFS pointer file); restore it from git or retrain (make repro TRAIN=1)")
+    check_shipped_checkpoint(path)
     stored = load_model(path).info.get("train_config") or {}
     diff = config_differences(stored, config_record(config))
     if diff:
@@ -397,3 +396,129 @@ def apply_shipped_recipe(data_root: str | os.PathLike, shipped_dir: str | os.Pat
     atomic_write_text(recipe, json.dumps({"flip": flips, "chosen_on": "validation height sweeps",
                                           "chosen_on_by_network": chosen_on}, indent=2) + "\n")
     return choice
+
+
+def check_shipped_checkpoint(path: str | os.PathLike, *, weights: bool = False) -> dict:
+    """The manifest of a shipped checkpoint, after checking that the file matches it.
+
+    Parameters
+    ----------
+    path : path
+        ``<shipped folder>/<name>.pt``; its manifest is ``<name>.json`` beside it.
+    weights : bool, optional
+        Also compare the weights' digest (:func:`weights_sha256`; loads the checkpoint) with the
+        manifest's ``weights_sha256``.
+
+    Returns
+    -------
+    dict
+        The manifest.
+
+    Raises
+    ------
+    FileNotFoundError
+        No such checkpoint.
+    ValueError
+        No manifest, a manifest that is not valid JSON, or a digest that differs from the
+        manifest's (a changed, truncated or Git LFS pointer file).
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such shipped checkpoint")
+    manifest_path = path.with_suffix(".json")
+    if not manifest_path.is_file():
+        raise ValueError(f"{path}: shipped checkpoint without its manifest {manifest_path.name}")
+    try:
+        manifest = json.loads(manifest_path.read_text())
+    except json.JSONDecodeError as e:
+        raise ValueError(f"{manifest_path}: not valid JSON ({e})") from None
+    if manifest.get("checkpoint_sha256") != file_sha256(path):
+        raise ValueError(f"{path}: its SHA-256 differs from the one in {manifest_path.name} (a changed, truncated or "
+                         f"Git LFS pointer file); restore it from git or retrain (make repro TRAIN=1)")
+    if weights and manifest.get("weights_sha256") != weights_sha256(path):
+        raise ValueError(f"{path}: its weights' SHA-256 differs from weights_sha256 in {manifest_path.name}")
+    return manifest
+
+
+def shipped_seeds(shipped_dir: str | os.PathLike, arch: str) -> dict[int, Path]:
+    """The shipped training seeds of an architecture: seed -> checkpoint.
+
+    Seed 0 is ``<arch>.pt``, seed ``s`` is ``<arch>@<s>.pt`` (the pipeline's network names,
+    :func:`~semmatch.segment.train_config.network_spec`). Only checkpoints with a manifest count;
+    their digests are not checked here (:func:`check_shipped_checkpoint`).
+
+    Parameters
+    ----------
+    shipped_dir : path
+        The shipped folder (``models/<profile>``).
+    arch : {"compact", "strong"}
+
+    Returns
+    -------
+    dict
+        Training seed -> checkpoint path, in seed order (empty when none is shipped).
+
+    Raises
+    ------
+    FileNotFoundError
+        No such folder.
+    ValueError
+        A shipped file name that is not a network name (e.g. ``compact@x.pt``), or a manifest
+        whose training seed differs from its file name's.
+    """
+    from .train_config import network_spec
+
+    folder = Path(shipped_dir)
+    if not folder.is_dir():
+        raise FileNotFoundError(f"{folder}: no such shipped folder")
+    seeds: dict[int, Path] = {}
+    for path in sorted(folder.glob(f"{arch}*.pt")):
+        if path.stem != arch and not path.stem.startswith(f"{arch}@"):
+            continue
+        if not path.with_suffix(".json").is_file():
+            continue
+        _, seed = network_spec(path.stem)
+        manifest = json.loads(path.with_suffix(".json").read_text())
+        recorded = (manifest.get("train_config") or {}).get("seed")
+        if recorded is not None and int(recorded) != seed:
+            raise ValueError(f"{path}: named for training seed {seed} but its manifest records seed {recorded}")
+        seeds[seed] = path
+    return dict(sorted(seeds.items()))
+
+
+def load_shipped_network(shipped_dir: str | os.PathLike, name: str, *, device=None, flip: bool | None = None):
+    """Load a shipped network by its pipeline name (``compact``, ``strong@2``), digests checked.
+
+    Parameters
+    ----------
+    shipped_dir : path
+        The shipped folder (``models/<profile>``).
+    name : str
+        Network name (:func:`~semmatch.segment.train_config.network_spec`).
+    device : str or torch.device, optional
+        As :func:`~semmatch.segment.predict.load_model`.
+    flip : bool, optional
+        Mirror averaging; default: the folder's ``recipe.json`` choice for ``name``, else for its
+        architecture (the seeds share their architecture's choice), else on.
+
+    Returns
+    -------
+    Segmenter
+
+    Raises
+    ------
+    FileNotFoundError, ValueError
+        No such shipped network, or its file does not match its manifest
+        (:func:`check_shipped_checkpoint`, weights included).
+    """
+    from .predict import load_model
+    from .train_config import network_spec
+
+    arch, _ = network_spec(name)
+    path = Path(shipped_dir) / f"{name}.pt"
+    check_shipped_checkpoint(path, weights=True)
+    if flip is None:
+        recipe = Path(shipped_dir) / "recipe.json"
+        flips = json.loads(recipe.read_text()).get("flip", {}) if recipe.is_file() else {}
+        flip = bool(flips.get(name, flips.get(arch, True)))
+    return load_model(path, arch=arch, device=device, flip=flip)

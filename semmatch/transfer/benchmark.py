@@ -99,7 +99,8 @@ def time_method(name: str, frames: Sequence[Frame], index: MapIndex, **params) -
 
 
 def time_methods(
-    frames: Sequence[Frame], index: MapIndex, methods: Sequence[str] = METHODS, *, exact_variant: bool = True
+    frames: Sequence[Frame], index: MapIndex, methods: Sequence[str] = METHODS, *, exact_variant: bool = True,
+    variants: Sequence[tuple[str, str, dict]] = (),
 ) -> dict:
     """Time each method and the reference backend of ``3d-neighborhood`` on the same frames, on
     one core (:func:`one_core`, :func:`time_method`).
@@ -113,9 +114,11 @@ def time_methods(
         load_average, cpu_share, accuracy, coverage, paper_fps, speedup_vs_paper,
         speedup_vs_reference[, agreement_with_reference]}}, "reference": {...}, "threads":
         {...}}``; with ``exact_variant`` also ``"3d-neighborhood (exact)"`` (exact closest-point
-        refinement near class edges). Speed-ups compare CPU rates.
+        refinement near class edges). Speed-ups compare CPU rates. ``variants``: more rows
+        ``(key, method, parameters)``, each method timed again with those parameters (e.g.
+        ``("2d-slic [iterations=3]", "2d-slic", {"iterations": 3})``), after the methods.
     """
-    for m in methods:
+    for m in [*methods, *(name for _, name, _ in variants)]:
         if m not in available_methods():
             raise ValueError(f"unknown method {m!r}; valid: {', '.join(available_methods())}")
     with one_core():
@@ -124,10 +127,11 @@ def time_methods(
         ref = time_method("3d-neighborhood", frames, index, backend="reference")
         ref_labels = ref.pop("labels")
         out: dict = {"methods": {}, "reference": ref, "threads": current()}
-        variants = [(m, m, {}) for m in methods]
+        rows = [(m, m, {}) for m in methods]
         if exact_variant and "3d-neighborhood" in methods:
-            variants.append(("3d-neighborhood (exact)", "3d-neighborhood", {"exact": True}))
-        for key, name, params in variants:
+            rows.append(("3d-neighborhood (exact)", "3d-neighborhood", {"exact": True}))
+        rows += [(key, name, dict(params)) for key, name, params in variants]
+        for key, name, params in rows:
             r = time_method(name, frames, index, **params)
             labels = r.pop("labels")
             paper = None if name == "fused" else method_info(name).paper_fps

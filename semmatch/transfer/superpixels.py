@@ -1,5 +1,9 @@
-"""Superpixels from real libraries: OpenCV contrib (``cv2.ximgproc`` SLIC, SEEDS) and
-scikit-image (SLIC; maskSLIC through its ``mask`` argument)."""
+"""Superpixels from real libraries: OpenCV contrib (``cv2.ximgproc`` SLIC, SLICO, LSC, SEEDS) and
+scikit-image (SLIC; maskSLIC through its ``mask`` argument).
+
+The transfer methods' defaults (``cv2-slic``, 4 iterations, half resolution) are unchanged; the
+other settings are the levers measured for ``2d-slic``'s speed on the validation scenes
+(docs/speed.md, "The 2d-slic lever, chosen on validation scenes")."""
 
 from __future__ import annotations
 
@@ -9,7 +13,7 @@ import numpy as np
 __all__ = ["BACKENDS", "superpixels", "skimage_slic"]
 
 #: Selectable superpixel backends.
-BACKENDS = ("cv2-slic", "cv2-slico", "cv2-seeds", "skimage-slic")
+BACKENDS = ("cv2-slic", "cv2-slico", "cv2-lsc", "cv2-seeds", "skimage-slic")
 
 
 def superpixels(
@@ -29,15 +33,17 @@ def superpixels(
     rgb : uint8 (H,W,3)
     n_segments : int
         Wanted number of superpixels (the paper uses 512).
-    backend : {"cv2-slic", "cv2-slico", "cv2-seeds", "skimage-slic"}
-        ``cv2-*``: ``cv2.ximgproc`` SLIC / SLICO / SEEDS on the CIELAB image (fast);
+    backend : {"cv2-slic", "cv2-slico", "cv2-lsc", "cv2-seeds", "skimage-slic"}
+        ``cv2-*``: ``cv2.ximgproc`` SLIC / SLICO / LSC (linear spectral clustering, its default
+        ratio 0.075) / SEEDS on the CIELAB image (fast);
         ``skimage-slic``: :func:`skimage.segmentation.slic` (maskSLIC when ``mask`` is given).
     compactness : float
-        SLIC colour/space trade-off (OpenCV ``ruler``, scikit-image ``compactness``).
+        SLIC colour/space trade-off (OpenCV ``ruler``, scikit-image ``compactness``; not used by
+        ``cv2-lsc`` and ``cv2-seeds``).
     iterations : int
         SLIC/SEEDS iterations.
     scale : float
-        The ``cv2-slic``/``cv2-slico`` backends run on the image resized by ``scale`` and the
+        The ``cv2-slic``/``cv2-slico``/``cv2-lsc`` backends run on the image resized by ``scale`` and the
         labels are resized back (nearest): 0.5 segments a quarter of the pixels, with superpixel
         boundaries at 2-pixel precision. 1 = full resolution. Ignored by the other backends.
     mask : bool (H,W), optional
@@ -79,8 +85,11 @@ def superpixels(
         small = cv2.resize(lab, (max(1, round(W * scale)), max(1, round(H * scale))), interpolation=cv2.INTER_AREA)
     h, w = small.shape[:2]
     region = max(2, int(round(np.sqrt(h * w / int(n_segments)))))
-    algo = cv2.ximgproc.SLICO if backend == "cv2-slico" else cv2.ximgproc.SLIC
-    sp = cv2.ximgproc.createSuperpixelSLIC(small, algo, region, float(compactness))
+    if backend == "cv2-lsc":
+        sp = cv2.ximgproc.createSuperpixelLSC(small, region)
+    else:
+        algo = cv2.ximgproc.SLICO if backend == "cv2-slico" else cv2.ximgproc.SLIC
+        sp = cv2.ximgproc.createSuperpixelSLIC(small, algo, region, float(compactness))
     sp.iterate(int(iterations))
     seg = sp.getLabels()
     if seg.shape != (H, W):

@@ -40,8 +40,33 @@ def register(sub) -> None:
                    help="time every method this many times in a row against each map (index built once) and "
                         "report each method's median and range over the runs, and in how many runs every method "
                         "reached the analysis plan's sensor rate (P3); the main table is the first run's")
+    p.add_argument("--variant", action="append", default=[], metavar="METHOD:KEY=VALUE[,KEY=VALUE]",
+                   help="time METHOD again with these parameters (JSON values) beside its plain row, in the same "
+                        "runs, e.g. --variant 2d-slic:iterations=3; repeatable (rows are summarised, not counted "
+                        "for the sensor rate)")
     add_json(p, "the timings")
     p.set_defaults(func=run)
+
+
+def parse_variant(text: str) -> tuple[str, str, dict]:
+    """``METHOD:KEY=VALUE[,KEY=VALUE]`` -> ``(row name, method, parameters)`` for
+    :func:`semmatch.transfer.benchmark.time_methods`.
+
+    Raises
+    ------
+    ValueError
+        No ``METHOD:`` prefix, an unknown method, or a parameter without ``=``.
+    """
+    from semmatch.cli.transfer import _parse_params
+    from semmatch.transfer import available_methods
+
+    method, sep, rest = text.partition(":")
+    if not sep or not rest:
+        raise ValueError(f"--variant expects METHOD:KEY=VALUE[,KEY=VALUE], got {text!r}")
+    if method not in available_methods():
+        raise ValueError(f"--variant {text!r}: unknown method {method!r}; valid: {', '.join(available_methods())}")
+    params = _parse_params(rest.split(","))
+    return f"{method} [{rest}]", method, params
 
 
 def run(args) -> int:
@@ -55,6 +80,7 @@ def run(args) -> int:
     if args.repeat < 1:
         raise ValueError("--repeat must be >= 1")
     methods = list(args.methods or (*METHODS, "fused"))  # argparse checked the names
+    variants = [parse_variant(v) for v in args.variant]
     scene, poses = bench_scene(args.seed, args.frames, args.camera_height)
     frames = render_frames(scene, poses)
     names = ["mesh", "fused"] if args.map == "both" else [args.map]
@@ -62,7 +88,8 @@ def run(args) -> int:
     for name in names:  # the scene's mesh; the person's fused ground-truth map of it (as Table 1)
         maps[name] = scene.to_semantic_map() if name == "mesh" else bench_upper_map(scene, seed=args.seed)
     target = sensor_rate_fps()
-    result: dict = {"maps": {name: _time_map(m, frames, methods, args.repeat, target) for name, m in maps.items()},
+    result: dict = {"maps": {name: _time_map(m, frames, methods, args.repeat, target, variants)
+                             for name, m in maps.items()},
                     "frames": len(frames), "scene": scene.name,
                     "size": [frames[0].intrinsics.width, frames[0].intrinsics.height],
                     "repeat": args.repeat, "target_fps": target}
@@ -119,10 +146,11 @@ def rate_spread(runs: list[dict], methods, target: float) -> dict:
     return {"spread": spread, "runs_all_at_target": int(every)}
 
 
-def _time_map(semantic_map, frames, methods, repeat: int, target: float) -> dict:
+def _time_map(semantic_map, frames, methods, repeat: int, target: float, variants=()) -> dict:
     """Index one map and time every method against it ``repeat`` times in a row
     (:func:`semmatch.transfer.benchmark.time_methods`); the first run's timings, with the
-    spread over the runs (:func:`rate_spread`) when ``repeat > 1``."""
+    spread over the runs (:func:`rate_spread`) when ``repeat > 1``; ``variants`` as in
+    :func:`~semmatch.transfer.benchmark.time_methods`."""
     from tqdm import tqdm
 
     from semmatch.transfer import as_map_index
@@ -131,7 +159,7 @@ def _time_map(semantic_map, frames, methods, repeat: int, target: float) -> dict
     t, c = time.perf_counter(), time.process_time()
     index = as_map_index(semantic_map)
     build_s, build_cpu_s = time.perf_counter() - t, time.process_time() - c
-    runs = [time_methods(frames, index, methods)
+    runs = [time_methods(frames, index, methods, variants=variants)
             for _ in tqdm(range(repeat), desc="bench runs", disable=repeat == 1, leave=False)]
     out = dict(runs[0])
     if repeat > 1:
