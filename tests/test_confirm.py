@@ -141,7 +141,7 @@ def test_the_in_home_study_runs_in_the_confirm_homes(tmp_path, monkeypatch):
 
     order, seen = [], {}
     monkeypatch.setattr(confirm, "run_notebook", lambda nb, profile, **kw: order.append(nb))
-    monkeypatch.setattr(claims, "judge_figures", lambda figures: order.append("verdicts"))
+    monkeypatch.setattr(claims, "judge_figures", lambda figures, **kw: order.append("verdicts"))
 
     def fake_study(data, figures, **kw):
         order.append("in_home")
@@ -165,7 +165,7 @@ def test_notebooks_are_added_to_an_existing_run_only(tmp_path, monkeypatch):
 
     order = []
     monkeypatch.setattr(confirm, "run_notebook", lambda nb, profile, **kw: order.append(nb))
-    monkeypatch.setattr(claims, "judge_figures", lambda figures: order.append("verdicts"))
+    monkeypatch.setattr(claims, "judge_figures", lambda figures, **kw: order.append("verdicts"))
     with pytest.raises(ValueError, match="adds to an existing confirmatory run, but .*confirm.json does not exist"):
         confirm.run_confirm([9921], name="add", out_root=tmp_path, notebooks=[confirm.ADAPT_NOTEBOOK])
     first = confirm.run_confirm([9921], name="add", out_root=tmp_path)
