@@ -286,7 +286,7 @@ def run_confirm(seeds: Sequence[int], *, name: str | None = None, base_profile: 
               file=sys.stderr)
         jobs = int((data["profiles"][base_profile].get("common") or {}).get("jobs", 1))
         run_in_home_study(data_root / "in_home", where["figures_dir"] / "in_home", homes=homes, jobs=jobs,
-                          scheduler=scheduler, progress=log_output)
+                          scheduler=scheduler, progress=log_output, analysis_plan=plan)
         walls["in_home"] = round(time.perf_counter() - t, 1)
 
     models = data_root / "models"
