@@ -90,8 +90,8 @@ stages = {
     # models: the shipped adapted networks (models/<profile>/adapted, every profile; notebook 09 uses them when they
     # answer its request)
     nb="09_adapt_robot_view", deps=[f"data/{P}/scenes", f"data/{P}/models", f"data/{P}/lower_maps", "models"],
-    params=["profile", *common("kinds", "train_seeds", "voxel_size", "eval_voxel_size", "fused_base", "seed"),
-            f"profiles.{P}.adapt_robot_view"],
+    params=["profile", *common("kinds", "train_seeds", "eval_seeds", "voxel_size", "eval_voxel_size", "fused_base",
+                               "seed"), f"profiles.{P}.adapt_robot_view"],
     outs=[f"data/{P}/adapted"],
     figs=[*tbl("adapt_label_quality", "validation_adapt_recipe", "adapt_height_per_scene", "adapt_height", "adapt_gap",
                "adapt_gap_bounds", "table2_adapted_per_scene", "table2_adapted", "table2_adapted_vs_transfer",
@@ -135,7 +135,8 @@ def with_overrides(params):
 
 
 #: data files a module reads at run time: a stage that runs the module depends on them too
-MODULE_DATA = {"semmatch/experiments/analysis_plan.py": ["semmatch/experiments/analysis_plan.yaml"],
+MODULE_DATA = {"semmatch/experiments/analysis_plan.py": ["semmatch/experiments/analysis_plan.yaml",
+                                                          "semmatch/experiments/analysis_plan_v2.yaml"],
                "semmatch/experiments/adapt_claims.py": ["semmatch/experiments/adapt_plan.yaml"]}
 
 out = {"stages": {}}

@@ -145,15 +145,17 @@ def test_several_networks_need_the_two_level_bootstrap(monkeypatch):
     assert out["verdict"].iloc[0] == "against" and out["p_against"].iloc[0] < 0.001
 
 
+def _fake_bootstrap(values, networks, scenes, strata, *, confidence, n_resamples, seed):
+    """A stand-in for ``two_level_bootstrap``: a narrow interval around the mean."""
+    a = 1.0 - confidence
+    m = float(np.mean(values))
+    return SimpleNamespace(mean=m, lo=m - 0.01 * (1 - a), hi=m + 0.01 * (1 - a), lower=m - 0.01, upper=m + 0.01)
+
+
 def test_judge_figures_v2_on_several_networks(tmp_path, monkeypatch):
     from semmatch.evaluate import stats
 
-    def fake(values, networks, scenes, strata, *, confidence, n_resamples, seed):
-        a = 1.0 - confidence
-        m = float(np.mean(values))
-        return SimpleNamespace(mean=m, lo=m - 0.01 * (1 - a), hi=m + 0.01 * (1 - a), lower=m - 0.01, upper=m + 0.01)
-
-    monkeypatch.setattr(stats, "two_level_bootstrap", fake, raising=False)
+    monkeypatch.setattr(stats, "two_level_bootstrap", _fake_bootstrap, raising=False)
     rows = [dict(scene=f"{kind}_{9000 + s}", route="own", reference="fusion", model="compact", method=m,
                  training_seed=n, mean_acc=0.7 + 0.05 * (m == "fused") + 0.001 * (s + n), color_acc=0.8,
                  jaccard=0.6, sorensen=0.7)
@@ -230,3 +232,65 @@ def test_plan_order_check_fails_on_a_seed_file_before_the_plan(tmp_path):
     _git(tmp_path, "commit", "-qm", "the plan, then a later file")
     bad = files_before_plan(tmp_path)
     assert [p for _, p in bad] == ["figures/confirm/seeds-8101-8106/table2_per_scene.csv"]
+
+
+def test_a_confirm_runs_tables_get_their_training_seeds_and_its_speed_claims_the_bench(tmp_path, monkeypatch):
+    """The wiring of a v2 run: per-scene tables as notebooks 05-07 write them with several training
+    seeds (``compact@1`` ...) get ``training_seed`` (ground truth none), and P1-P3 read a small
+    ``bench_speed.json`` (the plan's benchmark) instead of Table 1; the v1 plan ignores both."""
+    import json
+
+    from semmatch.evaluate import stats
+    from semmatch.experiments.plan_networks import label_training_seeds, plan_networks, with_training_seed
+    from semmatch.experiments.speed_claims import BENCH_RECORD
+
+    monkeypatch.setattr(stats, "two_level_bootstrap", _fake_bootstrap, raising=False)
+    rows = [dict(scene=f"{kind}_{9000 + s}", route="own", reference="fusion", model=net, method=m,
+                 mean_acc=0.7 + 0.05 * (m == "fused") + 0.001 * s + (0.03 if m == "3d-slic" and net == "ground truth"
+                                                                     else 0.0), color_acc=0.8, jaccard=0.6, sorensen=0.7)
+            for kind in KINDS for s in range(3) for net in ("compact", "compact@1", "compact@2", "ground truth")
+            for m in (("3d-slic", "3d-projected-sp") if net == "ground truth" else ("lower", "3d-slic", "fused"))]
+    pd.DataFrame(rows).to_csv(tmp_path / "table2_per_scene.csv", index=False)
+    pd.DataFrame({"method": ["2d-slic", "3d-slic"], "cpu_fps": [50.0, 5.0]}).to_csv(tmp_path / "table1_speed.csv",
+                                                                                  index=False)
+    assert label_training_seeds(tmp_path) == [tmp_path / "table2_per_scene.csv"]
+    assert label_training_seeds(tmp_path) == []  # once
+    table = pd.read_csv(tmp_path / "table2_per_scene.csv")
+    assert list(table.columns[3:5]) == ["model", "training_seed"] and set(table["model"]) == {"compact", "ground truth"}
+    assert table.groupby("model")["training_seed"].agg(lambda v: sorted(v.dropna().unique())).to_dict() == \
+        {"compact": [0, 1, 2], "ground truth": []}
+    assert "training_seed" in (tmp_path / "table2_per_scene.md").read_text()
+    with pytest.raises(ValueError, match="needs a 'model' column"):
+        with_training_seed(pd.DataFrame({"scene": ["a"]}))
+    spread = {m: {"median": f, "min": f - 1, "max": f + 1} for m, f in
+              (("2d-slic", 37.0), ("3d-slic", 40.0), ("fused", 45.0), ("3d-neighborhood (exact)", 5.0),
+               ("reference (closest point)", 12.0))}
+    runs = [{"2d-slic": 37.0, "load_average": 0.5}, {"2d-slic": 36.0, "load_average": 0.7}]
+    (tmp_path / BENCH_RECORD).write_text(json.dumps({
+        "maps": {"fused": {"spread": spread, "runs": runs}}, "command": "semmatch bench transfer --map fused --repeat 5",
+        "machine": {"device_name": "Test CPU", "cpu_count": 2}}))
+    verdicts = judge_figures(tmp_path, plan=V2).set_index("claim")
+    assert verdicts.loc["F1", "verdict"] == "holds" and "(3 networks)" in verdicts.loc["F1", "interval"]
+    assert verdicts.loc["C6-gt", "interval"].startswith("t over scenes (one network)")  # no training seed
+    assert verdicts.loc["P3", "verdict"] == "holds" and verdicts.loc["P3", "data"].startswith("speed (semmatch bench")
+    evidence = pd.read_csv(tmp_path / "claims_speed_bench.csv").set_index("claim")["evidence"]
+    assert "Test CPU (2 CPUs), load 0.5-0.7, reference 12.0 FPS" in evidence["P3"]  # the exact variant is no method
+    v1 = judge_figures(tmp_path, tmp_path / "v1", plan=load_analysis_plan(PLAN_FILE)).set_index("claim")
+    assert v1.loc["P3", "data"] == "speed (Table 1)" and v1.loc["P3", "verdict"] == "does not hold"
+    assert plan_networks(["compact", "strong"], load_analysis_plan(PLAN_FILE), tmp_path) == ["compact", "strong"]
+
+
+def test_a_v2_run_evaluates_every_shipped_training_seed(tmp_path, capsys):
+    """With the ``seeds`` branch's :func:`~semmatch.segment.shipping.shipped_seeds` (skipped before it is merged)."""
+    import json
+
+    from semmatch.experiments.plan_networks import plan_networks
+    from semmatch.segment import shipping
+
+    if not hasattr(shipping, "shipped_seeds"):
+        pytest.skip("semmatch.segment.shipping.shipped_seeds (the seeds branch) is not merged yet")
+    for name, seed in (("compact", 0), ("compact@2", 2), ("strong", 0)):
+        (tmp_path / f"{name}.pt").write_bytes(b"stand-in")
+        (tmp_path / f"{name}.json").write_text(json.dumps({"train_config": {"seed": seed}}))
+    assert plan_networks(["compact", "strong"], V2, tmp_path) == ["compact", "compact@2", "strong"]
+    assert "compact: training seeds [1] of the plan are not shipped" in capsys.readouterr().err

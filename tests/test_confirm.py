@@ -141,7 +141,7 @@ def test_the_in_home_study_runs_in_the_confirm_homes(tmp_path, monkeypatch):
 
     order, seen = [], {}
     monkeypatch.setattr(confirm, "run_notebook", lambda nb, profile, **kw: order.append(nb))
-    monkeypatch.setattr(claims, "judge_figures", lambda figures: order.append("verdicts"))
+    monkeypatch.setattr(claims, "judge_figures", lambda figures, **kw: order.append("verdicts"))
 
     def fake_study(data, figures, **kw):
         order.append("in_home")
@@ -165,7 +165,7 @@ def test_notebooks_are_added_to_an_existing_run_only(tmp_path, monkeypatch):
 
     order = []
     monkeypatch.setattr(confirm, "run_notebook", lambda nb, profile, **kw: order.append(nb))
-    monkeypatch.setattr(claims, "judge_figures", lambda figures: order.append("verdicts"))
+    monkeypatch.setattr(claims, "judge_figures", lambda figures, **kw: order.append("verdicts"))
     with pytest.raises(ValueError, match="adds to an existing confirmatory run, but .*confirm.json does not exist"):
         confirm.run_confirm([9921], name="add", out_root=tmp_path, notebooks=[confirm.ADAPT_NOTEBOOK])
     first = confirm.run_confirm([9921], name="add", out_root=tmp_path)
@@ -203,3 +203,131 @@ def test_the_in_home_studys_seeds_are_refused(tmp_path):
     with pytest.raises(ValueError, match=r"refusing confirmatory seeds \[8301\]: they are held-out adaptation scenes"):
         confirm.write_confirm_params([8301], tmp_path / "params.yaml")
     assert not any(tmp_path.iterdir())
+
+
+# --- the plan that judges a run (issue 52: v2 for its confirmatory seeds, v1 otherwise) -----------------
+
+FAKE_V2_SEEDS = [9941, 9942]  # stand-ins for 8101-8106: no scene of the real seeds is generated or read
+
+
+@pytest.fixture
+def fake_v2_seeds(tmp_path, monkeypatch):
+    """The v2 plan with ``FAKE_V2_SEEDS`` as its confirmatory seeds (a copy of both plan files)."""
+    from semmatch.experiments import analysis_plan
+
+    plans = tmp_path / "plans"
+    plans.mkdir()
+    (plans / analysis_plan.PLAN_FILE.name).write_text(analysis_plan.PLAN_FILE.read_text())
+    v2 = yaml.safe_load(analysis_plan.PLAN_V2_FILE.read_text())
+    v2["scenes"]["confirmatory_seeds"] = FAKE_V2_SEEDS
+    (plans / analysis_plan.PLAN_V2_FILE.name).write_text(yaml.safe_dump(v2, sort_keys=False))
+    monkeypatch.setattr(analysis_plan, "PLAN_V2_FILE", plans / analysis_plan.PLAN_V2_FILE.name)
+    assert analysis_plan.plan_for_seeds(FAKE_V2_SEEDS).rules == "v2"
+    return FAKE_V2_SEEDS
+
+
+def _fake_bench(argv: list[str]) -> str:
+    """A small ``semmatch bench transfer --map fused --repeat 5 --json`` record."""
+    rates = {"2d-slic": [31.0, 38.0, 37.0, 36.5, 39.0], "3d-projected-sp": [50.0] * 5, "3d-slic": [45.0] * 5,
+             "dbscan": [44.0] * 5, "3d-neighborhood": [300.0] * 5, "fused": [60.0] * 5,
+             "3d-neighborhood (exact)": [20.0] * 5, "reference (closest point)": [12.0, 12.5, 12.2, 12.1, 12.4]}
+    spread = {m: {"median": sorted(v)[2], "min": min(v), "max": max(v), "runs_at_target": sum(x >= 30 for x in v)}
+              for m, v in rates.items()}
+    runs = [{**{m: v[i] for m, v in rates.items()}, "load_average": 1.0 + 0.1 * i} for i in range(5)]
+    return "bench runs 5/5\n" + json.dumps({"maps": {"fused": {"spread": spread, "runs": runs}}, "repeat": 5,
+                                            "argv": argv}) + "\n"
+
+
+def test_the_run_is_judged_by_the_plan_of_its_seeds(tmp_path, monkeypatch, fake_v2_seeds):
+    """v2's seeds: v2 verdicts, every shipped training seed's networks, the plan's speed benchmark once
+    (a fresh process; its record with the machine, load and reference rate); other seeds: v1 as before."""
+    import subprocess
+
+    import semmatch.experiments.claims as claims
+    import semmatch.segment.shipping as shipping
+    from semmatch.experiments import speed_claims
+
+    judged, benches = [], []
+    monkeypatch.setattr(confirm, "run_notebook", lambda nb, profile, **kw: None)
+    monkeypatch.setattr(claims, "judge_figures", lambda figures, plan=None: judged.append(plan))
+    monkeypatch.setattr(confirm, "unshipped_networks", lambda *a: {})  # seeds 1 and 2 are not shipped here
+    monkeypatch.setattr(shipping, "shipped_seeds", lambda folder, arch: {0: Path(f"{arch}.pt"), 1: Path("a"),
+                                                                          2: Path("b")}, raising=False)
+
+    real_run = subprocess.run
+
+    def fake_run(argv, **kw):  # the benchmark answers with a small record; git and the rest run as they are
+        if argv[1:4] != ["-m", "semmatch", "bench"]:
+            return real_run(argv, **kw)
+        benches.append(argv)
+        return subprocess.CompletedProcess(argv, 0, stdout=_fake_bench(argv), stderr="")
+
+    monkeypatch.setattr(speed_claims.subprocess, "run", fake_run)
+    record = confirm.run_confirm(fake_v2_seeds, name="v2", out_root=tmp_path)
+    figures = tmp_path / "figures" / "confirm" / "v2"
+    assert [p.rules for p in judged] == ["v2"] and record["analysis_plan"]["rules"] == "v2"
+    assert benches[0][1:] == ["-m", "semmatch", "bench", "transfer", "--map", "fused", "--repeat", "5", "--json"]
+    bench = json.loads((figures / speed_claims.BENCH_RECORD).read_text())
+    assert bench["command"] == "semmatch bench transfer --map fused --repeat 5 --json" and bench["machine"]["cpu_count"]
+    speed = record["analysis_plan"]["speed_bench"]
+    assert (speed["load_min"], speed["load_max"], speed["reference_fps"]) == (1.0, 1.4, 12.2)
+    params = pipeline.load_params(tmp_path / "data" / "confirm" / "v2" / "params.yaml", "full")
+    assert params["common"]["networks"] == ["compact", "compact@1", "compact@2", "strong", "strong@1", "strong@2"]
+    assert "speed_bench" in record["wall_seconds"]
+    confirm.run_confirm(fake_v2_seeds, name="v2", out_root=tmp_path, notebooks=["05_evaluate_synthetic"])
+    assert len(benches) == 1 and [p.rules for p in judged] == ["v2", "v2"]  # an addition keeps the measurement
+
+    judged.clear()
+    record = confirm.run_confirm([9943], name="v1", out_root=tmp_path)
+    assert [p.rules for p in judged] == ["v1"] and record["analysis_plan"] == {
+        "file": "analysis_plan.yaml", "version": 1, "rules": "v1"}
+    assert len(benches) == 1 and not (tmp_path / "figures" / "confirm" / "v1" / speed_claims.BENCH_RECORD).exists()
+    params = pipeline.load_params(tmp_path / "data" / "confirm" / "v1" / "params.yaml", "full")
+    assert params["common"]["networks"] == ["compact", "strong"]
+    with pytest.raises(ValueError, match="mix the v2 plan's confirmatory seeds"):
+        confirm.run_confirm([9943, fake_v2_seeds[0]], out_root=tmp_path)
+
+
+def test_notebook_09_judges_the_adaptation_claims_by_the_plan_of_its_seeds(monkeypatch, fake_v2_seeds):
+    """Notebook 09's claims cell, run with fake seeds: the v2 plan for v2's seeds, v1 for the others."""
+    import papermill as pm
+
+    import semmatch.experiments.adapt_claims as adapt_claims
+
+    nb = ROOT / "notebooks" / "09_adapt_robot_view.ipynb"
+    assert "eval_seeds" in pm.inspect_notebook(str(nb))
+    assert pipeline.notebook_parameters("09_adapt_robot_view", "full")["eval_seeds"] == \
+        PROFILES["full"]["common"]["eval_seeds"]
+    cell = next("".join(c["source"]) for c in json.loads(nb.read_text())["cells"]
+                if "judge_adaptation(" in "".join(c["source"]) and c["cell_type"] == "code")
+    seen = []
+    monkeypatch.setattr(adapt_claims, "judge_adaptation", lambda figures, **kw: seen.append(kw["analysis_plan"]))
+    monkeypatch.setattr(adapt_claims, "adaptation_markdown", lambda claims: "")
+    for seeds in (fake_v2_seeds, [7001, 7002, 7003]):
+        exec(cell, {"figures_dir": "unused", "eval_seeds": seeds})
+    assert [p.rules for p in seen] == ["v2", "v1"]
+
+
+def test_the_readme_header_names_the_rules_of_the_plan_that_judged_the_run(tmp_path, fake_v2_seeds):
+    from semmatch.experiments import readme
+
+    figs = tmp_path / "figures"
+    base = {"kinds": ["a"], "networks_from": "models/full", "code_version": "abc", "started": "2026-11-28T10:00:00Z",
+            "total_seconds": 60.0}
+    for name, seeds, plan in (("first", [8001, 8002, 8003, 8004, 8005, 8006], None),
+                              ("second", fake_v2_seeds, {"file": "analysis_plan_v2.yaml", "version": 2, "rules": "v2"})):
+        (figs / "confirm" / name).mkdir(parents=True)
+        (figs / "confirm" / name / "verdicts.md").write_text("| claim |\n|---|\n| C1 |\n")
+        rec = {**base, "name": name, "seeds": seeds, **({"analysis_plan": plan} if plan else {})}
+        (figs / "confirm" / name / "confirm.json").write_text(json.dumps(rec))
+    assert readme.confirmatory_run(figs) == figs / "confirm" / "second"  # the v2 plan's run, once it exists
+    r = tmp_path / "README.md"
+    r.write_text(f"# x\n{readme.BEGIN}\nold\n{readme.END}\n")
+    readme.update_readme(r, figs / "full", judge=False, confirmatory_dir=figs / "confirm" / "second")
+    text = r.read_text()
+    assert "analysis plan v2 ([docs/analysis_plan_v2.md]" in text and "intersection-union" in text
+    assert "](docs/results_confirmatory_v2.md)" in text and (tmp_path / "docs" / "results_confirmatory_v2.md").is_file()
+    readme.update_readme(r, figs / "full", judge=False, confirmatory_dir=figs / "confirm" / "first")
+    text = r.read_text()  # the first run (no plan in its record: the plan of its seeds, v1) reads as before
+    assert "judged by the analysis plan ([docs/analysis_plan.md](docs/analysis_plan.md)): one verdict" in text
+    assert "intersection-union" not in text and "](docs/results_confirmatory.md)" in text

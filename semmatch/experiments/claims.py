@@ -278,8 +278,10 @@ def check_claims(
             for model in dref["model"].unique():
                 if (claim.models == "networks" and model == _GT) or (claim.models == "ground truth" and model != _GT):
                     continue
-                index = ["scene", NETWORK_COLUMN] if NETWORK_COLUMN in dref.columns else "scene"
-                wide = dref[dref["model"] == model].pivot(index=index, columns=level_col, values=claim.measure)
+                mine = dref[dref["model"] == model]  # a model without training seeds (ground truth): one per scene
+                seeded = NETWORK_COLUMN in mine and mine[NETWORK_COLUMN].notna().any()
+                index = ["scene", NETWORK_COLUMN] if seeded else "scene"
+                wide = mine.pivot(index=index, columns=level_col, values=claim.measure)
                 wide = wide.dropna(axis=1, how="all")
                 scenes = wide.index.get_level_values("scene")
                 strata = [scene_kind(s) for s in scenes]
@@ -491,12 +493,35 @@ def _network_mean(per_scene: pd.DataFrame) -> pd.DataFrame:
     return per_scene.drop(columns=NETWORK_COLUMN).groupby(keys, sort=False, dropna=False).mean().reset_index()
 
 
+def _speed_verdicts(figures_dir: Path, out_dir: Path, table1: pd.DataFrame | None,
+                    plan: AnalysisPlan) -> tuple[pd.DataFrame | None, str]:
+    """The speed claims of a run and what they were judged on: under a v2 plan the speed benchmark's
+    record (:data:`~semmatch.experiments.speed_claims.BENCH_RECORD`) when the run has one (its
+    verdicts with the machine, load and reference rate written to ``claims_speed_bench``), else
+    Table 1 (None without it)."""
+    import json
+
+    from .speed_claims import BENCH_RECORD, bench_conditions
+
+    bench = figures_dir / BENCH_RECORD
+    if plan.rules == "v2" and bench.is_file():
+        record = json.loads(bench.read_text())
+        speed = judge_speed_claims(bench_speed_table(record), plan=plan)
+        c = bench_conditions(record)
+        speed["evidence"] += (f"; {c['cpu']} ({c['cpu_count']} CPUs), load {c['load_min']}-{c['load_max']}, "
+                              f"reference {c['reference_fps']:.1f} FPS" if c["reference_fps"] is not None else "")
+        save_table(speed, out_dir, "claims_speed_bench")
+        return speed, f"speed ({record.get('command', 'bench transfer')})"
+    return (None if table1 is None else judge_speed_claims(table1, plan=plan)), "speed (Table 1)"
+
+
 def judge_figures(figures_dir: str | Path, out_dir: str | Path | None = None, *,
                   methods: Sequence[str] | None = None, plan: AnalysisPlan | None = None) -> pd.DataFrame:
     """Every claim of the plan judged on the per-scene tables of one run, in one verdict table.
 
     Reads ``table2_per_scene.csv``, ``table3_per_scene.csv``, ``fig3_height_per_scene.csv``,
-    ``depth_noise.csv`` and ``table1_speed.csv`` from ``figures_dir`` (those present) and writes into ``out_dir``:
+    ``depth_noise.csv`` and ``table1_speed.csv`` from ``figures_dir`` (those present; under a v2 plan
+    the speed benchmark's ``bench_speed.json`` instead of Table 1 when present) and writes into ``out_dir``:
     ``claims_all.csv`` (every comparison), ``verdicts.csv`` / ``verdicts.md`` (one row per claim,
     the speed claims included), ``findings_all.md`` (:func:`claims_markdown`) and the declared
     secondary analyses ``secondary_s1_support`` (:func:`support_regression`, with
@@ -540,10 +565,10 @@ def judge_figures(figures_dir: str | Path, out_dir: str | Path | None = None, *,
     comps = check_claims(read["table2_per_scene"], read["table3_per_scene"], read["fig3_height_per_scene"], drops,
                          methods=methods, plan=plan)
     table = verdict_table(comps, plan=plan, data=list(_DATA))
-    if read["table1_speed"] is not None:
-        speed = judge_speed_claims(read["table1_speed"], plan=plan)
-        table = pd.concat([table, speed.assign(data="speed (Table 1)")[["claim", "statement", "data", "role",
-                                                                        "verdict"]]], ignore_index=True)
+    speed, where = _speed_verdicts(figures_dir, out_dir, read["table1_speed"], plan)
+    if speed is not None:
+        table = pd.concat([table, speed.assign(data=where)[["claim", "statement", "data", "role", "verdict"]]],
+                          ignore_index=True)
     save_table(comps, out_dir, "claims_all")
     save_table(table.fillna("-"), out_dir, "verdicts")
     # declared secondary analyses: S1 (C1 against support), S3 (per-kind means)

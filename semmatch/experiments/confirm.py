@@ -38,6 +38,7 @@ from pathlib import Path
 import yaml
 
 from ..io import atomic_write_text
+from .analysis_plan import PLAN_FILE, PLAN_V2_FILE, AnalysisPlan, plan_for_seeds
 from .pipeline import NOTEBOOKS, ROOT, notebook_parameters, run_notebook
 from .protocol import check_confirm_seeds, check_protocol
 
@@ -83,11 +84,15 @@ def code_version(root: str | os.PathLike = ROOT) -> str | None:
 
 
 def write_confirm_params(seeds: Sequence[int], out: str | os.PathLike, *, base_profile: str = "full",
-                         params_file: str | os.PathLike = ROOT / "params.yaml") -> Path:
+                         params_file: str | os.PathLike = ROOT / "params.yaml",
+                         shipped_dir: str | os.PathLike | None = None) -> Path:
     """Write the parameter file of a confirmatory run: the base profile with ``eval_seeds = seeds``.
 
     The base profile is taken as written in ``params_file`` (its top-level overrides, meant for
-    quick experiments, do not apply).
+    quick experiments, do not apply). Its ``networks`` are those of the plan that judges ``seeds``
+    (:func:`~semmatch.experiments.plan_networks.plan_networks`): under the v2 plan every training
+    seed of each architecture shipped in ``shipped_dir`` (``compact``, ``compact@1`` ...), under v1
+    the profile's as they are.
 
     Parameters
     ----------
@@ -97,6 +102,8 @@ def write_confirm_params(seeds: Sequence[int], out: str | os.PathLike, *, base_p
         The file to write.
     base_profile : str
     params_file : path
+    shipped_dir : path, optional
+        The shipped networks (default ``models/<base_profile>``).
 
     Returns
     -------
@@ -107,6 +114,8 @@ def write_confirm_params(seeds: Sequence[int], out: str | os.PathLike, *, base_p
     ValueError
         An unknown profile, refused seeds, or splits that break the protocol.
     """
+    from .plan_networks import plan_networks
+
     data = yaml.safe_load(Path(params_file).read_text())
     profiles = data.get("profiles") or {}
     if base_profile not in profiles:
@@ -115,7 +124,12 @@ def write_confirm_params(seeds: Sequence[int], out: str | os.PathLike, *, base_p
     seeds = check_confirm_seeds(seeds, profiles, where=str(params_file))
     _refuse_study_seeds(seeds)
     profile = copy.deepcopy(profiles[base_profile])
-    profile["common"]["eval_seeds"] = seeds
+    common = profile["common"]
+    common["eval_seeds"] = seeds
+    if common.get("networks"):
+        common["networks"] = plan_networks(common["networks"], plan_for_seeds(seeds),
+                                           shipped_dir or ROOT / "models" / base_profile,
+                                           default_seed=int(common.get("seed") or 0))
     check_protocol(profile["common"], where=f"confirmatory run on seeds {seeds}")
     header = (f"# Confirmatory run: profile {base_profile!r} of {Path(params_file).name} with eval_seeds = {seeds}\n"
               f"# (written by python -m semmatch.experiments confirm; not meant to be edited)\n")
@@ -149,6 +163,16 @@ def unshipped_networks(params_file: str | os.PathLike, profile: str, data_root: 
         if path is None:
             missing[net] = why
     return missing
+
+
+def _require_shipped(missing: dict[str, str], allow_training: bool, shipped_dir: Path) -> None:
+    """Refuse networks that are not shipped (:func:`unshipped_networks`) unless ``allow_training``."""
+    if missing and not allow_training:
+        raise ValueError(
+            "a confirmatory run uses the shipped networks, but "
+            + "; ".join(f"{n}: {why}" for n, why in missing.items())
+            + f". Restore {shipped_dir}/ from git, or pass --allow-training to train them (then it does not "
+              f"confirm the shipped networks)")
 
 
 def run_confirm(seeds: Sequence[int], *, name: str | None = None, base_profile: str = "full",
@@ -204,6 +228,7 @@ def run_confirm(seeds: Sequence[int], *, name: str | None = None, base_profile: 
     data = yaml.safe_load(Path(params_file).read_text())
     seeds = check_confirm_seeds(seeds, data.get("profiles") or {}, where=str(params_file))
     _refuse_study_seeds(seeds)
+    plan = plan_for_seeds(seeds)  # v2 for the v2 plan's confirmatory seeds, else v1
     name = name or confirm_name(seeds)
     if not name.replace("-", "").replace("_", "").replace(".", "").isalnum():
         raise ValueError(f"run name {name!r}: use letters, digits, '-', '_' and '.' only")
@@ -223,12 +248,7 @@ def run_confirm(seeds: Sequence[int], *, name: str | None = None, base_profile: 
                          f"an addition (--notebooks) must use the run's parameters: make a new run instead")
     shipped_dir = Path("models") / base_profile
     missing = unshipped_networks(params, base_profile, dirs["data_root"], ROOT / shipped_dir)
-    if missing and not allow_training:
-        raise ValueError(
-            "a confirmatory run uses the shipped networks, but "
-            + "; ".join(f"{n}: {why}" for n, why in missing.items())
-            + f". Restore {shipped_dir}/ from git, or pass --allow-training to train them (then it does not "
-              f"confirm the shipped networks)")
+    _require_shipped(missing, allow_training, shipped_dir)
     for d in where.values():
         d.mkdir(parents=True, exist_ok=True)
     print(f"[confirm] {name}: profile {base_profile}, seeds {seeds} x {len(data['profiles'][base_profile]['common']['kinds'])} "
@@ -253,9 +273,8 @@ def run_confirm(seeds: Sequence[int], *, name: str | None = None, base_profile: 
     # every claim of the analysis plan judged on this run's per-scene tables (verdicts.csv/.md)
     from ..segment.shipping import file_sha256
 
-    t = time.perf_counter()
-    _judge(where["figures_dir"], [nb for nb in NOTEBOOKS if nb not in skipped and (notebooks is None or nb in notebooks)])
-    walls["verdicts"] = round(time.perf_counter() - t, 1)
+    walls.update(_judge(where["figures_dir"], [nb for nb in NOTEBOOKS if nb not in skipped
+                                               and (notebooks is None or nb in notebooks)], plan))
     if in_home_plan is not None:
         from .adapt_claims import load_adapt_plan
         from .in_home import run_in_home_study
@@ -267,7 +286,7 @@ def run_confirm(seeds: Sequence[int], *, name: str | None = None, base_profile: 
               file=sys.stderr)
         jobs = int((data["profiles"][base_profile].get("common") or {}).get("jobs", 1))
         run_in_home_study(data_root / "in_home", where["figures_dir"] / "in_home", homes=homes, jobs=jobs,
-                          scheduler=scheduler, progress=log_output)
+                          scheduler=scheduler, progress=log_output, analysis_plan=plan)
         walls["in_home"] = round(time.perf_counter() - t, 1)
 
     models = data_root / "models"
@@ -278,6 +297,7 @@ def run_confirm(seeds: Sequence[int], *, name: str | None = None, base_profile: 
         "networks_from": "trained here" if missing else str(shipped_dir),
         "adapted_networks_from": (f"{shipped_dir}/adapted" if adapted_from == "shipped" else adapted_from) or "skipped",
         "skipped": skipped, "in_home": in_home_plan is not None, "code_version": code_version(), "started": started,
+        "analysis_plan": _plan_record(plan, where["figures_dir"]),
         "wall_seconds": walls, "total_seconds": round(time.perf_counter() - t0, 1),
     }
     if earlier is not None:
@@ -287,13 +307,46 @@ def run_confirm(seeds: Sequence[int], *, name: str | None = None, base_profile: 
     return record
 
 
-def _judge(figures_dir: Path, ran: Sequence[str]) -> None:
+def _judge(figures_dir: Path, ran: Sequence[str], plan: AnalysisPlan) -> dict[str, float]:
     """The analysis plan's verdicts on the paper's claims, unless only stage 09 ran (it judges
-    the adaptation claims itself: ``adapt_verdicts.md``)."""
-    from .claims import judge_figures
+    the adaptation claims itself: ``adapt_verdicts.md``).
 
+    ``plan`` is the run's (:func:`~semmatch.experiments.analysis_plan.plan_for_seeds`). Under a v2
+    plan the per-scene tables first get their ``training_seed`` column
+    (:func:`~semmatch.experiments.plan_networks.label_training_seeds`) and the plan's speed
+    benchmark runs once per run, in a fresh process after the notebooks
+    (:func:`~semmatch.experiments.speed_claims.run_speed_bench`: ``bench_speed.json``, which
+    :func:`~semmatch.experiments.claims.judge_figures` judges P1-P3 on). Returns the wall seconds
+    of ``verdicts`` (and ``speed_bench`` when it ran).
+    """
+    from .claims import judge_figures
+    from .plan_networks import label_training_seeds
+    from .speed_claims import BENCH_RECORD, run_speed_bench
+
+    walls = {}
+    if set(ran) - {ADAPT_NOTEBOOK} and plan.rules == "v2":
+        label_training_seeds(figures_dir)
+        if not (figures_dir / BENCH_RECORD).is_file():  # once per run: an addition keeps the first measurement
+            t = time.perf_counter()
+            run_speed_bench(figures_dir, plan, cwd=ROOT)
+            walls["speed_bench"] = round(time.perf_counter() - t, 1)
+    t = time.perf_counter()
     if set(ran) - {ADAPT_NOTEBOOK}:
-        judge_figures(figures_dir)
+        judge_figures(figures_dir, plan=plan)
+    return {**walls, "verdicts": round(time.perf_counter() - t, 1)}
+
+
+def _plan_record(plan: AnalysisPlan, figures_dir: Path) -> dict:
+    """The run record's ``analysis_plan``: the plan file, version and rules that judged the run, and
+    under a v2 plan the speed benchmark's conditions (machine, load, reference rate)."""
+    from .speed_claims import BENCH_RECORD, bench_conditions
+
+    record = {"file": PLAN_V2_FILE.name if plan.version == 2 else PLAN_FILE.name, "version": plan.version,
+              "rules": plan.rules}
+    bench = figures_dir / BENCH_RECORD
+    if plan.rules == "v2" and bench.is_file():
+        record["speed_bench"] = {"record": BENCH_RECORD, **bench_conditions(json.loads(bench.read_text()))}
+    return record
 
 
 def _with_addition(earlier: dict, record: dict, notebooks: Sequence[str] | None) -> dict:

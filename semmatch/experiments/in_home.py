@@ -315,7 +315,9 @@ def in_home_comparisons(per_home: pd.DataFrame, plan: InHomePlan, *, analysis_pl
 
     The analysis plan's inference (interval method, confidence, Holm over the comparisons of one
     measure, ``sesoi`` of the measure, the ``beats`` verdict rule: holds / does not hold /
-    equivalent / inconclusive).
+    equivalent / inconclusive). Under a v2 plan (``rules: v2``) its comparison rules instead
+    (:func:`~semmatch.experiments.rules_v2.comparison_verdict_v2`: holds / against / equivalent /
+    inconclusive, a family per measure), with all of their columns.
 
     Returns
     -------
@@ -328,6 +330,8 @@ def in_home_comparisons(per_home: pd.DataFrame, plan: InHomePlan, *, analysis_pl
     from .claims import _compare, _comparison_verdict
 
     ap = analysis_plan or load_analysis_plan()
+    if ap.rules == "v2":
+        return _comparisons_v2(per_home, plan, ap)
     wide_all = {m: per_home.pivot(index="home", columns="arm", values=m) for m in (plan.primary, *plan.secondary)}
     rows = []
     for measure, wide in wide_all.items():
@@ -349,6 +353,24 @@ def in_home_comparisons(per_home: pd.DataFrame, plan: InHomePlan, *, analysis_pl
     cols = ["measure", "role", "comparison", "diff", "lo", "hi", "homes", "p_holds", "p_against", "p_equivalent",
             "verdict"]
     return pd.concat(rows, ignore_index=True)[cols] if rows else pd.DataFrame(columns=cols)
+
+
+def _comparisons_v2(per_home: pd.DataFrame, plan: InHomePlan, ap) -> pd.DataFrame:
+    """:func:`in_home_comparisons` under a v2 analysis plan (``ap``)."""
+    from .claims import _compare
+    from .rules_v2 import _judge_family_v2
+
+    rows = []
+    for measure in (plan.primary, *plan.secondary):
+        wide = per_home.pivot(index="home", columns="arm", values=measure)
+        kinds = [h.rsplit("_", 1)[0] for h in wide.index]
+        sesoi = float(ap.sesoi.get(measure, 0.02))
+        fam = [{"measure": measure, "role": "primary" if measure == plan.primary else "secondary",
+                "comparison": f"{a} - {b}",
+                **_compare(wide[a].to_numpy(np.float64), wide[b].to_numpy(np.float64), kinds, sesoi=sesoi,
+                           plan=ap, seed=0)} for a, b in plan.comparisons]
+        rows.append(_judge_family_v2(pd.DataFrame(fam), "beats", sesoi, ap.alpha))
+    return pd.concat(rows, ignore_index=True).rename(columns={"scenes": "homes"})
 
 
 def plot_in_home(per_home: pd.DataFrame, path: str | Path, *, measure: str = "mean_acc") -> Path:
@@ -408,7 +430,8 @@ def write_in_home_results(per_home: pd.DataFrame, comparisons: pd.DataFrame, pla
 
 def run_in_home_study(data: str | Path, figures: str | Path, *, plan_path: str | Path | None = None,
                       models: str | Path | None = None, homes: Sequence[tuple[str, int]] | None = None,
-                      jobs: int = 1, scheduler: str | None = None, progress: bool = True) -> pd.DataFrame:
+                      jobs: int = 1, scheduler: str | None = None, progress: bool = True,
+                      analysis_plan=None) -> pd.DataFrame:
     """Run the study (:func:`in_home_study`), judge its comparisons and write its results into ``figures``.
 
     Parameters
@@ -423,6 +446,9 @@ def run_in_home_study(data: str | Path, figures: str | Path, *, plan_path: str |
         Other homes than the plan's (e.g. a confirmatory run's scenes); the rest of the plan holds.
     jobs, scheduler, progress
         As :func:`in_home_study`.
+    analysis_plan : AnalysisPlan, optional
+        The rules of the comparisons (:func:`in_home_comparisons`; default the v1 plan; a
+        confirmatory run passes the plan of its seeds).
 
     Returns
     -------
@@ -436,7 +462,7 @@ def run_in_home_study(data: str | Path, figures: str | Path, *, plan_path: str |
     t0 = time.perf_counter()
     per_home = in_home_study(data, plan_path=plan_path, models=models, homes=homes, jobs=jobs, scheduler=scheduler,
                              views_cache=_views_cache(models, plan.network, Path(data)), progress=progress)
-    comps = in_home_comparisons(per_home, plan)
+    comps = in_home_comparisons(per_home, plan, analysis_plan=analysis_plan)
     for p in write_in_home_results(per_home, comps, plan, figures, minutes=(time.perf_counter() - t0) / 60):
         if progress:
             print(p)

@@ -51,6 +51,34 @@ _SECTIONS = (
 )
 
 
+#: a run judged by the v2 plan (docs/analysis_plan_v2.md): sections shown instead of v1's (same
+#: figure, other table or caption)
+_V2_SECTIONS = {
+    "claims_speed.md": (None, "claims_speed_bench.md", "The speed claims P1-P3 judged by the analysis plan v2 on "
+                        "`semmatch bench transfer --map fused --repeat 5` (each method's median CPU rate and its lowest "
+                        "run; the machine, its load and the reference workload's rate in `evidence`); Table 1 above "
+                        "is descriptive:"),
+    "adapt_verdicts.md": (None, "adapt_verdicts.md", "**The adaptation claims**, judged by the analysis plan v2 "
+                          "([analysis_plan_v2.md](analysis_plan_v2.md), statements and comparisons of "
+                          "`semmatch/experiments/adapt_plan.yaml`): paired per scene, two-sided 95 % intervals, a "
+                          "comparison holds when its lower bound is beyond the smallest effect of interest, the share "
+                          "of the gap closed by its one-sided 97.5 % bounds against 60 %:"),
+}
+#: the claims paragraph of the README's headline, per set of verdict rules
+_RULES_TEXT = {
+    "v1": "**The paper's claims**, judged by the analysis plan ([docs/analysis_plan.md](docs/analysis_plan.md)): "
+          "one verdict per claim under the `fusion` reference, the `mesh` one beside it, and how many "
+          "of the paper's own differences lie inside our intervals",
+    "v2": "**The paper's claims and the plan's own (F1-F2)**, judged by the analysis plan v2 "
+          "([docs/analysis_plan_v2.md](docs/analysis_plan_v2.md)): two-sided 95 % intervals over the scenes and the "
+          "training seeds' networks (two-level bootstrap; `provisional` where an architecture has fewer than three); "
+          "a comparison holds when its lower bound is beyond the smallest effect of interest (0.02), a claim holds "
+          "when every comparison holds (intersection-union) and is refuted when any is significantly against it "
+          "(Holm); `min_effect` and the kind-cluster verdict beside it; one verdict per claim under the `fusion` "
+          "reference, the `mesh` one beside it, and how many of the paper's own differences lie inside our intervals",
+}
+
+
 #: tables of the ``variance`` profile (the compact network trained from several seeds), shown
 #: after the main results when that profile has run
 _VARIANCE_SECTIONS = (
@@ -144,7 +172,9 @@ def results_markdown(figures_dir: str | Path, readme_dir: str | Path) -> str:
     if run:
         parts.append(_confirm_sentence(run) + "\n")
     missing = []
-    for png, md, caption in _SECTIONS:
+    v2 = _run_rules(run) == "v2"
+    for png, md, caption in (_V2_SECTIONS.get(md, (png, md, caption)) if v2 else (png, md, caption)
+                             for png, md, caption in _SECTIONS):
         have_png = png is not None and (figures_dir / png).is_file()
         have_md = md is not None and (figures_dir / md).is_file()
         if not (have_png or have_md):
@@ -209,6 +239,22 @@ def _confirm_sentence(run: dict) -> str:
     return text
 
 
+def _run_rules(run: dict | None) -> str | None:
+    """The verdict rules (``v1`` / ``v2``) of the plan that judged a confirmatory run: its record's
+    ``analysis_plan`` entry, else the plan of its seeds
+    (:func:`~semmatch.experiments.analysis_plan.plan_for_seeds`); None for other folders."""
+    if not run:
+        return None
+    if (run.get("analysis_plan") or {}).get("rules"):
+        return str(run["analysis_plan"]["rules"])
+    from .analysis_plan import plan_for_seeds
+
+    try:
+        return plan_for_seeds(run.get("seeds") or []).rules
+    except ValueError:  # seeds mixing the v2 plan's with others: not a run of either plan's seeds
+        return "v1"
+
+
 def confirmatory_run(figures_root: str | Path, plan=None) -> Path | None:
     """The analysis plan's confirmatory run under ``<figures_root>/confirm/``, if it has been made.
 
@@ -217,8 +263,8 @@ def confirmatory_run(figures_root: str | Path, plan=None) -> Path | None:
     figures_root : path
         The repository's ``figures/`` folder.
     plan : AnalysisPlan or dict, optional
-        The analysis plan (default :func:`semmatch.experiments.analysis_plan.load_analysis_plan`; a dict
-        is its YAML form).
+        The analysis plan (a dict is its YAML form); default: the v2 plan's run when it has been
+        made, else the v1 plan's (:func:`semmatch.experiments.analysis_plan.load_analysis_plan`).
 
     Returns
     -------
@@ -227,9 +273,10 @@ def confirmatory_run(figures_root: str | Path, plan=None) -> Path | None:
         used the shipped networks; None when there is none.
     """
     if plan is None:
-        from .analysis_plan import load_analysis_plan
+        from .analysis_plan import PLAN_V2_FILE, load_analysis_plan
 
-        plan = load_analysis_plan()
+        return (confirmatory_run(figures_root, load_analysis_plan(PLAN_V2_FILE))
+                or confirmatory_run(figures_root, load_analysis_plan()))
     raw = plan if isinstance(plan, dict) else plan.raw
     wanted = sorted(int(s) for s in raw["scenes"]["confirmatory_seeds"])
     for rec in sorted(Path(figures_root, "confirm").glob("*/confirm.json")):
@@ -266,7 +313,9 @@ def headline_markdown(figures_dir: str | Path, readme_dir: str | Path, results_d
     if run:
         later = (" The plan of what was added later (the adaptation claims, `adapt_plan.yaml`) was committed before "
                  "that addition ran." if run.get("additions") else "")
-        parts.append(f"**{_confirm_sentence(run)}** The analysis plan was committed before these scenes "
+        which = ("The analysis plan v2 ([docs/analysis_plan_v2.md](docs/analysis_plan_v2.md))"
+                 if _run_rules(run) == "v2" else "The analysis plan")
+        parts.append(f"**{_confirm_sentence(run)}** {which} was committed before these scenes "
                      f"existed; nothing was chosen on them.{later}\n")
     if (figures_dir / "table2_synthetic.png").is_file():
         parts.append("**Table 2 (synthetic)**: lower-view semantic reconstructions of the robot's own tour, "
@@ -274,14 +323,13 @@ def headline_markdown(figures_dir: str | Path, readme_dir: str | Path, results_d
                      "person's map supports a pixel, the robot's network elsewhere).\n")
         parts.append(f"![table2_synthetic.png]({rel}/table2_synthetic.png)\n")
     if (figures_dir / "verdicts.md").is_file():
-        parts.append("**The paper's claims**, judged by the analysis plan ([docs/analysis_plan.md](docs/analysis_plan.md)): "
-                     "one verdict per claim under the `fusion` reference, the `mesh` one beside it, and how many "
-                     f"of the paper's own differences lie inside our intervals (from `{_shown(figures_dir)}/`; "
+        parts.append(_RULES_TEXT[_run_rules(run) or "v1"] + f" (from `{_shown(figures_dir)}/`; "
                      "every comparison: `findings_all.md` there).\n")
         parts.append((figures_dir / "verdicts.md").read_text().strip() + "\n")
     if (figures_dir / "adapt_verdicts.md").is_file():
         parts.append("**The adaptation claims** (the robot fine-tuned on labels transferred from the person's map; "
-                     "their plan: `semmatch/experiments/adapt_plan.yaml`):\n")
+                     "their plan: `semmatch/experiments/adapt_plan.yaml`" +
+                     (", judged by the v2 rules" if _run_rules(run) == "v2" else "") + "):\n")
         parts.append((figures_dir / "adapt_verdicts.md").read_text().strip() + "\n")
     if not parts:
         parts.append(f"_No results yet: run `make repro` to fill `{_shown(figures_dir)}/`._\n")
@@ -339,8 +387,9 @@ def update_readme(readme: str | Path, figures_dir: str | Path, *, results_doc: s
             pass  # no per-scene tables yet: no verdicts
     note = "<!-- Generated by `python -m semmatch.experiments readme` (run by `make repro`): do not edit. -->\n\n"
     docs = {results_doc: note + results_markdown(figures_dir, results_doc.parent).replace("## Results", "# Results", 1)}
-    if confirmatory_dir is not None:
-        confirm_doc = results_doc.parent / "results_confirmatory.md"
+    if confirmatory_dir is not None:  # the v1 plan's run: results_confirmatory.md; v2's: results_confirmatory_v2.md
+        v2 = _run_rules(_confirm_record(Path(confirmatory_dir))) == "v2"
+        confirm_doc = results_doc.parent / f"results_confirmatory{'_v2' if v2 else ''}.md"
         docs[confirm_doc] = note + results_markdown(confirmatory_dir, confirm_doc.parent).replace(
             "## Results", "# Confirmatory results", 1)
         head = headline_markdown(confirmatory_dir, readme.parent, confirm_doc, development_doc=results_doc)

@@ -106,27 +106,12 @@ def rejudge_in_home(figures_dir: str | Path, *, plan: AnalysisPlan) -> pd.DataFr
 
     A family is one measure's comparisons (as the in-home plan's); the rules are the plan's
     (:func:`~semmatch.experiments.claims.comparison_verdict_v2` under v2)."""
-    from .claims import _compare
     from .in_home import in_home_comparisons, load_in_home_plan
-    from .rules_v2 import _judge_family_v2
 
     csv = Path(figures_dir) / "in_home" / "in_home_per_home.csv"
     if not csv.is_file():
         return None
-    per_home, home_plan = pd.read_csv(csv), load_in_home_plan()
-    if plan.rules != "v2":
-        return in_home_comparisons(per_home, home_plan, analysis_plan=plan)
-    rows = []
-    for measure in (home_plan.primary, *home_plan.secondary):
-        wide = per_home.pivot(index="home", columns="arm", values=measure)
-        kinds = [h.rsplit("_", 1)[0] for h in wide.index]
-        sesoi = float(plan.sesoi.get(measure, 0.02))
-        fam = [{"measure": measure, "role": "primary" if measure == home_plan.primary else "secondary",
-                "comparison": f"{a} - {b}",
-                **_compare(wide[a].to_numpy(np.float64), wide[b].to_numpy(np.float64), kinds, sesoi=sesoi,
-                           plan=plan, seed=0)} for a, b in home_plan.comparisons]
-        rows.append(_judge_family_v2(pd.DataFrame(fam), "beats", sesoi, plan.alpha))
-    return pd.concat(rows, ignore_index=True).rename(columns={"scenes": "homes"})
+    return in_home_comparisons(pd.read_csv(csv), load_in_home_plan(), analysis_plan=plan)
 
 
 def rejudge_markdown(figures_dir: str | Path, *, rules: str = "v2", command: str = "") -> str:

@@ -1,16 +1,123 @@
 """The analysis plan's speed claims (P1-P3): on Table 1 (v1) or on ``semmatch bench transfer --repeat`` medians (v2).
 
 :func:`judge_speed_claims` was defined in :mod:`semmatch.experiments.claims` before and is
-importable from there as before.
+importable from there as before. :func:`run_speed_bench` runs the v2 plan's benchmark
+(``speed.command``: ``semmatch bench transfer --map fused --repeat 5``) in a fresh process and
+keeps its JSON record with the machine and its load (:data:`BENCH_RECORD` in a run's figures
+folder, where :func:`semmatch.experiments.claims.judge_figures` reads it under a v2 plan).
 """
 
 from __future__ import annotations
+
+import json
+import os
+import shlex
+import subprocess
+import sys
+import time
+from pathlib import Path
 
 import pandas as pd
 
 from .analysis_plan import AnalysisPlan, load_analysis_plan
 
-__all__ = ["bench_speed_table", "judge_speed_claims"]
+__all__ = ["BENCH_RECORD", "bench_speed_table", "judge_speed_claims", "speed_bench_command", "run_speed_bench",
+           "bench_conditions"]
+
+#: the speed benchmark's record in a run's figures folder (:func:`run_speed_bench`)
+BENCH_RECORD = "bench_speed.json"
+#: the reference workload's row in the benchmark's spread (the published closest-point backend)
+_REFERENCE = "reference (closest point)"
+
+
+def speed_bench_command(plan: AnalysisPlan) -> list[str]:
+    """The plan's speed benchmark (``speed.command``) as an argument list with ``--json``, run by
+    this Python (``python -m semmatch ...``).
+
+    Raises
+    ------
+    ValueError
+        If the plan states no ``speed.command`` or it is not a ``semmatch`` command.
+    """
+    words = shlex.split(str((plan.raw.get("speed") or {}).get("command") or ""))
+    if not words or words[0] != "semmatch":
+        raise ValueError(f"analysis plan v{plan.version}: speed.command must be a semmatch command "
+                         f"(e.g. 'semmatch bench transfer --map fused --repeat 5'), got {words or None}")
+    return [sys.executable, "-m", "semmatch", *words[1:], *([] if "--json" in words else ["--json"])]
+
+
+def run_speed_bench(out_dir: str | os.PathLike, plan: AnalysisPlan, *, cwd: str | os.PathLike | None = None) -> dict:
+    """Run the plan's speed benchmark once in a fresh (otherwise idle) process and keep its record.
+
+    Parameters
+    ----------
+    out_dir : path
+        Where :data:`BENCH_RECORD` is written (a run's figures folder).
+    plan : AnalysisPlan
+        Its ``speed.command`` is run (:func:`speed_bench_command`).
+    cwd : path, optional
+        Working directory of the benchmark.
+
+    Returns
+    -------
+    dict
+        The benchmark's JSON record with ``command``, ``machine``
+        (:func:`semmatch.segment.training.machine_record` of the CPU), ``load_average_before``,
+        ``started``, ``wall_seconds`` and ``conditions`` (:func:`bench_conditions`) added.
+
+    Raises
+    ------
+    RuntimeError
+        If the benchmark fails or prints no JSON record (its command and the end of its output).
+    """
+    from ..io import atomic_write_text
+    from ..segment.training import machine_record
+
+    cmd = speed_bench_command(plan)
+    shown = " ".join(["semmatch", *cmd[3:]])
+    load = [round(x, 2) for x in os.getloadavg()] if hasattr(os, "getloadavg") else None
+    started, t = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), time.perf_counter()
+    print(f"[speed] {shown} (load {load})", file=sys.stderr)
+    done = subprocess.run(cmd, cwd=cwd, capture_output=True, text=True)
+    lines = [x for x in done.stdout.splitlines() if x.strip()]
+    try:
+        bench = json.loads(lines[-1]) if done.returncode == 0 and lines else None
+    except json.JSONDecodeError:
+        bench = None
+    if not isinstance(bench, dict):
+        raise RuntimeError(f"{shown}: exit status {done.returncode}, no JSON record; its output ends: "
+                           f"{(done.stderr or done.stdout)[-800:]}")
+    record = {**bench, "command": shown, "machine": machine_record("cpu"), "load_average_before": load,
+              "started": started, "wall_seconds": round(time.perf_counter() - t, 1)}
+    record["conditions"] = bench_conditions(record)
+    atomic_write_text(Path(out_dir) / BENCH_RECORD, json.dumps(record, indent=2) + "\n")
+    return record
+
+
+def bench_conditions(bench: dict, *, map_name: str = "fused") -> dict:
+    """The conditions of a benchmark record the v2 plan asks to state: the machine (CPU model and
+    count), the 1-minute load average over the repeated runs and the reference workload's rate.
+
+    Parameters
+    ----------
+    bench : dict
+        A :func:`run_speed_bench` record (or the bare benchmark JSON: no machine then).
+    map_name : str, optional
+
+    Returns
+    -------
+    dict
+        ``cpu``, ``cpu_count``, ``load_min``, ``load_max`` and ``reference_fps`` (the reference's
+        median CPU rate; min and max beside it); None where the record lacks them.
+    """
+    result = (bench.get("maps") or {}).get(map_name) or {}
+    loads = [float(r["load_average"]) for r in result.get("runs", []) if r.get("load_average") is not None]
+    ref = (result.get("spread") or {}).get(_REFERENCE) or {}
+    machine = bench.get("machine") or {}
+    return {"cpu": machine.get("device_name"), "cpu_count": machine.get("cpu_count"),
+            "load_min": min(loads) if loads else None, "load_max": max(loads) if loads else None,
+            "reference_fps": ref.get("median"), "reference_fps_min": ref.get("min"),
+            "reference_fps_max": ref.get("max")}
 
 
 def bench_speed_table(bench: dict, *, map_name: str = "fused") -> pd.DataFrame:
@@ -26,7 +133,8 @@ def bench_speed_table(bench: dict, *, map_name: str = "fused") -> pd.DataFrame:
     Returns
     -------
     DataFrame
-        ``method, median, min, max`` (the reference workload left out).
+        ``method, median, min, max`` of the transfer methods (``fused`` included); the reference
+        workload and the variant rows (``3d-neighborhood (exact)``, ``--variant`` rows) left out.
 
     Raises
     ------
@@ -37,8 +145,10 @@ def bench_speed_table(bench: dict, *, map_name: str = "fused") -> pd.DataFrame:
     if not spread:
         raise ValueError(f"bench_speed_table: the record has no spread over repeated runs for map {map_name!r} "
                          "(run semmatch bench transfer --map fused --repeat 5 --json)")
+    from ..transfer import available_methods
+
     rows = [dict(method=m, median=float(v["median"]), min=float(v["min"]), max=float(v["max"]))
-            for m, v in spread.items() if not m.startswith("reference")]
+            for m, v in spread.items() if m in available_methods()]
     return pd.DataFrame(rows, columns=["method", "median", "min", "max"])
 
 

@@ -45,8 +45,8 @@ _PACKAGE = "semmatch"
 #: read by people, never by a stage (3D views in the reports; the README's results section and
 #: the report snapshots, written from finished tables by their own commands)
 DISPLAY_ONLY = ("semmatch.viz", "semmatch.experiments.readme", "semmatch.experiments.snapshot")
-#: the stage command's other subcommands (confirmatory runs, shipping networks)
-OTHER_COMMANDS = ("semmatch.experiments.confirm",)
+#: the stage command's other subcommands (confirmatory runs, shipping networks, re-judging a run)
+OTHER_COMMANDS = ("semmatch.experiments.confirm", "semmatch.experiments.rejudge")
 #: what no stage depends on, nor on what only these import
 LEAVE_OUT = DISPLAY_ONLY + OTHER_COMMANDS
 #: the module the stage command runs (``python -m semmatch.experiments run NN_name``)
