@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -182,3 +184,36 @@ def test_tables_and_figure_from_a_per_scene_table(tmp_path):
     assert arms[arms["factor"] == "height"]["change"].isna().all()
     png = wtp.plot_crossover(est, grid, tmp_path / "f.png", title="synthetic")
     assert png.is_file() and png.stat().st_size > 10_000
+
+
+def test_make_confirm_runs_the_study_on_the_run_scenes_after_the_verdicts(tmp_path, monkeypatch):
+    """The confirm plumbing (nothing real runs): ``make confirm`` passes ``--when-transfer-pays``, and
+    ``run_confirm`` then calls the study on every kind of every seed, with the run's data root."""
+    import re
+    import subprocess
+
+    import semmatch.experiments.claims as claims
+    from semmatch.experiments import confirm
+    from semmatch.experiments.pipeline import ROOT
+
+    dry = subprocess.run(["make", "-n", "confirm", "SEEDS=9931 9932"], cwd=ROOT, capture_output=True, text=True,
+                         check=True).stdout
+    assert re.search(r"-m semmatch.experiments confirm --seeds 9931 9932 .*--when-transfer-pays", dry)
+    order, seen = [], {}
+    monkeypatch.setattr(confirm, "run_notebook", lambda nb, profile, **kw: order.append(nb))
+    monkeypatch.setattr(claims, "judge_figures", lambda figures: order.append("verdicts"))
+
+    def fake_study(data_root, figures, scenes, **kw):
+        order.append("when_transfer_pays")
+        seen.update(kw, data_root=Path(data_root), figures=Path(figures), scenes=list(scenes))
+
+    monkeypatch.setattr(wtp, "run_when_transfer_pays", fake_study)
+    record = confirm.run_confirm([9931, 9932], name="wtp", out_root=tmp_path, when_transfer_pays=True)
+    assert order[-2:] == ["verdicts", "when_transfer_pays"] and "01_simulate" in order
+    assert seen["scenes"] == [(k, s) for s in (9931, 9932) for k in KINDS] and seen["split"] == "eval"
+    assert seen["data_root"] == tmp_path / "data" / "confirm" / "wtp"
+    assert seen["figures"] == tmp_path / "figures" / "confirm" / "wtp" / "when_transfer_pays"
+    assert record["when_transfer_pays"] is True and "when_transfer_pays" in record["wall_seconds"]
+    order.clear()
+    assert confirm.run_confirm([9933], name="plain", out_root=tmp_path)["when_transfer_pays"] is False
+    assert "when_transfer_pays" not in order
