@@ -273,15 +273,7 @@ def run_confirm(seeds: Sequence[int], *, name: str | None = None, base_profile: 
         run_in_home_study(data_root / "in_home", where["figures_dir"] / "in_home", homes=homes, jobs=jobs,
                           scheduler=scheduler, progress=log_output)
         walls["in_home"] = round(time.perf_counter() - t, 1)
-    if when_transfer_pays:
-        from .when_transfer_pays import run_when_transfer_pays
-
-        t = time.perf_counter()
-        common = data["profiles"][base_profile]["common"]
-        run_when_transfer_pays(data_root, where["figures_dir"] / "when_transfer_pays",
-                               [(kind, s) for s in seeds for kind in common["kinds"]], split="eval",
-                               jobs=int(common.get("jobs", 1)), scheduler=scheduler, progress=log_output)
-        walls["when_transfer_pays"] = round(time.perf_counter() - t, 1)
+    walls.update(_when_transfer_pays(when_transfer_pays, seeds, data, base_profile, where, scheduler, log_output))
 
     models = data_root / "models"
     record = {
@@ -290,8 +282,7 @@ def run_confirm(seeds: Sequence[int], *, name: str | None = None, base_profile: 
         "networks": {p.stem: file_sha256(p) for p in sorted(models.glob("*.pt"))},
         "networks_from": "trained here" if missing else str(shipped_dir),
         "adapted_networks_from": (f"{shipped_dir}/adapted" if adapted_from == "shipped" else adapted_from) or "skipped",
-        "skipped": skipped, "in_home": in_home_plan is not None, "when_transfer_pays": when_transfer_pays,
-        "code_version": code_version(), "started": started,
+        "skipped": skipped, "in_home": in_home_plan is not None, "code_version": code_version(), "started": started,
         "wall_seconds": walls, "total_seconds": round(time.perf_counter() - t0, 1),
     }
     if earlier is not None:
@@ -299,6 +290,23 @@ def run_confirm(seeds: Sequence[int], *, name: str | None = None, base_profile: 
     atomic_write_text(where["figures_dir"] / "confirm.json", json.dumps(record, indent=2) + "\n")
     print(f"[confirm] {name}: done in {(time.perf_counter() - t0) / 60:.1f} min -> {dirs['figures_dir']}", file=sys.stderr)
     return record
+
+
+def _when_transfer_pays(run: bool, seeds: Sequence[int], data: dict, base_profile: str, where: dict[str, Path],
+                        scheduler: str | None, progress: bool) -> dict[str, float]:
+    """The "when transfer pays" study on every kind of every seed of the run (when ``run``), with the
+    run's data root (person tours, networks); results in ``<figures_dir>/when_transfer_pays``. Returns
+    its wall seconds as ``{"when_transfer_pays": s}`` (``{}`` when not run)."""
+    if not run:
+        return {}
+    from .when_transfer_pays import run_when_transfer_pays
+
+    t = time.perf_counter()
+    common = data["profiles"][base_profile]["common"]
+    run_when_transfer_pays(where["data_root"], where["figures_dir"] / "when_transfer_pays",
+                           [(kind, s) for s in seeds for kind in common["kinds"]], split="eval",
+                           jobs=int(common.get("jobs", 1)), scheduler=scheduler, progress=progress)
+    return {"when_transfer_pays": round(time.perf_counter() - t, 1)}
 
 
 def _judge(figures_dir: Path, ran: Sequence[str]) -> None:

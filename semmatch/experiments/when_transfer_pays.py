@@ -21,6 +21,10 @@ side transfer pays.
 ``python -m semmatch.experiments.when_transfer_pays --seeds ... --out DIR`` runs it
 (``make confirm`` calls :func:`run_when_transfer_pays` on the run's scenes); docs/when_transfer_pays.md
 describes the design and the validation run.
+
+Size: one study in one place, as :mod:`.in_home` is: its grid, the per-scene rendering and scoring,
+the crossover estimator and its tables and figure read together, and the estimator is small
+(:func:`crossing_point`, :func:`beyond_grid`, :func:`resample_means`, :func:`crossover_estimate`).
 """
 
 from __future__ import annotations
@@ -38,7 +42,7 @@ import numpy as np
 import pandas as pd
 import yaml
 
-__all__ = ["GRID_PATH", "StudyGrid", "Arm", "load_grid", "study_arms", "study_scenes", "run_scene",
+__all__ = ["GRID_PATH", "StudyGrid", "Arm", "load_grid", "study_arms", "arm_methods", "study_scenes", "run_scene",
            "crossing_point", "beyond_grid", "resample_means", "crossover_estimate", "difference_table",
            "crossover_table", "arms_table", "plot_crossover", "when_transfer_pays_study", "run_when_transfer_pays"]
 
@@ -65,6 +69,9 @@ class StudyGrid:
         Shares of the person's tour in (0, 1].
     simulation : dict
     networks, methods : tuple of str
+        ``methods`` are scored on every height arm.
+    secondary_methods : tuple of str
+        The methods scored on the tilt, appearance and coverage arms.
     fused_base, measure : str
     voxel_size, eval_voxel_size : float
     n_resamples : int
@@ -85,6 +92,7 @@ class StudyGrid:
     simulation: dict
     networks: tuple[str, ...]
     methods: tuple[str, ...]
+    secondary_methods: tuple[str, ...]
     fused_base: str
     measure: str
     voxel_size: float
@@ -117,6 +125,7 @@ def load_grid(path: str | Path | None = None) -> StudyGrid:
             severity=float(d["appearance"]["severity"]), cameras=tuple(str(c) for c in d["appearance"]["cameras"]),
             coverage=tuple(float(c) for c in d["coverage"]), simulation=dict(d["simulation"]),
             networks=tuple(str(n) for n in d["networks"]), methods=tuple(str(m) for m in d["methods"]),
+            secondary_methods=tuple(str(m) for m in d["secondary_methods"]),
             fused_base=str(d["fused_base"]), measure=str(d["measure"]), voxel_size=float(d["voxel_size"]),
             eval_voxel_size=float(d["eval_voxel_size"]), n_resamples=int(boot["n_resamples"]),
             confidence=float(boot["confidence"]), networks_level=bool(boot["networks_level"]),
@@ -133,6 +142,9 @@ def load_grid(path: str | Path | None = None) -> StudyGrid:
         raise ValueError(f"{path}: appearance cameras {bad} unknown; valid: robot, both")
     if not all(0 < c <= 1 for c in grid.coverage):
         raise ValueError(f"{path}: coverage shares must lie in (0, 1], got {list(grid.coverage)}")
+    bad = sorted(set(grid.secondary_methods) - set(grid.methods))
+    if bad:
+        raise ValueError(f"{path}: secondary_methods {bad} are not among the methods {list(grid.methods)}")
     bad = sorted(set(grid.methods) - set(available_methods()))
     if bad or grid.fused_base not in available_methods():
         raise ValueError(f"{path}: unknown transfer method(s) {bad or [grid.fused_base]}")
@@ -274,6 +286,18 @@ def _render_scene(kind: str, seed: int, sdir: Path, upper_src: Path | None, arms
     return tours, len(rendered)
 
 
+def arm_methods(grid: StudyGrid, arm: Arm) -> tuple[str, ...]:
+    """The methods scored on ``arm``: every method on a height arm, the secondary ones elsewhere."""
+    return grid.methods if arm.factor == "height" else grid.secondary_methods
+
+
+def _scoring_key(grid: StudyGrid) -> str:
+    """8 hex digits over what a network's rows depend on besides the frames (kept rows are reused only for them)."""
+    key = {"arms": [a.name for a in study_arms(grid)], "methods": grid.methods, "secondary": grid.secondary_methods,
+           "fused_base": grid.fused_base, "voxel": grid.voxel_size, "eval_voxel": grid.eval_voxel_size}
+    return hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()[:8]
+
+
 def _labels(model, frames) -> list[np.ndarray]:
     """A network's labels of every frame (argmax of its probabilities, as :func:`semmatch.segment.predict_sequence`)."""
     return [model.predict_frame(f).argmax(axis=-1).astype(np.uint8) for f in frames]
@@ -299,9 +323,6 @@ def _score_network(model, tours: Mapping[str, Path], arms: Sequence[Arm], grid: 
             k = max(1, int(round(share * len(uppers[look]))))
             indexes[(look, share)] = as_map_index(reconstruct(uppers[look][:k], upper_labels[look][:k],
                                                               grid.voxel_size))
-    transferred = [m for m in grid.methods if m != "fused"]
-    if "fused" in grid.methods and grid.fused_base not in transferred:
-        transferred.append(grid.fused_base)
     origin = eval_grid_origin(grid.eval_voxel_size)
     rows = []
     for key in dict.fromkeys(a.robot_key for a in arms):
@@ -310,11 +331,14 @@ def _score_network(model, tours: Mapping[str, Path], arms: Sequence[Arm], grid: 
         valid = np.concatenate([(f.depth > 0).reshape(-1) for f in frames])
         labelings: list[tuple[Arm, str, list[np.ndarray]]] = []
         for arm in (a for a in arms if a.robot_key == key):
-            index = indexes[arm.person_key]
+            index, methods = indexes[arm.person_key], arm_methods(grid, arm)
+            transferred = [m for m in methods if m != "fused"]
+            if "fused" in methods and grid.fused_base not in transferred:
+                transferred.append(grid.fused_base)
             lab = {m: [transfer_frame(m, f, index).labels for f in frames] for m in transferred}
-            if "fused" in grid.methods:
+            if "fused" in methods:
                 lab["fused"] = [fuse_labels(t, p) for t, p in zip(lab[grid.fused_base], lower, strict=True)]
-            labelings += [(arm, "lower", lower)] + [(arm, m, lab[m]) for m in grid.methods]
+            labelings += [(arm, "lower", lower)] + [(arm, m, lab[m]) for m in methods]
         ref, *maps = reconstruct_many(frames, [None, *(lab for _, _, lab in labelings)], grid.voxel_size)
         ref = reference_grid(ref, grid.eval_voxel_size)
         for (arm, method, lab), m in zip(labelings, maps, strict=True):
@@ -333,7 +357,7 @@ def run_scene(data_root: str, work: str, grid_path: str, split: str, scene: tupl
     The person's tour is ``data_root/scenes/<split>/<scene>/upper`` where it exists (the
     pipeline's, e.g. a confirmatory run's), else it is rendered as the pipeline does. Rendered
     frames are kept under ``work/<scene>/<settings key>/``; each network's rows are kept there as
-    ``rows_<network>_<digest>.json`` (a rerun scores only what is missing).
+    ``rows_<network>_<digest>_<scoring key>.json`` (a rerun scores only what is missing).
 
     Returns
     -------
@@ -360,7 +384,7 @@ def run_scene(data_root: str, work: str, grid_path: str, split: str, scene: tupl
     render = (time.perf_counter() - t, time.process_time() - c) if fresh else (float("nan"),) * 2
     rows = []
     for net in grid.networks:
-        kept = sdir / f"rows_{net}_{file_digest(layout.model(net))[:12]}.json"
+        kept = sdir / f"rows_{net}_{file_digest(layout.model(net))[:12]}_{_scoring_key(grid)}.json"
         if kept.is_file():
             net_rows, score = json.loads(kept.read_text()), (float("nan"),) * 2
         else:
@@ -607,8 +631,9 @@ def crossover_table(diffs: pd.DataFrame, grid: StudyGrid) -> tuple[pd.DataFrame,
 
 
 def arms_table(diffs: pd.DataFrame, grid: StudyGrid) -> pd.DataFrame:
-    """Per arm and method: mean transfer - ``lower`` with its bootstrap interval, and its change
-    from the reference height's arm (the tilt, appearance and coverage arms' comparator).
+    """Per arm and method (:func:`arm_methods`): mean transfer - ``lower`` with its bootstrap
+    interval, and its change from the reference height's arm (the tilt, appearance and coverage
+    arms' comparator).
 
     Returns
     -------
@@ -616,12 +641,12 @@ def arms_table(diffs: pd.DataFrame, grid: StudyGrid) -> pd.DataFrame:
         ``arm, factor, method, diff, lo, hi, change, change_lo, change_hi`` (``change``: NaN for
         the height arms).
     """
-    arms = study_arms(grid)
-    names = [a.name for a in arms]
-    ref = names.index(f"height {grid.reference_height:g}")
     a = (1.0 - grid.confidence) / 2
     rows = []
     for m in grid.methods:
+        arms = [arm for arm in study_arms(grid) if m in arm_methods(grid, arm)]
+        names = [arm.name for arm in arms]
+        ref = names.index(f"height {grid.reference_height:g}")
         cube, kinds = _cube(diffs, m, names)
         curves = resample_means(cube, kinds, networks_level=grid.networks_level, n_resamples=grid.n_resamples,
                                 seed=grid.seed)
