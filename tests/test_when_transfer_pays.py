@@ -221,3 +221,20 @@ def test_make_confirm_runs_the_study_on_the_run_scenes_after_the_verdicts(tmp_pa
     order.clear()
     assert "when_transfer_pays" not in confirm.run_confirm([9933], name="plain", out_root=tmp_path)["wall_seconds"]
     assert "when_transfer_pays" not in order
+
+
+@pytest.mark.parametrize("args, match", [
+    (["--split", "val", "--seeds", "7001"], "not validation seeds"),
+    (["--seeds", "1"], "seed 1 is a training seed"),
+])
+def test_the_command_refuses_seeds_it_may_not_generate_before_any_work(tmp_path, capsys, args, match):
+    with pytest.raises(SystemExit) as e:
+        wtp.main([*args, "--out", str(tmp_path / "out"), "--data", str(tmp_path)])
+    assert e.value.code == 2 and match in capsys.readouterr().err
+    assert not (tmp_path / "out").exists() and not (tmp_path / "when_transfer_pays").exists()
+
+
+def test_the_command_needs_the_grids_networks(tmp_path, capsys):
+    with pytest.raises(SystemExit):
+        wtp.main(["--split", "val", "--seeds", "501", "--out", str(tmp_path / "out"), "--data", str(tmp_path)])
+    assert "compact.pt: no such network" in capsys.readouterr().err
