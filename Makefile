@@ -33,10 +33,12 @@ endif
 ## confirmatory run: every evaluation study of the full profile on scenes of fresh seeds, with the
 ## shipped networks -> figures/confirm/NAME/ (docs/confirm.md); e.g. make confirm SEEDS="9111 9112 9113"
 ## (IN_HOME=1: the in-home adaptation study in the run's homes too; NOTEBOOKS="...": only these
-## notebooks, added to an existing run of the same seeds)
+## notebooks, added to an existing run of the same seeds; the "when transfer pays" study runs too,
+## docs/when_transfer_pays.md, unless NOTEBOOKS is given or WHEN_TRANSFER_PAYS=0)
+WHEN_TRANSFER_PAYS ?= 1
 confirm: setup
-	@if [ -z "$(SEEDS)" ]; then echo 'usage: make confirm SEEDS="9111 9112 9113" [NAME=mine] [IN_HOME=1] [NOTEBOOKS="09_adapt_robot_view"]' >&2; exit 2; fi
-	PATH="$(CURDIR)/$(VENV)/bin:$$PATH" $(PY) -m semmatch.experiments confirm --seeds $(SEEDS) $(if $(NAME),--name $(NAME),) $(if $(IN_HOME),--in-home,) $(if $(NOTEBOOKS),--notebooks $(NOTEBOOKS),)
+	@if [ -z "$(SEEDS)" ]; then echo 'usage: make confirm SEEDS="9111 9112 9113" [NAME=mine] [IN_HOME=1] [NOTEBOOKS="09_adapt_robot_view"] [WHEN_TRANSFER_PAYS=0]' >&2; exit 2; fi
+	PATH="$(CURDIR)/$(VENV)/bin:$$PATH" $(PY) -m semmatch.experiments confirm --seeds $(SEEDS) $(if $(NAME),--name $(NAME),) $(if $(IN_HOME),--in-home,) $(if $(NOTEBOOKS),--notebooks $(NOTEBOOKS),$(if $(filter 1,$(WHEN_TRANSFER_PAYS)),--when-transfer-pays,))
 
 ## the in-home adaptation study (its plan: semmatch/experiments/in_home_plan.yaml; docs/adapt.md)
 in-home: setup

@@ -179,7 +179,7 @@ def run_confirm(seeds: Sequence[int], *, name: str | None = None, base_profile: 
                 allow_training: bool = False, params_file: str | os.PathLike = ROOT / "params.yaml",
                 out_root: str | os.PathLike | None = None, log_output: bool = False,
                 scheduler: str | None = None, in_home: bool = False,
-                notebooks: Sequence[str] | None = None) -> dict:
+                notebooks: Sequence[str] | None = None, when_transfer_pays: bool = False) -> dict:
     """Run every evaluation study of ``base_profile`` on the scenes of ``seeds``.
 
     Parameters
@@ -210,6 +210,10 @@ def run_confirm(seeds: Sequence[int], *, name: str | None = None, base_profile: 
         Run only these notebooks in an existing run of the same seeds and name (its data and
         ``confirm.json`` must be there; e.g. ``09_adapt_robot_view`` once adapted networks are
         shipped). The run's record keeps its earlier stages and lists this addition.
+    when_transfer_pays : bool
+        Also run the "when transfer pays" study (:func:`semmatch.experiments.when_transfer_pays.run_when_transfer_pays`,
+        its committed grid) on the run's scenes, with the run's networks and person tours; results
+        in ``figures/confirm/<name>/when_transfer_pays/`` (``make confirm`` passes it).
 
     Returns
     -------
@@ -288,6 +292,7 @@ def run_confirm(seeds: Sequence[int], *, name: str | None = None, base_profile: 
         run_in_home_study(data_root / "in_home", where["figures_dir"] / "in_home", homes=homes, jobs=jobs,
                           scheduler=scheduler, progress=log_output, analysis_plan=plan)
         walls["in_home"] = round(time.perf_counter() - t, 1)
+    walls.update(_when_transfer_pays(when_transfer_pays, seeds, data, base_profile, where, scheduler, log_output))
 
     models = data_root / "models"
     record = {
@@ -305,6 +310,23 @@ def run_confirm(seeds: Sequence[int], *, name: str | None = None, base_profile: 
     atomic_write_text(where["figures_dir"] / "confirm.json", json.dumps(record, indent=2) + "\n")
     print(f"[confirm] {name}: done in {(time.perf_counter() - t0) / 60:.1f} min -> {dirs['figures_dir']}", file=sys.stderr)
     return record
+
+
+def _when_transfer_pays(run: bool, seeds: Sequence[int], data: dict, base_profile: str, where: dict[str, Path],
+                        scheduler: str | None, progress: bool) -> dict[str, float]:
+    """The "when transfer pays" study on every kind of every seed of the run (when ``run``), with the
+    run's data root (person tours, networks); results in ``<figures_dir>/when_transfer_pays``. Returns
+    its wall seconds as ``{"when_transfer_pays": s}`` (``{}`` when not run)."""
+    if not run:
+        return {}
+    from .when_transfer_pays import run_when_transfer_pays
+
+    t = time.perf_counter()
+    common = data["profiles"][base_profile]["common"]
+    run_when_transfer_pays(where["data_root"], where["figures_dir"] / "when_transfer_pays",
+                           [(kind, s) for s in seeds for kind in common["kinds"]], split="eval",
+                           jobs=int(common.get("jobs", 1)), scheduler=scheduler, progress=progress)
+    return {"when_transfer_pays": round(time.perf_counter() - t, 1)}
 
 
 def _judge(figures_dir: Path, ran: Sequence[str], plan: AnalysisPlan) -> dict[str, float]:
@@ -423,6 +445,8 @@ def add_confirm_parser(sub) -> None:
     c.add_argument("--scheduler", help="Dask scheduler address for the per-scene tasks")
     c.add_argument("--in-home", action="store_true",
                    help="also run the in-home adaptation study in the run's homes (docs/adapt.md)")
+    c.add_argument("--when-transfer-pays", action="store_true",
+                   help="also run the 'when transfer pays' study on the run's scenes (docs/when_transfer_pays.md)")
     c.add_argument("--notebooks", nargs="+", metavar="NOTEBOOK",
                    help="run only these notebooks in an existing run of the same seeds (e.g. 09_adapt_robot_view)")
     c.set_defaults(handler=_confirm_main)
@@ -431,7 +455,7 @@ def add_confirm_parser(sub) -> None:
 def _confirm_main(args) -> int:
     run_confirm(args.seeds, name=args.name, base_profile=args.base_profile, allow_training=args.allow_training,
                 params_file=args.params, log_output=not args.quiet, scheduler=args.scheduler, in_home=args.in_home,
-                notebooks=args.notebooks)
+                notebooks=args.notebooks, when_transfer_pays=args.when_transfer_pays)
     return 0
 
 
