@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import subprocess
 from pathlib import Path
 from types import SimpleNamespace
@@ -18,6 +19,8 @@ from semmatch.experiments.rules_v2 import _judge_family_v2, claim_rule_v2, compa
 ROOT = Path(__file__).resolve().parents[1]
 RUN = ROOT / "figures" / "confirm" / "seeds-8001-8006"
 V2 = load_analysis_plan(PLAN_V2_FILE)
+#: the v2 plan with its first version's interval over networks (the two-level bootstrap)
+V2_BOOT = dataclasses.replace(V2, raw={**V2.raw, "inference": {**V2.raw["inference"], "interval": "two-level-bootstrap"}})
 KINDS = ("living_room", "bedroom", "office", "apartment")
 
 
@@ -113,6 +116,22 @@ def test_check_claims_v2_on_synthetic_scenes():
     assert out["interval_method"].eq("t over scenes (one network); provisional").all()
 
 
+def test_several_networks_use_the_two_component_t():
+    """The plan's interval over networks and scenes: the two-component t (no resampling): holds on a clear
+    gain, refuted when the networks are worse than lower, the method named in the table."""
+    rows = [dict(scene=f"{kind}_{9000 + s}", model="compact", method=m, training_seed=n,
+                 mean_acc=0.7 + (0.06 if m == "3d-neighborhood" else 0.0) + 0.01 * n + 0.003 * s * (m == "lower"))
+            for kind in KINDS for s in range(3) for n in range(3) for m in ("lower", "3d-neighborhood")]
+    df = pd.DataFrame(rows)
+    claims = [c for c in V2.claims if c.id == "C1"]
+    out = check_claims(df, methods=["3d-neighborhood"], plan=V2, claims=claims)
+    assert out["interval_method"].iloc[0] == "two-component t (3 networks)"
+    assert out["verdict"].iloc[0] == "holds" and out["lo"].iloc[0] > 0.02
+    flipped = df.assign(mean_acc=np.where(df["method"] == "lower", df["mean_acc"] + 0.12, df["mean_acc"]))
+    out = check_claims(flipped, methods=["3d-neighborhood"], plan=V2, claims=claims)
+    assert out["verdict"].iloc[0] == "against" and out["p_against"].iloc[0] < 0.001
+
+
 def test_several_networks_need_the_two_level_bootstrap(monkeypatch):
     from semmatch.evaluate import stats
 
@@ -123,7 +142,7 @@ def test_several_networks_need_the_two_level_bootstrap(monkeypatch):
     claims = [c for c in V2.claims if c.id == "C1"]
     if not hasattr(stats, "two_level_bootstrap"):
         with pytest.raises(ValueError, match="two_level_bootstrap"):
-            check_claims(df, methods=["3d-neighborhood"], plan=V2, claims=claims)
+            check_claims(df, methods=["3d-neighborhood"], plan=V2_BOOT, claims=claims)
 
     def fake(values, networks, scenes, strata, *, confidence, n_resamples, seed):
         # the contract: two-sided bounds lo/hi and one-sided lower/upper at `confidence`, a fixed
@@ -135,13 +154,13 @@ def test_several_networks_need_the_two_level_bootstrap(monkeypatch):
         return SimpleNamespace(mean=float(np.mean(values)), lo=lo, hi=hi, lower=lower, upper=upper)
 
     monkeypatch.setattr(stats, "two_level_bootstrap", fake, raising=False)
-    out = check_claims(df, methods=["3d-neighborhood"], plan=V2, claims=claims)
+    out = check_claims(df, methods=["3d-neighborhood"], plan=V2_BOOT, claims=claims)
     assert out["interval_method"].iloc[0] == "two-level bootstrap (3 networks)"
     assert out["verdict"].iloc[0] == "holds" and out["lo"].iloc[0] > 0.02
     assert out["p_against"].iloc[0] == 1.0  # no resample below 0: the bound never excludes it
     # the same networks, now worse than lower: refuted through the bound-derived p-value and Holm
     flipped = df.assign(mean_acc=np.where(df["method"] == "lower", df["mean_acc"] + 0.12, df["mean_acc"]))
-    out = check_claims(flipped, methods=["3d-neighborhood"], plan=V2, claims=claims)
+    out = check_claims(flipped, methods=["3d-neighborhood"], plan=V2_BOOT, claims=claims)
     assert out["verdict"].iloc[0] == "against" and out["p_against"].iloc[0] < 0.001
 
 
@@ -163,7 +182,7 @@ def test_judge_figures_v2_on_several_networks(tmp_path, monkeypatch):
     pd.DataFrame(rows).to_csv(tmp_path / "table2_per_scene.csv", index=False)
     pd.DataFrame({"scene": sorted({r["scene"] for r in rows}), "route": "own",
                   "support": np.linspace(0.5, 0.9, 12)}).to_csv(tmp_path / "support_per_scene.csv", index=False)
-    table = judge_figures(tmp_path, plan=V2).set_index("claim")
+    table = judge_figures(tmp_path, plan=V2_BOOT).set_index("claim")
     assert table.loc["F1", "verdict"] == "holds" and "two-level bootstrap (3 networks)" in table.loc["F1", "interval"]
     assert (tmp_path / "secondary_s1_support.csv").is_file()
 
@@ -269,7 +288,7 @@ def test_a_confirm_runs_tables_get_their_training_seeds_and_its_speed_claims_the
     (tmp_path / BENCH_RECORD).write_text(json.dumps({
         "maps": {"fused": {"spread": spread, "runs": runs}}, "command": "semmatch bench transfer --map fused --repeat 5",
         "machine": {"device_name": "Test CPU", "cpu_count": 2}}))
-    verdicts = judge_figures(tmp_path, plan=V2).set_index("claim")
+    verdicts = judge_figures(tmp_path, plan=V2_BOOT).set_index("claim")
     assert verdicts.loc["F1", "verdict"] == "holds" and "(3 networks)" in verdicts.loc["F1", "interval"]
     assert verdicts.loc["C6-gt", "interval"].startswith("t over scenes (one network)")  # no training seed
     assert verdicts.loc["P3", "verdict"] == "holds" and verdicts.loc["P3", "data"].startswith("speed (semmatch bench")

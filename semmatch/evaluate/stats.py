@@ -804,6 +804,36 @@ def grid_two_component_t(grid: np.ndarray, *, confidence: float = 0.95) -> Netwo
     """
     if not 0.0 < confidence < 1.0:
         raise ValueError(f"two_component_t_ci: confidence must be in (0, 1), got {confidence}")
+    est = network_scene_estimate(grid)
+    n_net, n_sc = np.asarray(grid).shape
+    mean, se, df = est.mean, est.se, est.df
+    if se == 0.0:
+        return NetworkSceneInterval(mean, mean, mean, mean, mean, n_net, n_sc)
+    two, one = (float(_st.t.ppf(q, df)) * se for q in (0.5 + confidence / 2, confidence))
+    return NetworkSceneInterval(mean, mean - two, mean + two, mean - one, mean + one, n_net, n_sc)
+
+
+def network_scene_estimate(grid: np.ndarray) -> StratifiedEstimate:
+    """The grid mean of a networks x scenes matrix with the two-component standard error and
+    Welch-Satterthwaite degrees of freedom of :func:`two_component_t_ci` (for its t tests:
+    :func:`t_test_pvalue`).
+
+    Parameters
+    ----------
+    grid : ndarray (N, S)
+        One value per network and scene (:func:`network_scene_grid`).
+
+    Returns
+    -------
+    StratifiedEstimate
+        ``mean``, ``se`` (0 and ``df`` inf for a degenerate grid), ``df``, ``n`` (cells) and
+        ``stratified`` False.
+
+    Raises
+    ------
+    ValueError
+        A NaN or an empty grid.
+    """
     grid = np.asarray(grid, dtype=np.float64)
     if grid.ndim != 2 or grid.size == 0 or np.isnan(grid).any():
         raise ValueError(f"two_component_t_ci: expected a non-empty networks x scenes matrix without NaN, "
@@ -817,8 +847,6 @@ def grid_two_component_t(grid: np.ndarray, *, confidence: float = 0.95) -> Netwo
         parts.append((float(np.var(grid.mean(axis=0), ddof=1)) / n_sc, n_sc - 1))
     var = sum(v for v, _ in parts)
     if var == 0.0:
-        return NetworkSceneInterval(mean, mean, mean, mean, mean, n_net, n_sc)
+        return StratifiedEstimate(mean, 0.0, float("inf"), int(grid.size), False)
     df = var**2 / sum(v**2 / d for v, d in parts if v > 0)
-    se = float(np.sqrt(var))
-    two, one = (float(_st.t.ppf(q, df)) * se for q in (0.5 + confidence / 2, confidence))
-    return NetworkSceneInterval(mean, mean - two, mean + two, mean - one, mean + one, n_net, n_sc)
+    return StratifiedEstimate(mean, float(np.sqrt(var)), float(df), int(grid.size), False)

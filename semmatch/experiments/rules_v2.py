@@ -6,10 +6,11 @@
 * :func:`claim_rule_v2`: the intersection-union rule (every comparison holds, no adjustment),
   ``refuted`` when any comparison is against.
 * The intervals behind them (:func:`semmatch.experiments.claims.check_claims` calls
-  ``_compare_v2``): the two-level bootstrap over networks and scenes
-  (``semmatch.evaluate.stats.two_level_bootstrap``) when a table holds several networks per
-  architecture, else a t interval over scenes; and the kind-cluster sensitivity (a t interval
-  over the four kind means).
+  ``_compare_v2``): when a table holds several networks per architecture, the plan's
+  ``inference.interval``: the two-component t over networks and scenes
+  (``semmatch.evaluate.stats.two_component_t_ci``, the plan's primary interval since the coverage
+  study) or the two-level bootstrap (``two_level_bootstrap``); else a t interval over scenes; and
+  the kind-cluster sensitivity (a t interval over the four kind means).
 """
 
 from __future__ import annotations
@@ -19,7 +20,15 @@ from collections.abc import Sequence
 import numpy as np
 import pandas as pd
 
-from ..evaluate.stats import holm, interval, stratified_estimate, t_test_pvalue
+from ..evaluate.stats import (
+    grid_two_component_t,
+    holm,
+    interval,
+    network_scene_estimate,
+    network_scene_grid,
+    stratified_estimate,
+    t_test_pvalue,
+)
 from .analysis_plan import AnalysisPlan
 
 __all__ = ["COMPARISON_VERDICTS_V2", "CLAIM_VERDICTS_V2", "NETWORK_COLUMN", "comparison_verdict_v2",
@@ -35,8 +44,20 @@ NETWORK_COLUMN = "training_seed"
 
 def _t_tests(d: np.ndarray, *, sesoi: float, confidence: float) -> dict:
     """One-sample t interval over ``d`` and the one-sided t p-values the rules read."""
-    est = stratified_estimate(d)
     _, lo, hi = interval(d, None, method="t", confidence=confidence)
+    return _estimate_tests(stratified_estimate(d), lo, hi, sesoi=sesoi)
+
+
+def _two_component_tests(d: np.ndarray, networks: list, scenes: list, *, sesoi: float, confidence: float) -> dict:
+    """The two-component t over networks and scenes (``semmatch.evaluate.stats.two_component_t_ci``:
+    a network and a scene variance component, Welch-Satterthwaite df) and its one-sided p-values."""
+    grid, _ = network_scene_grid(d, networks, scenes, None, fn="check_claims")
+    r = grid_two_component_t(grid, confidence=confidence)
+    return _estimate_tests(network_scene_estimate(grid), r.lo, r.hi, sesoi=sesoi)
+
+
+def _estimate_tests(est, lo: float, hi: float, *, sesoi: float) -> dict:
+    """The one-sided t p-values the rules read, from a mean with its standard error and df."""
     p = lambda null, alt: t_test_pvalue(est, null, alt)  # noqa: E731
     up, down = p(sesoi, "greater"), p(-sesoi, "less")
     return dict(diff=est.mean, lo=lo, hi=hi, df=est.df, p_pos=p(0.0, "greater"), p_neg=p(0.0, "less"),
@@ -86,7 +107,11 @@ def _compare_v2(d: np.ndarray, strata: list[str], networks: list | None, scenes:
     """:func:`_compare` under the v2 plan: the plan's interval (the two-level bootstrap over several
     networks, else ``one_network_interval``) and the kind-cluster sensitivity (t over the kind means)."""
     several = networks is not None and len(set(networks)) > 1
-    if several:
+    kind = plan.raw.get("inference", {}).get("interval", "two-component-t")
+    if several and kind == "two-component-t":
+        out = _two_component_tests(d, networks, scenes, sesoi=sesoi, confidence=plan.confidence)
+        method = f"two-component t ({len(set(networks))} networks)"
+    elif several:
         out = _bootstrap_tests(d, strata, networks, scenes, sesoi=sesoi, plan=plan, seed=seed)
         method = f"two-level bootstrap ({len(set(networks))} networks)"
     elif plan.one_network_interval == "t":
