@@ -29,7 +29,7 @@ __all__ = ["VERBS", "LONG_VERBS", "build_parser", "main", "add_quiet", "add_sequ
            "emit"]
 
 #: verb modules, in the order ``semmatch --help`` lists them
-VERBS = ("simulate", "train", "adapt", "predict", "reconstruct", "transfer", "evaluate", "panoptic", "show", "bench")
+VERBS = ("simulate", "train", "adapt", "predict", "reconstruct", "align", "transfer", "evaluate", "panoptic", "show", "bench")
 
 
 def build_parser() -> argparse.ArgumentParser:

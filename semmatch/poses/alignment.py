@@ -55,6 +55,9 @@ __all__ = [
     "check_alignment",
     "camera_up",
     "label_up",
+    "recording_poses",
+    "align_recording",
+    "write_aligned_poses",
 ]
 
 #: refusal thresholds of :func:`check_alignment` (docs/recordings.md, "A person and a robot", says
@@ -598,3 +601,105 @@ def _align(source, target, *, source_up, target_up, floor, voxel_size, seed, res
         checks=result_checks, accepted=all(c["passed"] for c in result_checks.values()),
         seconds=time.perf_counter() - t0,
     )
+
+
+def recording_poses(seq, *, estimate: bool = False, progress: bool = False) -> np.ndarray:
+    """A recording's poses in its own frame: the recorded ones, or RGB-D odometry from the identity.
+
+    Parameters
+    ----------
+    seq : sequence of Frame
+        E.g. :func:`semmatch.io.recordings.read_recording`.
+    estimate : bool
+        Ignore recorded poses and estimate them (:func:`semmatch.poses.odometry.estimate_poses`,
+        hybrid residual, pose graph: ``reconstruct --estimate-poses``'s chain, from the identity).
+    progress : bool
+
+    Raises
+    ------
+    ValueError
+        No recorded pose for some frame and ``estimate`` off (the message names ``--estimate-poses``).
+    """
+    if estimate:
+        from .odometry import estimate_poses
+
+        return estimate_poses(seq, init_pose=np.eye(4), progress=progress)
+    poses = getattr(seq, "poses", None)
+    name = getattr(seq, "path", "the recording")
+    if poses is None:
+        raise ValueError(f"{name} has no recorded poses; pass --estimate-poses to estimate them by RGB-D odometry")
+    poses = np.asarray(poses, dtype=np.float64)
+    bad = np.flatnonzero(~np.isfinite(poses).all(axis=(1, 2)))
+    if len(bad):
+        raise ValueError(f"{name} has no recorded pose for {len(bad)} of {len(poses)} frames (first: frame "
+                         f"{bad[0]}); pass --estimate-poses to estimate them by RGB-D odometry")
+    return poses
+
+
+def align_recording(seq, poses: np.ndarray, person_map: SemanticMap, *, person_up: np.ndarray | str | None = "auto",
+                    map_voxel: float = 0.04, progress: bool = False, **settings) -> tuple[AlignmentResult, np.ndarray]:
+    """Fuse a robot's recording on its own poses and align the map into the person's map.
+
+    Parameters
+    ----------
+    seq : sequence of Frame
+    poses : ndarray (N, 4, 4)
+        The recording's poses in its own frame (:func:`recording_poses`).
+    person_map : SemanticMap
+    person_up : array-like (3,), "auto" or None
+        The person's map's up hint: a vector, ``"auto"`` (its floor-labelled points,
+        :func:`label_up`; none when it has too few) or None (no floor constraint).
+    map_voxel : float
+        TSDF voxel (m) of the robot's map.
+    progress : bool
+    **settings
+        Passed to :func:`align_to_map`.
+
+    Returns
+    -------
+    result : AlignmentResult
+    poses_in_person : ndarray (N, 4, 4)
+        ``result.transform @ poses``.
+    """
+    from ..fusion import extract, fuse_sequence
+
+    vol = fuse_sequence(seq, poses=poses, voxel_size=map_voxel, progress=progress)
+    robot_map = extract(vol, "mesh")
+    if isinstance(person_up, str):
+        if person_up != "auto":
+            raise ValueError(f"person_up must be a 3-vector, 'auto' or None, got {person_up!r}")
+        person_up = label_up(person_map)
+    result = align_to_map(robot_map, person_map, source_up=camera_up(poses), target_up=person_up, **settings)
+    return result, result.transform @ np.asarray(poses, dtype=np.float64)
+
+
+def write_aligned_poses(path, timestamps: np.ndarray, poses: np.ndarray, result: AlignmentResult, *,
+                        forced: bool = False, person_map: str = "") -> dict:
+    """Write the robot's poses in the person's frame (TUM, atomic) and the report beside them.
+
+    The TUM file's header comments and the report (``<path>.json``) say whether the alignment
+    passed its checks or was forced (``--accept-weak-alignment``). Readers of TUM (evo, semmatch)
+    skip the comments.
+
+    Returns
+    -------
+    dict
+        The report as written.
+    """
+    from pathlib import Path
+
+    from ..geometry import pose_to_tum
+    from ..io import atomic_write_text, write_json
+
+    path = Path(path)
+    status = "accepted" if result.accepted else "FORCED: below the checks (--accept-weak-alignment): " + "; ".join(
+        result.failures())
+    lines = ["# timestamp tx ty tz qx qy qz qw (T_world_camera)",
+             f"# semmatch align: robot poses in the frame of {person_map or 'the person map'}; alignment {status}"]
+    for t, T in zip(np.asarray(timestamps, dtype=np.float64), poses, strict=True):
+        lines.append(f"{t:.6f} " + " ".join(f"{x:.9f}" for x in pose_to_tum(T)))
+    report = {"poses": str(path), "person_map": person_map, "forced": bool(forced and not result.accepted),
+              **result.as_dict()}
+    write_json(Path(f"{path}.json"), report)
+    atomic_write_text(path, "\n".join(lines) + "\n")
+    return report
