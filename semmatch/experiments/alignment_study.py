@@ -247,8 +247,13 @@ def kitchen_study(data: str | Path, out: str | Path, *, progress: bool = False, 
 
 
 def two_height_scene(sd: Path, pose_dir: Path, work: Path, *, methods: Sequence[str] = ("3d-neighborhood",),
-                     chain: bool = True, progress: bool = False, **settings) -> dict:
+                     chain: bool = True, person_scene: Path | None = None, progress: bool = False,
+                     **settings) -> dict:
     """One scene of :func:`two_height_study`: alignment, its error, and the chain's Mean Acc. (estimated and true poses).
+
+    With ``person_scene`` (another scene) the robot of ``sd`` is aligned into that scene's
+    person's map: a wrong pair, which :func:`~semmatch.poses.alignment.align_to_map` must refuse
+    (no errors, no chain).
 
     Returns
     -------
@@ -266,17 +271,19 @@ def two_height_scene(sd: Path, pose_dir: Path, work: Path, *, methods: Sequence[
 
     work.mkdir(parents=True, exist_ok=True)
     seqs, est, true = {}, {}, {}
-    for n in ("upper", "lower"):
-        seqs[n] = read_sequence(sd / f"{n}_noisy").load()
-        (pose_dir / sd.name).mkdir(parents=True, exist_ok=True)
-        est[n] = cached_odometry(seqs[n], pose_dir / sd.name / f"{n}_noisy.txt", prior=seqs[n].poses, progress=progress)
-        true[n] = read_tum(sd / f"{n}_noisy" / "poses_gt.txt")[1]
+    for n, d in (("upper", Path(person_scene or sd)), ("lower", sd)):
+        seqs[n] = read_sequence(d / f"{n}_noisy").load()
+        (pose_dir / d.name).mkdir(parents=True, exist_ok=True)
+        est[n] = cached_odometry(seqs[n], pose_dir / d.name / f"{n}_noisy.txt", prior=seqs[n].poses, progress=progress)
+        true[n] = read_tum(d / f"{n}_noisy" / "poses_gt.txt")[1]
     t0 = time.perf_counter()
     (person_map,) = reconstruct_many(PosedSequence(seqs["upper"], est["upper"]), [None], 0.04)
     result, _ = align_recording(seqs["lower"], est["lower"], person_map, person_up="auto", **settings)
     A = {n: world_alignment(est[n], true[n]) for n in seqs}
     err = registration_errors(result.transform, A["upper"], A["lower"], est["lower"], true["lower"])
-    row = {"scene": sd.name, "accepted": result.accepted, "constrained": result.constrained,
+    if person_scene is not None:
+        err, chain = {"trans_err_m": float("nan"), "rot_err_deg": float("nan")}, False
+    row = {"scene": sd.name, "person": Path(person_scene or sd).name, "accepted": result.accepted, "constrained": result.constrained,
            "trans_err_m": err["trans_err_m"], "rot_err_deg": err["rot_err_deg"],
            **{k: v for k, v in result.as_dict().items() if isinstance(v, float | int | bool) and k != "accepted"},
            "failures": "; ".join(result.failures()), "align_seconds": time.perf_counter() - t0}

@@ -494,7 +494,7 @@ def align_to_map(
     icp_voxels: Sequence[float] = (0.05, 0.025),
     icp_iterations: int = 50,
     check_voxel: float = 0.02,
-    check_distance: float = 0.05,
+    check_distance: float = 0.03,
     checks: dict | None = None,
     threads: int | None = 1,
 ) -> AlignmentResult:
