@@ -75,7 +75,7 @@ def align_robot(args: argparse.Namespace, robot: str, person_map_path: str):
     seq = read_recording(robot)
     poses = recording_poses(seq, estimate=args.estimate_poses, progress=not args.quiet)
     person = read_map(person_map_path)
-    result, aligned = align_recording(seq, poses, person, person_up=up, map_voxel=args.map_voxel,
+    result, aligned, _ = align_recording(seq, poses, person, person_up=up, map_voxel=args.map_voxel,
                                       progress=not args.quiet, voxel_size=args.align_voxel, seed=args.align_seed,
                                       restarts=args.restarts)
     if not result.accepted and not args.accept_weak_alignment:

@@ -637,7 +637,8 @@ def recording_poses(seq, *, estimate: bool = False, progress: bool = False) -> n
 
 
 def align_recording(seq, poses: np.ndarray, person_map: SemanticMap, *, person_up: np.ndarray | str | None = "auto",
-                    map_voxel: float = 0.04, progress: bool = False, **settings) -> tuple[AlignmentResult, np.ndarray]:
+                    map_voxel: float = 0.04, progress: bool = False,
+                    **settings) -> tuple[AlignmentResult, np.ndarray, SemanticMap]:
     """Fuse a robot's recording on its own poses and align the map into the person's map.
 
     Parameters
@@ -660,6 +661,8 @@ def align_recording(seq, poses: np.ndarray, person_map: SemanticMap, *, person_u
     result : AlignmentResult
     poses_in_person : ndarray (N, 4, 4)
         ``result.transform @ poses``.
+    robot_map : SemanticMap
+        The robot's map in its own frame.
     """
     from ..fusion import extract, fuse_sequence
 
@@ -670,7 +673,7 @@ def align_recording(seq, poses: np.ndarray, person_map: SemanticMap, *, person_u
             raise ValueError(f"person_up must be a 3-vector, 'auto' or None, got {person_up!r}")
         person_up = label_up(person_map)
     result = align_to_map(robot_map, person_map, source_up=camera_up(poses), target_up=person_up, **settings)
-    return result, result.transform @ np.asarray(poses, dtype=np.float64)
+    return result, result.transform @ np.asarray(poses, dtype=np.float64), robot_map
 
 
 def write_aligned_poses(path, timestamps: np.ndarray, poses: np.ndarray, result: AlignmentResult, *,
