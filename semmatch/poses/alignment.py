@@ -252,7 +252,7 @@ def label_up(m: SemanticMap) -> np.ndarray | None:
 
 
 def fit_floor(cloud, up: np.ndarray, voxel_size: float, *, floor_angle: float = 30.0, min_support: float = 0.03,
-              seed: int = 0) -> Floor | None:
+              max_below: float = 0.02, seed: int = 0) -> Floor | None:
     """The floor of a map: the lowest well-supported layer of points facing up, refined by a RANSAC plane.
 
     Parameters
@@ -267,6 +267,9 @@ def fit_floor(cloud, up: np.ndarray, voxel_size: float, *, floor_angle: float = 
         Largest angle (degrees) between a floor normal (point or plane) and ``up``.
     min_support : float
         Smallest share of the cloud's points on the floor.
+    max_below : float
+        Largest share of the cloud's points more than two voxels below the plane (a map that
+        sees too little floor finds a table or bed top instead, with the floor's points under it).
     seed : int
         Seed of Open3D's RANSAC (``segment_plane``).
 
@@ -290,14 +293,14 @@ def fit_floor(cloud, up: np.ndarray, voxel_size: float, *, floor_angle: float = 
     h = pts[flat] @ up
     bins = np.floor((h - h.min()) / voxel_size).astype(int)
     counts = np.bincount(bins)
-    need = max(10, min_support * len(pts) / 2)
+    need = max(20, min_support * len(pts) / 2)
     # the lowest layer (two bins thick) holding enough points: below it only noise
     pair = counts + np.r_[counts[1:], 0]
     low = np.flatnonzero(pair >= need)
     if len(low) == 0:
         return None
     lo = h.min() + low[0] * voxel_size
-    band = (h >= lo - voxel_size) & (h <= lo + 3 * voxel_size)
+    band = (h >= lo - 0.5 * voxel_size) & (h <= lo + 2 * voxel_size)  # a table top 0.3 m up stays out
     sel = pts[flat][band]
     if len(sel) < 10:
         return None
@@ -314,6 +317,8 @@ def fit_floor(cloud, up: np.ndarray, voxel_size: float, *, floor_angle: float = 
     dist = pts @ n + d
     support = float((np.abs(dist) <= 0.5 * voxel_size).mean())
     if angle > floor_angle or support < min_support:
+        return None
+    if (dist < -2 * voxel_size).mean() > max_below:  # a floor has nothing under it (a bed top has)
         return None
     res = float(np.sqrt(np.mean((sel[inl] @ n + d) ** 2)))
     return Floor(normal=n, offset=d, residual=res, support=support, up_angle_deg=angle)
