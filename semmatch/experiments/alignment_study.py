@@ -41,6 +41,7 @@ __all__ = [
     "two_height_scene",
     "two_height_study",
     "pixels_near_map",
+    "alignment_figure",
     "main",
 ]
 
@@ -345,6 +346,54 @@ def two_height_study(scene_dirs: Sequence[Path], pose_dir: Path, out: Path, *, c
     return df
 
 
+def alignment_figure(rows: pd.DataFrame, out: str | Path, *, kitchen: dict | None = None,
+                     max_trans_m: float = 0.05, max_rot_deg: float = 2.0) -> Path:
+    """Alignment errors per pair (translation against rotation), accepted and refused, with the target box.
+
+    Parameters
+    ----------
+    rows : DataFrame
+        :func:`two_height_study`'s rows (``scene``, ``person``, ``accepted``, ``trans_err_m``,
+        ``rot_err_deg``); wrong pairs (``person`` differs from ``scene``) are left out.
+    out : path
+        PNG (written atomically).
+    kitchen : dict, optional
+        :func:`kitchen_study`'s report, drawn as a star.
+    max_trans_m, max_rot_deg : float
+        The target (a dashed box).
+
+    Returns
+    -------
+    Path
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from ..io import save_figure
+
+    fig, ax = plt.subplots(figsize=(4.6, 3.4))
+    right = rows[rows.get("person", rows["scene"]) == rows["scene"]] if len(rows) else rows
+    for acc, marker, label in ((True, "o", "accepted"), (False, "x", "refused")):
+        r = right[right["accepted"] == acc] if len(right) else right
+        if len(r):
+            ax.scatter(100 * r["trans_err_m"].clip(upper=1.0), r["rot_err_deg"].clip(upper=20), marker=marker,
+                       label=f"two heights, {label} ({len(r)})")
+    if kitchen is not None:
+        ax.scatter([100 * kitchen["trans_err_m"]], [kitchen["rot_err_deg"]], marker="*", s=160, color="k",
+                   label="real kitchen (accepted)" if kitchen["alignment"]["accepted"] else "real kitchen (refused)")
+    ax.plot([0, 100 * max_trans_m, 100 * max_trans_m], [max_rot_deg, max_rot_deg, 0], "k--", lw=0.8,
+            label=f"target ({100 * max_trans_m:g} cm, {max_rot_deg:g} deg)")
+    ax.set_xscale("symlog", linthresh=1.0)
+    ax.set_yscale("symlog", linthresh=1.0)
+    ax.set_xlabel("translation error (cm; clipped at 100)")
+    ax.set_ylabel("rotation error (deg; clipped at 20)")
+    ax.legend(fontsize=7, loc="upper left")
+    fig.tight_layout()
+    return save_figure(fig, out)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """``python -m semmatch.experiments.alignment_study {kitchen,two-heights,simulate-val}``."""
     p = argparse.ArgumentParser(prog="python -m semmatch.experiments.alignment_study", description=__doc__.split("\n")[0])
@@ -357,6 +406,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     t.add_argument("--poses", required=True, help="odometry cache folder")
     t.add_argument("--out", required=True, help="work folder (rows.csv)")
     t.add_argument("--no-chain", dest="chain", action="store_false", help="alignment only (no transfer, no Mean Acc.)")
+    f = sub.add_parser("figure", help="the figure of docs/recordings.md from the studies' outputs")
+    f.add_argument("rows", nargs="+", help="rows.csv of two-heights runs")
+    f.add_argument("--kitchen", help="kitchen.json")
+    f.add_argument("--out", required=True, help="PNG")
     v = sub.add_parser("simulate-val", help="validation pairs for the thresholds")
     v.add_argument("--out", required=True)
     v.add_argument("--seeds", type=int, nargs="+", default=[501, 502, 503, 504])
@@ -366,6 +419,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     elif args.what == "two-heights":
         df = two_height_study([Path(s) for s in args.scenes], Path(args.poses), Path(args.out), chain=args.chain)
         print(df.to_string())
+    elif args.what == "figure":
+        rows = pd.concat([pd.read_csv(r) for r in args.rows], ignore_index=True)
+        kitchen = json.loads(Path(args.kitchen).read_text()) if args.kitchen else None
+        print(alignment_figure(rows, args.out, kitchen=kitchen))
     else:
         print("\n".join(str(d) for d in simulate_validation_pairs(Path(args.out), args.seeds)))
     return 0
