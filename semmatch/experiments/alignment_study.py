@@ -365,7 +365,8 @@ def alignment_figure(rows: pd.DataFrame, out: str | Path, *, kitchen: dict | Non
     ----------
     rows : DataFrame
         :func:`two_height_study`'s rows (``scene``, ``person``, ``accepted``, ``trans_err_m``,
-        ``rot_err_deg``); wrong pairs (``person`` differs from ``scene``) are left out.
+        ``rot_err_deg``, and ``trans_err_mesh_m`` / ``rot_err_mesh_deg`` used instead where
+        present); wrong pairs (``person`` differs from ``scene``) are left out.
     out : path
         PNG (written atomically).
     kitchen : dict, optional
@@ -385,7 +386,11 @@ def alignment_figure(rows: pd.DataFrame, out: str | Path, *, kitchen: dict | Non
     from ..io import save_figure
 
     fig, ax = plt.subplots(figsize=(4.6, 3.4))
-    right = rows[rows.get("person", rows["scene"]) == rows["scene"]] if len(rows) else rows
+    right = rows[rows.get("person", rows["scene"]) == rows["scene"]].copy() if len(rows) else rows
+    if "trans_err_mesh_m" in right:  # the mesh-fit truth where it was measured
+        mesh = right["trans_err_mesh_m"].notna()
+        right.loc[mesh, "trans_err_m"] = right.loc[mesh, "trans_err_mesh_m"]
+        right.loc[mesh, "rot_err_deg"] = right.loc[mesh, "rot_err_mesh_deg"]
     for acc, marker, label in ((True, "o", "accepted"), (False, "x", "refused")):
         r = right[right["accepted"] == acc] if len(right) else right
         if len(r):
@@ -396,11 +401,9 @@ def alignment_figure(rows: pd.DataFrame, out: str | Path, *, kitchen: dict | Non
                    label="real kitchen (accepted)" if kitchen["alignment"]["accepted"] else "real kitchen (refused)")
     ax.plot([0, 100 * max_trans_m, 100 * max_trans_m], [max_rot_deg, max_rot_deg, 0], "k--", lw=0.8,
             label=f"target ({100 * max_trans_m:g} cm, {max_rot_deg:g} deg)")
-    ax.set_xscale("symlog", linthresh=1.0)
-    ax.set_yscale("symlog", linthresh=1.0)
-    ax.set_xlabel("translation error (cm; clipped at 100)")
-    ax.set_ylabel("rotation error (deg; clipped at 20)")
-    ax.legend(fontsize=7, loc="upper left")
+    ax.set_xlabel("translation error (cm)")
+    ax.set_ylabel("rotation error (degrees)")
+    ax.legend(fontsize=7, loc="upper right")
     fig.tight_layout()
     return save_figure(fig, out)
 
