@@ -29,8 +29,8 @@ __all__ = ["VERBS", "LONG_VERBS", "build_parser", "main", "add_quiet", "add_sequ
            "emit"]
 
 #: verb modules, in the order ``semmatch --help`` lists them
-VERBS = ("simulate", "train", "adapt", "predict", "reconstruct", "transfer", "evaluate", "panoptic", "show", "convert",
-         "replay", "bench")
+VERBS = ("simulate", "train", "adapt", "predict", "reconstruct", "align", "transfer", "evaluate", "panoptic", "show",
+         "convert", "replay", "bench")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -40,7 +40,7 @@ __all__ = ["LONG_VERBS", "ImageSize", "HelpFormatter", "RawDescriptionHelpFormat
 
 #: the verbs that run long enough to want a progress display (on stderr) and ``--quiet`` to hide it;
 #: the benchmarks are left out (they time their work, and print nothing until the numbers)
-LONG_VERBS: tuple[str, ...] = ("simulate", "train", "adapt", "predict", "reconstruct", "transfer",
+LONG_VERBS: tuple[str, ...] = ("simulate", "train", "adapt", "predict", "reconstruct", "align", "transfer",
                                "panoptic reference", "panoptic transfer", "convert", "replay")
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import json
 
 
@@ -36,7 +37,12 @@ def register(sub) -> None:
     p.add_argument("--strict", action="store_true",
                    help="exit with an error when the map supports (almost) no pixel (default: a warning)")
     add_index_cache(p)
-    declare_paths(p, inputs=("sequence", "sequence_flag", "map", "probs", "intrinsics"), outputs=("out",))
+    p.add_argument("--align", metavar="PERSON_MAP_OR_POSES",
+                   help="place SEQ in the map's frame first: a person's map (PLY) to align SEQ into as `semmatch "
+                        "align` does (refused alignments transfer nothing), or that verb's poses (TUM)")
+    p.add_argument("--accept-weak-alignment", action="store_true",
+                   help="with --align: use an alignment that fails its checks (the output's metadata says so)")
+    declare_paths(p, inputs=("sequence", "sequence_flag", "map", "probs", "intrinsics", "align"), outputs=("out",))
     p.set_defaults(func=run)
 
 
@@ -74,6 +80,9 @@ def run(args) -> int:
     if args.jobs < 1:  # before the map is indexed (and its index cached)
         raise ValueError(f"--jobs must be >= 1, got {args.jobs}")
     seq = open_sequence(args, seq_path, needs_poses=True)
+    alignment = None
+    if args.align:
+        seq, alignment = _aligned(args, seq_path, seq)
     if args.jobs > 1 and type(seq) is not SequenceReader:  # workers share a recording's decoded frames
         seq = InMemorySequence(seq, progress=not args.quiet)
     index = load_index(args.map, max_distance=args.max_distance, voxel_size=args.voxel_size,
@@ -92,5 +101,37 @@ def run(args) -> int:
             )
         except LowSupportWarning as e:
             raise ValueError(f"{e} (--strict: coverage below {LOW_SUPPORT:.0%}; the labels were written)") from None
+    if alignment is not None:  # the labels folder says which poses it was transferred at
+        from semmatch.io import write_json
+
+        write_json(f"{stats['out']}/alignment.json", alignment)
+        stats["alignment"] = {k: alignment[k] for k in ("accepted", "forced") if k in alignment}
     return emit(stats, args.json, f"{stats['method']}: {stats['frames']} frames -> {stats['out']}  coverage "
                 f"{stats['coverage']:.3f}  median {stats['ms_median']:.1f} ms/frame ({stats['fps']:.1f} FPS)")
+
+
+def _aligned(args, seq_path: str, seq):
+    """``--align``: the sequence at its poses in the map's frame, and the alignment's report."""
+    from pathlib import Path
+
+    import numpy as np
+
+    from semmatch.experiments.real_poses import PosedSequence
+    from semmatch.io import read_tum
+
+    if Path(args.align).suffix.lower() == ".ply":
+        from semmatch.cli.align import align_robot
+
+        defaults = dict(estimate_poses=False, person_up="auto", align_voxel=0.1, map_voxel=0.04, align_seed=0,
+                        restarts=4)
+        opts = argparse.Namespace(**{**defaults, **vars(args)})
+        _, result, poses = align_robot(opts, seq_path, args.align, seq=seq)
+        report = {"person_map": str(args.align), "forced": bool(not result.accepted), **result.as_dict()}
+    else:
+        _, poses = read_tum(args.align)
+        header = Path(args.align).read_text().split("\n", 2)[:2]
+        forced = any("FORCED" in line for line in header)
+        report = {"poses": str(args.align), "accepted": not forced, "forced": forced}
+    if len(poses) != len(seq):
+        raise ValueError(f"{args.align}: {len(poses)} poses for the {len(seq)} frames of {seq_path}")
+    return PosedSequence(seq, np.asarray(poses)), report

@@ -45,7 +45,8 @@ import numpy as np
 
 from ..io import SemanticMap
 
-__all__ = ["Registration", "register_maps", "rigid_perturbation", "transform_error"]
+__all__ = ["Registration", "register_maps", "rigid_perturbation", "transform_error", "MapClouds", "map_clouds",
+           "fpfh_features", "ransac_starts", "refine_starts"]
 
 
 @dataclass(frozen=True)
@@ -74,9 +75,9 @@ class Registration:
         and would agree with each other by construction. 0 when the kept transform comes from
         such restarts only (before 2026-11-27 they counted, so a failure could read as agreement).
     candidates : list of dict
-        Per restart: ``seed``, ``global_fitness`` (RANSAC), ``coarse_fitness``, ``coarse_rmse``
-        (ICP at ``voxel_size``), ``fitness``, ``inlier_rmse``, ``transform`` (after the finest
-        level; shared by restarts that agree).
+        Per restart: ``seed``, ``global_fitness`` (RANSAC), ``coarse_fitness``, ``coarse_rmse``,
+        ``coarse_transform`` (ICP at ``voxel_size``), ``fitness``, ``inlier_rmse``, ``transform``
+        (after the finest level; shared by restarts that agree).
     n_source, n_target : int
         Points after downsampling at ``voxel_size`` (those the features describe).
     seconds : float
@@ -231,15 +232,45 @@ def register_maps(
 def _register(source: SemanticMap, target: SemanticMap, *, voxel_size: float, seed: int, restarts: int,
               max_iterations: int, confidence: float, icp_voxels: Sequence[float], icp_iterations: int) -> Registration:
     """:func:`register_maps` under its thread limit."""
-    import open3d as o3d
-
-    reg = o3d.pipelines.registration
     t0 = time.perf_counter()
+    clouds = map_clouds(source, target, voxel_size)
+    starts = ransac_starts(clouds, voxel_size, seed=seed, restarts=restarts, max_iterations=max_iterations,
+                           confidence=confidence)
+    return refine_starts(clouds, starts, voxel_size, icp_voxels=icp_voxels, icp_iterations=icp_iterations, t0=t0)
+
+
+@dataclass
+class MapClouds:
+    """Both maps of a registration as Open3D clouds: in full (``source``, ``target``) and
+    downsampled at the feature voxel with normals (``source_down``, ``target_down``)."""
+
+    source: object
+    target: object
+    source_down: object
+    target_down: object
+
+
+def map_clouds(source: SemanticMap, target: SemanticMap, voxel_size: float) -> MapClouds:
+    """The clouds :func:`register_maps` works on (step 1 of the module documentation).
+
+    Parameters
+    ----------
+    source, target : SemanticMap
+    voxel_size : float
+        Feature voxel (m).
+
+    Returns
+    -------
+    MapClouds
+
+    Raises
+    ------
+    ValueError
+        Non-positive ``voxel_size``, an empty map, or fewer than 10 points left at ``voxel_size``
+        (naming the map's file).
+    """
     if not voxel_size > 0:
         raise ValueError(f"voxel_size must be > 0, got {voxel_size}")
-    if int(restarts) < 1:
-        raise ValueError(f"restarts must be >= 1, got {restarts}")
-    levels = sorted((float(v) for v in icp_voxels if 0 < float(v) < voxel_size), reverse=True)
     src_full = _point_cloud(source, "source")
     dst_full = _point_cloud(target, "target")
     src, dst = _downsample(src_full, voxel_size), _downsample(dst_full, voxel_size)
@@ -247,19 +278,36 @@ def _register(source: SemanticMap, target: SemanticMap, *, voxel_size: float, se
         if len(pc.points) < 10:
             raise ValueError(f"{what} map {m.source}: only {len(pc.points)} points at a {voxel_size} m voxel; "
                              "too few to register")
+    return MapClouds(src_full, dst_full, src, dst)
+
+
+def fpfh_features(cloud, voxel_size: float):
+    """FPFH features (radius ``5 * voxel_size``, up to 100 neighbours) of a downsampled cloud with normals."""
+    import open3d as o3d
+
     feature = o3d.geometry.KDTreeSearchParamHybrid(radius=5.0 * voxel_size, max_nn=100)
-    f_src = reg.compute_fpfh_feature(src, feature)
-    f_dst = reg.compute_fpfh_feature(dst, feature)
+    return o3d.pipelines.registration.compute_fpfh_feature(cloud, feature)
+
+
+def ransac_starts(clouds: MapClouds, voxel_size: float, *, seed: int, restarts: int, max_iterations: int,
+                  confidence: float) -> list[dict]:
+    """Global starts of :func:`register_maps`: FPFH + RANSAC, once per restart (step 2).
+
+    Returns
+    -------
+    list of dict
+        Per restart: ``seed``, ``global_fitness`` (0: RANSAC found nothing; its transform is then
+        the identity), ``global_transform``.
+    """
+    import open3d as o3d
+
+    reg = o3d.pipelines.registration
+    if int(restarts) < 1:
+        raise ValueError(f"restarts must be >= 1, got {restarts}")
+    src, dst = clouds.source_down, clouds.target_down
+    f_src, f_dst = fpfh_features(src, voxel_size), fpfh_features(dst, voxel_size)
     dist = 1.5 * voxel_size
-    point_to_plane = reg.TransformationEstimationPointToPlane()
-    criteria = reg.ICPConvergenceCriteria(max_iteration=int(icp_iterations))
-
-    def icp(s, d, v: float, T: np.ndarray):
-        res = reg.registration_icp(s, d, 2.0 * v, T, point_to_plane, criteria)
-        return np.asarray(res.transformation).copy(), float(res.fitness), float(res.inlier_rmse)
-
-    # every restart: RANSAC, then ICP at the feature voxel (cheap)
-    candidates = []
+    starts = []
     for k in range(int(restarts)):
         o3d.utility.random.seed(int(seed) + k)
         ransac = reg.registration_ransac_based_on_feature_matching(
@@ -267,10 +315,52 @@ def _register(source: SemanticMap, target: SemanticMap, *, voxel_size: float, se
             [reg.CorrespondenceCheckerBasedOnEdgeLength(0.9), reg.CorrespondenceCheckerBasedOnDistance(dist)],
             reg.RANSACConvergenceCriteria(int(max_iterations), float(confidence)),
         )
-        T0 = np.asarray(ransac.transformation).copy()
+        starts.append(dict(seed=int(seed) + k, global_fitness=float(ransac.fitness),
+                           global_transform=np.asarray(ransac.transformation).copy()))
+    return starts
+
+
+def refine_starts(clouds: MapClouds, starts: list[dict], voxel_size: float, *, icp_voxels: Sequence[float],
+                  icp_iterations: int, t0: float | None = None) -> Registration:
+    """ICP from every global start, coarse to fine, and the best fit kept (steps 3 and 4).
+
+    Parameters
+    ----------
+    clouds : MapClouds
+    starts : list of dict
+        ``seed``, ``global_fitness`` (a start with fitness 0 is no vote in ``agreement``) and
+        ``global_transform`` each (:func:`ransac_starts`, or another global search).
+    voxel_size : float
+        Feature voxel (m): the first ICP level, and the scale of agreement (``2 * voxel_size``, 2 degrees).
+    icp_voxels, icp_iterations
+        As :func:`register_maps`.
+    t0 : float, optional
+        ``time.perf_counter()`` at the start of the registration (for ``seconds``).
+
+    Returns
+    -------
+    Registration
+    """
+    import open3d as o3d
+
+    reg = o3d.pipelines.registration
+    t0 = time.perf_counter() if t0 is None else t0
+    levels = sorted((float(v) for v in icp_voxels if 0 < float(v) < voxel_size), reverse=True)
+    src_full, dst_full, src, dst = clouds.source, clouds.target, clouds.source_down, clouds.target_down
+    point_to_plane = reg.TransformationEstimationPointToPlane()
+    criteria = reg.ICPConvergenceCriteria(max_iteration=int(icp_iterations))
+
+    def icp(s, d, v: float, T: np.ndarray):
+        res = reg.registration_icp(s, d, 2.0 * v, T, point_to_plane, criteria)
+        return np.asarray(res.transformation).copy(), float(res.fitness), float(res.inlier_rmse)
+
+    # every restart: ICP at the feature voxel (cheap)
+    candidates = []
+    for start in starts:
+        T0 = np.asarray(start["global_transform"], dtype=np.float64).copy()
         T, fit, rmse = icp(src, dst, voxel_size, T0)
-        candidates.append(dict(seed=int(seed) + k, global_fitness=float(ransac.fitness), global_transform=T0,
-                               coarse_fitness=fit, coarse_rmse=rmse, coarse_transform=T))
+        candidates.append(dict(seed=int(start["seed"]), global_fitness=float(start["global_fitness"]),
+                               global_transform=T0, coarse_fitness=fit, coarse_rmse=rmse, coarse_transform=T))
     # the finer levels for every distinct candidate (restarts that agree share one refinement):
     # a coarse fit, with correspondences up to twice the feature voxel, also rewards wrong
     # alignments of a small room; the finest level tells them apart
@@ -295,9 +385,8 @@ def _register(source: SemanticMap, target: SemanticMap, *, voxel_size: float, se
     return Registration(
         transform=T, fitness=fit, inlier_rmse=rmse,
         global_transform=best["global_transform"], global_fitness=best["global_fitness"],
-        restarts=int(restarts), agreement=agreement,
-        candidates=[{k: v for k, v in c.items() if k not in ("global_transform", "coarse_transform")}
-                    for c in candidates],
+        restarts=len(starts), agreement=agreement,
+        candidates=[{k: v for k, v in c.items() if k not in ("global_transform",)} for c in candidates],
         n_source=len(src.points), n_target=len(dst.points), seconds=time.perf_counter() - t0,
     )
 

@@ -5,18 +5,26 @@ ATE: RMSE of the camera positions after a least-squares rigid (or similarity) al
 pose is not finite are skipped, and an RPE pair is two frames ``delta`` apart in the recording
 that both have ground truth (no pair spans a gap in the ground truth).
 
+The numbers equal those of evo [3]_ (``evo_ape tum gt.txt est.txt --align``, ``evo_rpe tum gt.txt
+est.txt --delta 1 --delta_unit f``; :func:`evo_trajectory_errors` computes them through evo's
+``metrics`` and ``tests/test_align.py`` checks they agree): evo has no notion of frames without
+ground truth, so this module keeps its own code and skips them before aligning; trajectories
+written by ``semmatch reconstruct --estimate-poses --poses-out`` are TUM files that evo reads.
+
 References
 ----------
 .. [1] J. Sturm et al., "A benchmark for the evaluation of RGB-D SLAM systems", IROS 2012.
 .. [2] S. Umeyama, "Least-squares estimation of transformation parameters between two point
    patterns", TPAMI 1991.
+.. [3] M. Grupp, "evo: Python package for the evaluation of odometry and SLAM",
+   https://github.com/MichaelGrupp/evo, 2017.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["align_trajectory", "ate", "rpe", "rpe_pairs", "trajectory_errors", "rotation_deg"]
+__all__ = ["align_trajectory", "ate", "rpe", "rpe_pairs", "trajectory_errors", "evo_trajectory_errors", "rotation_deg"]
 
 
 def rotation_deg(R: np.ndarray) -> float:
@@ -123,3 +131,48 @@ def trajectory_errors(est: np.ndarray, gt: np.ndarray, *, delta: int = 1) -> dic
         "rpe_rot_deg": r,
         "n_frames": len(e),
     }
+
+
+def evo_trajectory_errors(est: np.ndarray, gt: np.ndarray, *, delta: int = 1) -> dict:
+    """:func:`trajectory_errors` computed by evo (``evo.core.metrics``): the same keys and numbers.
+
+    Frames without a finite estimate or ground truth are dropped first (evo cannot skip them);
+    with gaps, RPE pairs may then span a gap, unlike :func:`rpe`.
+
+    Parameters
+    ----------
+    est, gt : ndarray (N, 4, 4)
+    delta : int
+        RPE step in frames.
+
+    Returns
+    -------
+    dict
+        ``ate_rmse`` (after evo's rigid Umeyama alignment), ``ate_rmse_unaligned``, ``rpe_trans``
+        (RMSE), ``rpe_rot_deg`` (mean), ``n_frames``.
+    """
+    from evo.core import metrics
+    from evo.core.trajectory import PoseTrajectory3D
+
+    e, g = _valid_pairs(est, gt)
+    stamps = np.arange(len(e), dtype=np.float64)
+
+    def traj(P: np.ndarray) -> PoseTrajectory3D:
+        return PoseTrajectory3D(poses_se3=list(P), timestamps=stamps.copy())
+
+    def ape(ref, estimate) -> float:
+        m = metrics.APE(metrics.PoseRelation.translation_part)
+        m.process_data((ref, estimate))
+        return float(m.get_statistic(metrics.StatisticsType.rmse))
+
+    unaligned = ape(traj(g), traj(e))
+    aligned_est = traj(e)
+    aligned_est.align(traj(g), correct_scale=False)
+    out = {"ate_rmse": ape(traj(g), aligned_est), "ate_rmse_unaligned": unaligned}
+    for key, relation, stat in (("rpe_trans", metrics.PoseRelation.translation_part, metrics.StatisticsType.rmse),
+                                ("rpe_rot_deg", metrics.PoseRelation.rotation_angle_deg, metrics.StatisticsType.mean)):
+        m = metrics.RPE(relation, delta=int(delta), delta_unit=metrics.Unit.frames, all_pairs=False)
+        m.process_data((traj(g), traj(e)))
+        out[key] = float(m.get_statistic(stat))
+    out["n_frames"] = len(e)
+    return out
