@@ -121,6 +121,21 @@ def test_initialiser_is_pluggable_and_retried_until_it_answers(room):
     assert not r0.labels.any() and r0.reason
 
 
+def test_align_frame_places_a_frame_or_answers_not_found(room):
+    """``replay --init align``: semmatch align's checked alignment of one frame into the person's map;
+    a pose only when the alignment passes its checks, and then near the truth."""
+    from semmatch.online import align_frame
+
+    person, lower = room
+    assert align_frame(lower[0], None).pose is None
+    answers = [align_frame(f, person) for f in lower[:4]]
+    assert all(a.method == "align" for a in answers) and any(a.pose is not None for a in answers)
+    for a, f in zip(answers, lower[:4]):
+        if a.pose is not None:  # measured: 3 of 4 accepted, 5-6 cm / 0.3 degrees (the 4 cm map's offset)
+            err = transform_error(a.pose, f.pose)
+            assert err[0] < 0.08 and err[1] < 2.0, err
+
+
 def test_frame_schedule_drops_what_arrives_while_busy():
     took = {0: 0.05, 3: 0.01}
     processed, dropped = frame_schedule(8, 30.0, lambda i: took.get(i, 0.1))

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-INITS = ("auto", "register", "first-pose", "identity")
+INITS = ("auto", "align", "register", "first-pose", "identity")
 
 
 def register(sub) -> None:
@@ -36,7 +36,9 @@ def register(sub) -> None:
                    help="processing time on the simulated clock that decides the dropped frames: wall time, or "
                         "CPU time (one free core; for a machine shared with other work)")
     p.add_argument("--init", default="auto", choices=INITS,
-                   help="first pose: 'register' (global registration of the first frame onto --map), 'first-pose' "
+                   help="first pose: 'align' (semmatch align's checked, floor-levelled alignment of the frame into "
+                        "--map; a frame that fails the checks is retried later), 'register' (global registration "
+                        "of the first frame onto --map), 'first-pose' "
                         "(the recording's first ground-truth pose), 'identity'; 'auto': register with --map, else "
                         "first-pose where the recording has one, else identity")
     p.add_argument("--true-poses", action="store_true",
@@ -83,15 +85,15 @@ def _iterations(text: str) -> tuple[int, ...]:
 def _initialiser(args, gt):
     import numpy as np
 
-    from semmatch.online import given_pose, register_frame
+    from semmatch.online import align_frame, given_pose, register_frame
 
     mode = args.init
     if mode == "auto":
         mode = "register" if args.map else ("first-pose" if gt is not None and np.isfinite(gt[0]).all() else "identity")
-    if mode == "register":
+    if mode in ("register", "align"):
         if not args.map:
-            raise ValueError("--init register needs --map (the person's map to register the first frame onto)")
-        return register_frame
+            raise ValueError(f"--init {mode} needs --map (the person's map to place the first frame in)")
+        return register_frame if mode == "register" else align_frame
     if mode == "first-pose":
         if gt is None or not np.isfinite(gt[0]).all():
             raise ValueError(f"{args.recording}: --init first-pose, but its first frame has no ground-truth pose")

@@ -8,9 +8,9 @@ session at a sensor rate, dropping frames as a live robot would, and reports lat
 losses and trajectory error (``semmatch replay``, ``semmatch bench online``). docs/online.md.
 """
 
-from .initialisation import Initialisation, given_pose, register_frame
+from .initialisation import Initialisation, align_frame, given_pose, register_frame
 from .session import STATUSES, FrameResult, RobotSession
 from .tracking import ModelTracker, TrackingResult
 
 __all__ = ["RobotSession", "FrameResult", "STATUSES", "ModelTracker", "TrackingResult", "Initialisation",
-           "given_pose", "register_frame"]
+           "given_pose", "register_frame", "align_frame"]

@@ -18,7 +18,7 @@ import numpy as np
 from ..geometry import backproject, check_pose
 from ..io import Frame, SemanticMap
 
-__all__ = ["Initialisation", "Initialiser", "given_pose", "register_frame"]
+__all__ = ["Initialisation", "Initialiser", "given_pose", "register_frame", "align_frame"]
 
 
 @dataclass(frozen=True)
@@ -101,3 +101,44 @@ def register_frame(frame: Frame, person_map: SemanticMap | None, *, voxel_size: 
     if reg.fitness < min_fitness:
         return Initialisation(None, float(reg.fitness), "register")
     return Initialisation(np.asarray(reg.transform, dtype=np.float64), float(reg.fitness), "register")
+
+
+def align_frame(frame: Frame, person_map: SemanticMap | None, *, depth_max: float = 4.0, seed: int = 0,
+                restarts: int = 4) -> Initialisation:
+    """The frame's pose in the person's map by ``semmatch align``'s checked global alignment.
+
+    The frame's point cloud (camera frame; its up hint the camera's -y, a level robot camera) is
+    aligned into the person's map by :func:`semmatch.poses.alignment.align_to_map` (floors levelled
+    where both see one, yaw and floor shift searched, ICP, the alignment checks); an alignment
+    that fails its checks is "not found" (tried again on a later frame), never used.
+
+    Parameters
+    ----------
+    frame : Frame
+    person_map : SemanticMap
+    depth_max : float
+    seed, restarts : int
+        As :func:`~semmatch.poses.alignment.align_to_map`.
+
+    Returns
+    -------
+    Initialisation
+        ``quality`` is the alignment's structure fitness.
+    """
+    from ..poses.alignment import align_to_map, label_up
+
+    if person_map is None:
+        return Initialisation(None, 0.0, "align")
+    pts, _ = backproject(np.where(np.isfinite(frame.depth), frame.depth, 0), frame.intrinsics, stride=2,
+                         max_depth=depth_max)
+    if len(pts) < 100:
+        return Initialisation(None, 0.0, "align")
+    cloud = SemanticMap(pts, np.zeros(len(pts), np.uint8), source=f"frame {frame.index}")
+    try:
+        res = align_to_map(cloud, person_map, source_up=np.array([0.0, -1.0, 0.0]), target_up=label_up(person_map),
+                           seed=seed, restarts=restarts)
+    except ValueError:  # too few points after downsampling
+        return Initialisation(None, 0.0, "align")
+    if not res.accepted:
+        return Initialisation(None, float(res.structure_fitness), "align")
+    return Initialisation(np.asarray(res.transform, dtype=np.float64), float(res.structure_fitness), "align")
