@@ -499,8 +499,9 @@ def test_cli_simulate(tmp_path, capsys):
     assert main(["simulate", "--kind", "office", "--height", "9", "--frames", "3", "--out",
                  str(tmp_path / "x")]) == 2
     assert "above the ceiling" in capsys.readouterr().err
-    assert main(["simulate", "--fx", "0", "--frames", "3", "--out", str(tmp_path / "y")]) == 2
-    assert "focal length" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as e:  # refused by the parser: a focal length must be > 0
+        main(["simulate", "--fx", "0", "--frames", "3", "--out", str(tmp_path / "y")])
+    assert e.value.code == 2 and "--fx: must be > 0" in capsys.readouterr().err
 
 
 def test_fast_mode_matches_exact_rendering(living):
