@@ -64,6 +64,16 @@ def given_pose(pose: np.ndarray) -> Initialiser:
     return init
 
 
+
+def _frame_cloud(frame: Frame, depth_max: float) -> SemanticMap | None:
+    """The frame's point cloud in its camera frame (every 2nd pixel up to ``depth_max``), or None
+    when it has fewer than 100 points (the initialisers' input)."""
+    pts, _ = backproject(np.where(np.isfinite(frame.depth), frame.depth, 0), frame.intrinsics, stride=2,
+                         max_depth=depth_max)
+    if len(pts) < 100:
+        return None
+    return SemanticMap(pts, np.zeros(len(pts), np.uint8), source=f"frame {frame.index}")
+
 def register_frame(frame: Frame, person_map: SemanticMap | None, *, voxel_size: float = 0.05,
                    min_fitness: float = 0.3, depth_max: float = 4.0, seed: int = 0,
                    restarts: int = 3) -> Initialisation:
@@ -87,13 +97,9 @@ def register_frame(frame: Frame, person_map: SemanticMap | None, *, voxel_size: 
     """
     from ..poses.registration import register_maps
 
-    if person_map is None:
+    cloud = _frame_cloud(frame, depth_max) if person_map is not None else None
+    if cloud is None:
         return Initialisation(None, 0.0, "register")
-    pts, _ = backproject(np.where(np.isfinite(frame.depth), frame.depth, 0), frame.intrinsics, stride=2,
-                         max_depth=depth_max)
-    if len(pts) < 100:
-        return Initialisation(None, 0.0, "register")
-    cloud = SemanticMap(pts, np.zeros(len(pts), np.uint8), source=f"frame {frame.index}")
     try:
         reg = register_maps(cloud, person_map, voxel_size=voxel_size, seed=seed, restarts=restarts)
     except ValueError:  # too few points after downsampling
@@ -127,13 +133,9 @@ def align_frame(frame: Frame, person_map: SemanticMap | None, *, depth_max: floa
     """
     from ..poses.alignment import align_to_map, label_up
 
-    if person_map is None:
+    cloud = _frame_cloud(frame, depth_max) if person_map is not None else None
+    if cloud is None:
         return Initialisation(None, 0.0, "align")
-    pts, _ = backproject(np.where(np.isfinite(frame.depth), frame.depth, 0), frame.intrinsics, stride=2,
-                         max_depth=depth_max)
-    if len(pts) < 100:
-        return Initialisation(None, 0.0, "align")
-    cloud = SemanticMap(pts, np.zeros(len(pts), np.uint8), source=f"frame {frame.index}")
     try:
         res = align_to_map(cloud, person_map, source_up=np.array([0.0, -1.0, 0.0]), target_up=label_up(person_map),
                            seed=seed, restarts=restarts)
