@@ -61,7 +61,7 @@ stages = {
     outs=[f"data/{P}/upper"], figs=[*tbl("upper_maps"), "upper_maps.png"]),
  "label_transfer": dict(
     nb="04_label_transfer", deps=[f"data/{P}/scenes", f"data/{P}/models", f"data/{P}/upper"],
-    params=["profile", *common("methods", "networks", "fused_base"), f"profiles.{P}.label_transfer"],
+    params=["profile", *common("methods", "networks", "fused_base", "slic_2d"), f"profiles.{P}.label_transfer"],
     outs=[f"data/{P}/lower_labels"],
     figs=[*tbl("table1_speed", "support_per_scene", "claims_speed"), "table1_speed.png", "support_per_scene.png",
           "fig_transferred_frames.png"]),
@@ -77,7 +77,7 @@ stages = {
     outs=[], figs=[*tbl("fig3_height", "fig3_height_per_scene", "claims_height", "verdicts_height", "fig3_training_seeds"), "fig3_height.png", "findings_height.md"]),
  "real_data": dict(
     nb="07_real_data", deps=[f"data/{P}/scenes", f"data/{P}/models", f"data/{P}/upper", f"data/{P}/lower_maps"],
-    params=["profile", *common("methods", "networks", "voxel_size", "eval_voxel_size", "fused_base"), f"profiles.{P}.real_data"],
+    params=["profile", *common("methods", "networks", "voxel_size", "eval_voxel_size", "fused_base", "slic_2d"), f"profiles.{P}.real_data"],
     outs=[f"data/{P}/real_like"],
     figs=[*tbl("table3_per_scene", "table3_real", "table3_mesh_reference", "trajectory_error", "validation_odometry_gate",
                "misregistration", "claims_real", "verdicts_real", "depth_noise", "claims_depth_noise", "trajectory_error_summary", "registration_error"),

@@ -266,9 +266,11 @@ def test_the_run_is_judged_by_the_plan_of_its_seeds(tmp_path, monkeypatch, fake_
     record = confirm.run_confirm(fake_v2_seeds, name="v2", out_root=tmp_path)
     figures = tmp_path / "figures" / "confirm" / "v2"
     assert [p.rules for p in judged] == ["v2"] and record["analysis_plan"]["rules"] == "v2"
-    assert benches[0][1:] == ["-m", "semmatch", "bench", "transfer", "--map", "fused", "--repeat", "5", "--json"]
+    lever = "--param=2d-slic:iterations=3"  # the plan's 2d-slic lever, as params.yaml states it
+    assert benches[0][1:] == ["-m", "semmatch", "bench", "transfer", "--map", "fused", "--repeat", "5", lever, "--json"]
     bench = json.loads((figures / speed_claims.BENCH_RECORD).read_text())
-    assert bench["command"] == "semmatch bench transfer --map fused --repeat 5 --json" and bench["machine"]["cpu_count"]
+    assert bench["command"] == f"semmatch bench transfer --map fused --repeat 5 {lever} --json"
+    assert bench["machine"]["cpu_count"]
     speed = record["analysis_plan"]["speed_bench"]
     assert (speed["load_min"], speed["load_max"], speed["reference_fps"]) == (1.0, 1.4, 12.2)
     params = pipeline.load_params(tmp_path / "data" / "confirm" / "v2" / "params.yaml", "full")
@@ -331,3 +333,34 @@ def test_the_readme_header_names_the_rules_of_the_plan_that_judged_the_run(tmp_p
     text = r.read_text()  # the first run (no plan in its record: the plan of its seeds, v1) reads as before
     assert "judged by the analysis plan ([docs/analysis_plan.md](docs/analysis_plan.md)): one verdict" in text
     assert "intersection-union" not in text and "](docs/results_confirmatory.md)" in text
+
+
+def test_the_plans_speed_lever_is_read_from_the_runs_parameters_and_must_be_the_plans_choice(tmp_path):
+    """The 2d-slic lever reaches the run's benchmark and every study from params.yaml's one key; a
+    parameter file that states another value (or none) is refused before the benchmark runs."""
+    from semmatch.experiments.analysis_plan import PLAN_V2_FILE, load_analysis_plan
+    from semmatch.experiments.pipeline import run_method_settings
+    from semmatch.experiments.speed_claims import lever_settings, speed_bench_command
+
+    plan = load_analysis_plan(PLAN_V2_FILE)
+    lever = plan.raw["speed"]["lever"]
+    assert lever["params_key"] == "profiles.full.common.slic_2d"
+    assert lever_settings(plan, pipeline.ROOT / "params.yaml") == {"2d-slic": lever["chosen_value"]}
+    full = pipeline.load_params(pipeline.ROOT / "params.yaml", "full")["common"]
+    assert run_method_settings(full) == {"2d-slic": lever["chosen_value"]}
+    smoke = pipeline.load_params(pipeline.ROOT / "params.yaml", "smoke")["common"]
+    assert run_method_settings(smoke) == {"2d-slic": {}} and run_method_settings({}) == {}
+    with pytest.raises(ValueError, match="slic_2d: expected a mapping"):
+        run_method_settings({"slic_2d": 3})
+    cmd = speed_bench_command(plan, {"2d-slic": {"iterations": 3, "backend": "cv2-slic"}, "dbscan": {}})
+    assert cmd[-2:] == ['--param=2d-slic:iterations=3,backend="cv2-slic"', "--json"]
+    data = yaml.safe_load((pipeline.ROOT / "params.yaml").read_text())
+    data["profiles"]["full"]["common"]["slic_2d"] = {"iterations": 4}
+    other = tmp_path / "params.yaml"
+    other.write_text(yaml.safe_dump(data))
+    with pytest.raises(ValueError, match=r"slic_2d is \{'iterations': 4\}, but analysis plan v2 chose"):
+        lever_settings(plan, other)
+    del data["profiles"]["full"]["common"]["slic_2d"]
+    other.write_text(yaml.safe_dump(data))
+    with pytest.raises(ValueError, match="speed lever is read from profiles.full.common.slic_2d, which is not there"):
+        lever_settings(plan, other)

@@ -513,6 +513,35 @@ def test_bench_variant_times_a_method_again_with_its_parameters(frames, index):
         time_methods(frames[:1], index, [], variants=[("x", "nope", {})])
 
 
+def test_a_runs_method_settings_reach_the_method_and_are_checked(frames, index, monkeypatch):
+    """``settings_for`` hands a method its own parameters from ``{method: {parameter: value}}``;
+    ``bench transfer --param`` and ``time_methods(settings=...)`` run the main rows with them."""
+    from semmatch.cli.bench.transfer import method_settings
+    from semmatch.transfer import benchmark, settings_for
+
+    settings = {"2d-slic": {"iterations": 3}}
+    assert settings_for("2d-slic", settings) == {"iterations": 3} and settings_for("dbscan", settings) == {}
+    settings_for("2d-slic", settings)["iterations"] = 9
+    assert settings["2d-slic"] == {"iterations": 3}  # a copy
+    with pytest.raises(ValueError, match="unknown method.*slic"):
+        settings_for("2d-slic", {"slic": {}})
+    with pytest.raises(ValueError, match="2d-slic: unknown parameter.*iteration"):
+        settings_for("2d-slic", {"2d-slic": {"iteration": 3}})
+    with pytest.raises(ValueError, match="expected a mapping"):
+        settings_for("2d-slic", {"2d-slic": 3})
+    assert method_settings(["2d-slic:iterations=3,scale=0.5"]) == {"2d-slic": {"iterations": 3, "scale": 0.5}}
+    with pytest.raises(ValueError, match="names 2d-slic twice"):
+        method_settings(["2d-slic:iterations=3", "2d-slic:scale=0.5"])
+    with pytest.raises(ValueError, match="unknown parameter"):
+        method_settings(["dbscan:iterations=3"])
+    calls = []
+    real = benchmark.time_method
+    monkeypatch.setattr(benchmark, "time_method", lambda name, fr, ix, **kw: calls.append((name, kw)) or
+                        real(name, fr, ix, **kw))
+    benchmark.time_methods(frames[:1], index, ["2d-slic", "dbscan"], exact_variant=False, settings=settings)
+    assert calls[1:] == [("2d-slic", {"iterations": 3}), ("dbscan", {})]  # after the reference
+
+
 def test_time_methods_reports_cpu_and_wall_rates_on_one_thread(frames, index):
     """The timing behind ``bench transfer`` and Table 1: the rate from the CPU time of the
     method, the wall rate and the load beside it, on one OpenCV / BLAS / torch thread, restored

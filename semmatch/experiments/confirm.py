@@ -39,7 +39,7 @@ import yaml
 
 from ..io import atomic_write_text
 from .analysis_plan import PLAN_FILE, PLAN_V2_FILE, AnalysisPlan, plan_for_seeds
-from .pipeline import NOTEBOOKS, ROOT, notebook_parameters, run_notebook
+from .pipeline import NOTEBOOKS, ROOT, notebook_parameters, run_method_settings, run_notebook
 from .protocol import check_confirm_seeds, check_protocol
 
 __all__ = ["SKIPPED", "confirm_name", "write_confirm_params", "unshipped_networks", "run_confirm",
@@ -278,7 +278,7 @@ def run_confirm(seeds: Sequence[int], *, name: str | None = None, base_profile: 
     from ..segment.shipping import file_sha256
 
     walls.update(_judge(where["figures_dir"], [nb for nb in NOTEBOOKS if nb not in skipped
-                                               and (notebooks is None or nb in notebooks)], plan))
+                                               and (notebooks is None or nb in notebooks)], plan, params))
     if in_home_plan is not None:
         from .adapt_claims import load_adapt_plan
         from .in_home import run_in_home_study
@@ -325,11 +325,12 @@ def _when_transfer_pays(run: bool, seeds: Sequence[int], data: dict, base_profil
     common = data["profiles"][base_profile]["common"]
     run_when_transfer_pays(where["data_root"], where["figures_dir"] / "when_transfer_pays",
                            [(kind, s) for s in seeds for kind in common["kinds"]], split="eval",
-                           jobs=int(common.get("jobs", 1)), scheduler=scheduler, progress=progress)
+                           jobs=int(common.get("jobs", 1)), scheduler=scheduler, progress=progress,
+                           method_settings=run_method_settings(common))
     return {"when_transfer_pays": round(time.perf_counter() - t, 1)}
 
 
-def _judge(figures_dir: Path, ran: Sequence[str], plan: AnalysisPlan) -> dict[str, float]:
+def _judge(figures_dir: Path, ran: Sequence[str], plan: AnalysisPlan, params_file: Path) -> dict[str, float]:
     """The analysis plan's verdicts on the paper's claims, unless only stage 09 ran (it judges
     the adaptation claims itself: ``adapt_verdicts.md``).
 
@@ -338,7 +339,8 @@ def _judge(figures_dir: Path, ran: Sequence[str], plan: AnalysisPlan) -> dict[st
     (:func:`~semmatch.experiments.plan_networks.label_training_seeds`) and the plan's speed
     benchmark runs once per run, in a fresh process after the notebooks
     (:func:`~semmatch.experiments.speed_claims.run_speed_bench`: ``bench_speed.json``, which
-    :func:`~semmatch.experiments.claims.judge_figures` judges P1-P3 on). Returns the wall seconds
+    :func:`~semmatch.experiments.claims.judge_figures` judges P1-P3 on), with the plan's speed
+    lever as the run's ``params_file`` states it. Returns the wall seconds
     of ``verdicts`` (and ``speed_bench`` when it ran).
     """
     from .claims import judge_figures
@@ -350,7 +352,7 @@ def _judge(figures_dir: Path, ran: Sequence[str], plan: AnalysisPlan) -> dict[st
         label_training_seeds(figures_dir)
         if not (figures_dir / BENCH_RECORD).is_file():  # once per run: an addition keeps the first measurement
             t = time.perf_counter()
-            run_speed_bench(figures_dir, plan, cwd=ROOT)
+            run_speed_bench(figures_dir, plan, cwd=ROOT, params_file=params_file)
             walls["speed_bench"] = round(time.perf_counter() - t, 1)
     t = time.perf_counter()
     if set(ran) - {ADAPT_NOTEBOOK}:

@@ -19,7 +19,7 @@ from __future__ import annotations
 import dataclasses
 import tempfile
 import zlib
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -50,6 +50,7 @@ def depth_noise_study(
     jobs: int = 1,
     scheduler: str | None = None,
     progress: bool = True,
+    method_settings: Mapping[str, Mapping] | None = None,
 ) -> pd.DataFrame:
     """Scores of every transfer method when the robot's depth gets more and more noise.
 
@@ -76,6 +77,8 @@ def depth_noise_study(
     scheduler : str, optional
         Dask scheduler address (default ``SEMMATCH_SCHEDULER``; none: local).
     progress : bool
+    method_settings : mapping, optional
+        The methods' parameters, ``{method: {parameter: value}}`` (the notebooks' ``slic_2d``).
 
     Returns
     -------
@@ -96,7 +99,8 @@ def depth_noise_study(
     layout = Layout(data_root)
     rows = layout.map_scenes(_depth_noise_scene, tuple(methods), tuple(dict.fromkeys(lv)),
                              dict(depth_a=float(depth_a), depth_b=float(depth_b), voxel_size=voxel_size,
-                                  eval_voxel_size=eval_voxel_size, seed=int(seed)),
+                                  eval_voxel_size=eval_voxel_size, seed=int(seed),
+                                  method_settings=dict(method_settings or {})),
                              scenes=_scene_dirs(layout, scenes), jobs=jobs, scheduler=scheduler,
                              desc="depth-noise scenes", progress=progress)
     cols = ["scene", "method", "level", "depth_sigma_2m", *MEASURES, "coverage"]
@@ -109,7 +113,7 @@ def _depth_noise_scene(data_root: str, methods: tuple[str, ...], levels: tuple[f
     from ..evaluate.metrics import compare
     from ..fusion import reconstruct_many
     from ..sim.noise import NoiseConfig, noisy_depth
-    from ..transfer import transfer_sequence
+    from ..transfer import settings_for, transfer_sequence
 
     layout = Layout(data_root)
     _, lower, reference, index = clean_scene_inputs(layout, sid, o["eval_voxel_size"])
@@ -123,7 +127,8 @@ def _depth_noise_scene(data_root: str, methods: tuple[str, ...], levels: tuple[f
                 noisy = [dataclasses.replace(f, depth=noisy_depth(f.depth, cfg, rng)) for f in lower]
             for method in methods:
                 out = Path(tmp) / f"level{level:g}" / method
-                res = transfer_sequence(method, noisy, index, out, poses=lower.poses, progress=False)
+                res = transfer_sequence(method, noisy, index, out, poses=lower.poses, progress=False,
+                                        **settings_for(method, o["method_settings"]))
                 labelings.append((level, method, out, res["coverage"]))
         # every labeling fused at the clean depth and true poses: only the labels differ
         maps = reconstruct_many(lower, [j[2] for j in labelings], o["voxel_size"])

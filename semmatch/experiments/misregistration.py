@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import tempfile
 import zlib
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -77,6 +77,7 @@ def misregistration_study(
     jobs: int = 1,
     scheduler: str | None = None,
     progress: bool = True,
+    method_settings: Mapping[str, Mapping] | None = None,
 ) -> pd.DataFrame:
     """Scores of every transfer method when the upper map is misregistered by known amounts.
 
@@ -105,6 +106,8 @@ def misregistration_study(
     scheduler : str, optional
         Dask scheduler address to run the scenes on (default ``SEMMATCH_SCHEDULER``; none: local).
     progress : bool
+    method_settings : mapping, optional
+        The methods' parameters, ``{method: {parameter: value}}`` (the notebooks' ``slic_2d``).
 
     Returns
     -------
@@ -130,7 +133,7 @@ def misregistration_study(
     # scenes are engine tasks (jobs local processes or a scheduler); one scene: its frames in jobs processes
     rows = layout.map_scenes(_misregistration_scene, tuple(methods), tuple(cases),
                              dict(voxel_size=voxel_size, eval_voxel_size=eval_voxel_size, seed=int(seed),
-                                  frame_jobs=frame_jobs),
+                                  frame_jobs=frame_jobs, method_settings=dict(method_settings or {})),
                              scenes=sids, jobs=jobs, scheduler=scheduler, desc="misregistration scenes",
                              progress=progress)
     cols = ["scene", "method", "translation_m", "rotation_deg", *MEASURES, "coverage"]
@@ -180,7 +183,7 @@ def _misregistration_scene(data_root: str, methods: tuple[str, ...], cases: tupl
     from ..evaluate.metrics import compare
     from ..fusion import reconstruct_many
     from ..poses.registration import rigid_perturbation
-    from ..transfer import transfer_sequence
+    from ..transfer import settings_for, transfer_sequence
 
     layout = Layout(data_root)
     upper, lower, reference, index = clean_scene_inputs(layout, sid, o["eval_voxel_size"])
@@ -193,7 +196,8 @@ def _misregistration_scene(data_root: str, methods: tuple[str, ...], cases: tupl
             poses = np.linalg.inv(P) @ lower.poses  # the cameras in the unmoved map = the map moved by P
             for method in methods:
                 out = Path(tmp) / f"t{t:g}_r{r:g}" / method
-                res = transfer_sequence(method, lower, index, out, poses=poses, jobs=o["frame_jobs"], progress=False)
+                res = transfer_sequence(method, lower, index, out, poses=poses, jobs=o["frame_jobs"], progress=False,
+                                        **settings_for(method, o["method_settings"]))
                 labelings.append((t, r, method, out, res["coverage"]))
         # one fusion of the lower frames at their true poses for every labeling
         maps = reconstruct_many(lower, [j[3] for j in labelings], o["voxel_size"])

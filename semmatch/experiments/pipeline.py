@@ -19,7 +19,7 @@ import argparse
 import os
 import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
 import yaml
@@ -36,6 +36,8 @@ __all__ = [
     "NotebookFailed",
     "section_of",
     "load_params",
+    "METHOD_SETTING_KEYS",
+    "run_method_settings",
     "notebook_parameters",
     "notebook_setup",
     "run_notebook",
@@ -114,6 +116,42 @@ def section_of(notebook: str) -> str:
     if notebook not in NOTEBOOKS:
         raise ValueError(f"unknown notebook {notebook!r}; valid: {', '.join(NOTEBOOKS)}")
     return notebook.split("_", 1)[1]
+
+
+#: profile keys (``common``) that carry a transfer method's parameters: key -> method. ``slic_2d``
+#: is the analysis plan v2's speed lever (docs/analysis_plan_v2.md, "The 2d-slic lever")
+METHOD_SETTING_KEYS: dict[str, str] = {"slic_2d": "2d-slic"}
+
+
+def run_method_settings(params: Mapping) -> dict[str, dict]:
+    """The transfer methods' settings a profile states, ``{method: {parameter: value}}``.
+
+    Parameters
+    ----------
+    params : mapping
+        A profile's ``common`` section or a notebook's parameters (e.g. ``{"slic_2d": slic_2d}``);
+        keys of :data:`METHOD_SETTING_KEYS` that are absent or ``None`` leave their method at its
+        defaults.
+
+    Returns
+    -------
+    dict
+        What every study passes on; each method checks its parameters where it runs
+        (:func:`semmatch.transfer.settings_for`).
+
+    Raises
+    ------
+    ValueError
+        A setting that is not a mapping.
+    """
+    out = {}
+    for key, method in METHOD_SETTING_KEYS.items():
+        value = params.get(key)
+        if value is not None and not isinstance(value, Mapping):
+            raise ValueError(f"params.yaml {key}: expected a mapping of {method}'s parameters, got {value!r}")
+        if value is not None:
+            out[method] = dict(value)
+    return out
 
 
 #: parameters a researcher varies, settable at the top level of params.yaml (``null`` = the

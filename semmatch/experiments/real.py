@@ -31,7 +31,7 @@ ground-truth-mesh reference (``compare(ref, pred, transform=lower_to_world)``).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import replace
 from pathlib import Path
 
@@ -120,6 +120,7 @@ def evaluate_real_like(
     jobs: int = 1,
     scheduler: str | None = None,
     progress: bool = True,
+    method_settings: Mapping[str, Mapping] | None = None,
 ) -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame]:
     """Run the real-like chain (module documentation) for every evaluation scene and score it.
 
@@ -202,7 +203,7 @@ def evaluate_real_like(
     scenes = [sd.name for sd in layout.scene_dirs("eval")]
     o = dict(voxel_size=voxel_size, eval_voxel_size=eval_voxel_size, tol=tol, fused_base=fused_base,
              registration_voxel=registration_voxel, registration_seed=registration_seed,
-             registration_restarts=registration_restarts,
+             registration_restarts=registration_restarts, method_settings=dict(method_settings or {}),
              frame_jobs=int(jobs) if resolve_scheduler(scheduler) is None and len(scenes) == 1 else 1)
     # scenes are engine tasks (jobs local processes or a scheduler); one scene: its frames in jobs processes
     per_scene = layout.map_scenes(_real_like_scene, tuple(methods), tuple(networks), tuple(sources), o, scenes=scenes,
@@ -300,7 +301,7 @@ def chain_from_poses(sd: Path, work: Path, seqs: dict, est: dict, true: dict, mo
     U = _compact_frame(upper_maps[0])
     lower = _lower_labels(seqs["lower"], models, methods, sources, upper_maps, U, U @ reg.transform @ est["lower"],
                           work, o["fused_base"], o["frame_jobs"],
-                          {n: d for (r, n), d in predicted.items() if r == "lower"})
+                          {n: d for (r, n), d in predicted.items() if r == "lower"}, o.get("method_settings"))
     rows = _real_like_rows(work, sid, seqs["lower"], lower, reference, upper_maps, upper_reference, sources,
                            o["voxel_size"], o["eval_voxel_size"])
     return rows, reg_row
@@ -413,12 +414,13 @@ def _registration(sd: Path, work: Path, sid: str, reference, upper_map, est: dic
 
 def _lower_labels(lower_seq: PosedSequence, models: dict, methods: tuple[str, ...], sources: tuple[str, ...],
                   upper_maps: list, U: np.ndarray, lower_in_upper: np.ndarray, work: Path, fused_base: str | None,
-                  jobs: int, predicted: dict[str, Path] | None = None) -> list[tuple[str, str, Path]]:
+                  jobs: int, predicted: dict[str, Path] | None = None,
+                  method_settings: Mapping[str, Mapping] | None = None) -> list[tuple[str, str, Path]]:
     """Labels of the lower frames: each network on them, each method from each upper map (in the
-    frame ``U``, the lower frames at ``lower_in_upper``), and ``fused``; ``(source, method,
-    labels folder)`` each."""
+    frame ``U``, the lower frames at ``lower_in_upper``; with its ``method_settings``), and
+    ``fused``; ``(source, method, labels folder)`` each."""
     from ..segment import predict_sequence
-    from ..transfer import as_map_index, transfer_sequence, write_fused_labels
+    from ..transfer import as_map_index, settings_for, transfer_sequence, write_fused_labels
 
     lower = []
     for source, upper_map in zip(sources, upper_maps, strict=True):
@@ -432,7 +434,8 @@ def _lower_labels(lower_seq: PosedSequence, models: dict, methods: tuple[str, ..
         index = as_map_index(_moved(upper_map, U))
         for method in methods:
             lab_dir = work / f"lower_labels_{source}" / method
-            transfer_sequence(method, lower_seq.seq, index, lab_dir, poses=lower_in_upper, jobs=jobs, progress=False)
+            transfer_sequence(method, lower_seq.seq, index, lab_dir, poses=lower_in_upper, jobs=jobs, progress=False,
+                              **settings_for(method, method_settings))
             lower.append((source, method, lab_dir))
         if source != GT and fused_base is not None:
             fused = write_fused_labels(work / f"lower_labels_{source}" / fused_base, low_dir,

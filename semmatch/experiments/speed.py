@@ -3,7 +3,7 @@ evaluation scene (04)."""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -48,7 +48,8 @@ def _frames_at(sd: Path, n_frames: int, width: int, height: int) -> list:
 
 
 def measure_speed(data_root: str | Path, methods: Sequence[str], *, n_frames: int = 30, scene: int = 0,
-                  width: int = 640, height: int = 480) -> pd.DataFrame:
+                  width: int = 640, height: int = 480,
+                  method_settings: Mapping[str, Mapping] | None = None) -> pd.DataFrame:
     """Table 1: the rate of each method on one core, from its CPU time, in one process.
 
     The ground-truth upper map of one evaluation scene is indexed once; ``n_frames`` lower
@@ -56,7 +57,8 @@ def measure_speed(data_root: str | Path, methods: Sequence[str], *, n_frames: in
     profile records smaller frames) are labelled by each method after one warm-up frame, on one
     thread (:func:`semmatch.transfer.benchmark.time_methods`, as ``semmatch bench transfer``).
     The rate is 1 / the median CPU time of the method per frame: what one free core delivers,
-    whatever else the machine runs. The wall rate and the machine's load stand beside it.
+    whatever else the machine runs. The wall rate and the machine's load stand beside it. Each
+    method runs with its ``method_settings`` (``{method: {parameter: value}}``).
 
     Returns
     -------
@@ -77,7 +79,7 @@ def measure_speed(data_root: str | Path, methods: Sequence[str], *, n_frames: in
     frames = _frames_at(sd, n_frames, width, height)
     index = load_index(layout.upper_map(sd.name, GT))  # cached beside the map
 
-    timing = time_methods(frames, index, methods, exact_variant=False)
+    timing = time_methods(frames, index, methods, exact_variant=False, settings=method_settings)
     ref_fps = timing["reference"]["fps"]
     rows = timing["methods"]
     df = speed_table({m: rows[m]["fps"] for m in methods}, ref_fps)

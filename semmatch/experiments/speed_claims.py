@@ -15,14 +15,15 @@ import shlex
 import subprocess
 import sys
 import time
+from collections.abc import Mapping
 from pathlib import Path
 
 import pandas as pd
 
 from .analysis_plan import AnalysisPlan, load_analysis_plan
 
-__all__ = ["BENCH_RECORD", "bench_speed_table", "judge_speed_claims", "speed_bench_command", "run_speed_bench",
-           "bench_conditions"]
+__all__ = ["BENCH_RECORD", "bench_speed_table", "judge_speed_claims", "lever_settings", "speed_bench_command",
+           "run_speed_bench", "bench_conditions"]
 
 #: the speed benchmark's record in a run's figures folder (:func:`run_speed_bench`)
 BENCH_RECORD = "bench_speed.json"
@@ -30,9 +31,41 @@ BENCH_RECORD = "bench_speed.json"
 _REFERENCE = "reference (closest point)"
 
 
-def speed_bench_command(plan: AnalysisPlan) -> list[str]:
+def lever_settings(plan: AnalysisPlan, params_file: str | os.PathLike) -> dict[str, dict]:
+    """The plan's speed lever as a run states it: ``{method: {parameter: value}}``.
+
+    The plan's ``speed.lever`` names the method and ``params_key``, the dotted path of the
+    setting in a run's parameter file (``profiles.full.common.slic_2d``); the value found there
+    must be the plan's ``chosen_value``, so a run cannot be judged under a lever its plan did not
+    choose. A plan without a lever gives ``{}``.
+
+    Raises
+    ------
+    ValueError
+        The parameter file lacks the key, or its value is not the plan's chosen value.
+    """
+    import yaml
+
+    lever = (plan.raw.get("speed") or {}).get("lever")
+    if not lever:
+        return {}
+    value: object = yaml.safe_load(Path(params_file).read_text()) or {}
+    for part in str(lever["params_key"]).split("."):
+        if not isinstance(value, dict) or part not in value:
+            raise ValueError(f"{params_file}: analysis plan v{plan.version}'s speed lever is read from "
+                             f"{lever['params_key']}, which is not there")
+        value = value[part]
+    chosen = lever.get("chosen_value")
+    if chosen is not None and value != chosen:
+        raise ValueError(f"{params_file}: {lever['params_key']} is {value!r}, but analysis plan v{plan.version} "
+                         f"chose {chosen!r} for {lever['method']}")
+    return {str(lever["method"]): dict(value or {})}
+
+
+def speed_bench_command(plan: AnalysisPlan, settings: Mapping[str, Mapping] | None = None) -> list[str]:
     """The plan's speed benchmark (``speed.command``) as an argument list with ``--json``, run by
-    this Python (``python -m semmatch ...``).
+    this Python (``python -m semmatch ...``); ``settings`` (:func:`lever_settings`) become its
+    ``--param METHOD:KEY=VALUE`` options.
 
     Raises
     ------
@@ -43,10 +76,13 @@ def speed_bench_command(plan: AnalysisPlan) -> list[str]:
     if not words or words[0] != "semmatch":
         raise ValueError(f"analysis plan v{plan.version}: speed.command must be a semmatch command "
                          f"(e.g. 'semmatch bench transfer --map fused --repeat 5'), got {words or None}")
-    return [sys.executable, "-m", "semmatch", *words[1:], *([] if "--json" in words else ["--json"])]
+    params = [f"--param={m}:" + ",".join(f"{k}={json.dumps(v)}" for k, v in kv.items())
+              for m, kv in (settings or {}).items() if kv]
+    return [sys.executable, "-m", "semmatch", *words[1:], *params, *([] if "--json" in words else ["--json"])]
 
 
-def run_speed_bench(out_dir: str | os.PathLike, plan: AnalysisPlan, *, cwd: str | os.PathLike | None = None) -> dict:
+def run_speed_bench(out_dir: str | os.PathLike, plan: AnalysisPlan, *, cwd: str | os.PathLike | None = None,
+                    params_file: str | os.PathLike | None = None) -> dict:
     """Run the plan's speed benchmark once in a fresh (otherwise idle) process and keep its record.
 
     Parameters
@@ -57,6 +93,9 @@ def run_speed_bench(out_dir: str | os.PathLike, plan: AnalysisPlan, *, cwd: str 
         Its ``speed.command`` is run (:func:`speed_bench_command`).
     cwd : path, optional
         Working directory of the benchmark.
+    params_file : path, optional
+        The run's parameter file: the plan's speed lever is read from it (:func:`lever_settings`)
+        and passed to the benchmark.
 
     Returns
     -------
@@ -73,7 +112,7 @@ def run_speed_bench(out_dir: str | os.PathLike, plan: AnalysisPlan, *, cwd: str 
     from ..io import atomic_write_text
     from ..segment.training import machine_record
 
-    cmd = speed_bench_command(plan)
+    cmd = speed_bench_command(plan, lever_settings(plan, params_file) if params_file is not None else None)
     shown = " ".join(["semmatch", *cmd[3:]])
     load = [round(x, 2) for x in os.getloadavg()] if hasattr(os, "getloadavg") else None
     started, t = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), time.perf_counter()

@@ -6,7 +6,7 @@ DataFrame the notebook shows and plots.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import pandas as pd
@@ -122,6 +122,7 @@ def transfer_lower_labels(
     jobs: int = 1,
     scheduler: str | None = None,
     progress: bool = True,
+    method_settings: Mapping[str, Mapping] | None = None,
 ) -> pd.DataFrame:
     """Labels for every lower frame: each method from each upper map, each network directly, fused.
 
@@ -131,7 +132,8 @@ def transfer_lower_labels(
     own upper map where it supports a pixel, the network elsewhere). Where the scene has the
     route ablation (``lower_shared/``), the same for ``fused_base`` under ``shared_route/``.
     Scenes are tasks of :func:`semmatch.engine.map_tasks` (``jobs`` local worker processes, or
-    the cluster at ``scheduler``); the labels do not depend on where they ran.
+    the cluster at ``scheduler``); the labels do not depend on where they ran. ``method_settings``:
+    the methods' parameters, ``{method: {parameter: value}}`` (the notebooks' ``slic_2d``).
 
     Returns
     -------
@@ -143,16 +145,17 @@ def transfer_lower_labels(
     if fused_base not in methods:
         raise ValueError(f"fused_base {fused_base!r} is not among the methods {list(methods)}")
     # scenes are engine tasks; with one local job the frames of a scene are not split either
-    rows = Layout(data_root).map_scenes(_transfer_scene, tuple(methods), tuple(networks), fused_base, jobs=jobs,
+    rows = Layout(data_root).map_scenes(_transfer_scene, tuple(methods), tuple(networks), fused_base,
+                                        dict(method_settings or {}), jobs=jobs,
                                         scheduler=scheduler, desc="transfer (scenes)", progress=progress)
     return pd.DataFrame(rows)
 
 
 def _transfer_scene(data_root: str, methods: tuple[str, ...], networks: tuple[str, ...], fused_base: str,
-                    sid: str) -> list[dict]:
+                    method_settings: dict, sid: str) -> list[dict]:
     """The labels of one scene's robot frames (a task of :func:`transfer_lower_labels`)."""
     from ..segment import predict_sequence
-    from ..transfer import load_index, transfer_sequence, write_fused_labels
+    from ..transfer import load_index, settings_for, transfer_sequence, write_fused_labels
 
     layout = Layout(data_root)
     sd = layout.scenes / "eval" / sid
@@ -163,8 +166,8 @@ def _transfer_scene(data_root: str, methods: tuple[str, ...], networks: tuple[st
         lower = read_sequence(layout.lower_sequence(sd, route)).load()  # read by every method
         for source in (GT, *networks):
             for method in _route_methods(route, methods, fused_base):
-                st = transfer_sequence(method, lower, indexes[source],
-                                       layout.lower_labels(sid, source, method, route), progress=False)
+                st = transfer_sequence(method, lower, indexes[source], layout.lower_labels(sid, source, method, route),
+                                       progress=False, **settings_for(method, method_settings))
                 rows.append(dict(scene=sid, route=route, model=model_name(source), method=method,
                                  coverage=float(st["coverage"]), fps=float(st["fps"])))
         for net in networks:

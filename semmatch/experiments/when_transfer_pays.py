@@ -291,10 +291,13 @@ def arm_methods(grid: StudyGrid, arm: Arm) -> tuple[str, ...]:
     return grid.methods if arm.factor == "height" else grid.secondary_methods
 
 
-def _scoring_key(grid: StudyGrid) -> str:
-    """8 hex digits over what a network's rows depend on besides the frames (kept rows are reused only for them)."""
+def _scoring_key(grid: StudyGrid, method_settings: Mapping[str, Mapping] | None = None) -> str:
+    """8 hex digits over what a network's rows depend on besides the frames (kept rows are reused
+    only for them); the methods' settings count where a run gives any."""
     key = {"arms": [a.name for a in study_arms(grid)], "methods": grid.methods, "secondary": grid.secondary_methods,
            "fused_base": grid.fused_base, "voxel": grid.voxel_size, "eval_voxel": grid.eval_voxel_size}
+    if any(method_settings.values() if method_settings else ()):
+        key["method_settings"] = {m: dict(v) for m, v in method_settings.items() if v}
     return hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()[:8]
 
 
@@ -303,12 +306,14 @@ def _labels(model, frames) -> list[np.ndarray]:
     return [model.predict_frame(f).argmax(axis=-1).astype(np.uint8) for f in frames]
 
 
-def _score_network(model, tours: Mapping[str, Path], arms: Sequence[Arm], grid: StudyGrid) -> list[dict]:
-    """Every arm's rows for one network: ``lower`` and each method, Table 2's measures."""
+def _score_network(model, tours: Mapping[str, Path], arms: Sequence[Arm], grid: StudyGrid,
+                   method_settings: Mapping[str, Mapping] | None = None) -> list[dict]:
+    """Every arm's rows for one network: ``lower`` and each method (with its ``method_settings``),
+    Table 2's measures."""
     from ..evaluate.metrics import compare
     from ..fusion import reconstruct, reconstruct_many
     from ..io import read_sequence
-    from ..transfer import as_map_index, transfer_frame
+    from ..transfer import as_map_index, settings_for, transfer_frame
     from ..transfer.fused import fuse_labels
     from .synthetic import eval_grid_origin, reference_grid
 
@@ -335,7 +340,8 @@ def _score_network(model, tours: Mapping[str, Path], arms: Sequence[Arm], grid: 
             transferred = [m for m in methods if m != "fused"]
             if "fused" in methods and grid.fused_base not in transferred:
                 transferred.append(grid.fused_base)
-            lab = {m: [transfer_frame(m, f, index).labels for f in frames] for m in transferred}
+            lab = {m: [transfer_frame(m, f, index, **settings_for(m, method_settings)).labels for f in frames]
+                   for m in transferred}
             if "fused" in methods:
                 lab["fused"] = [fuse_labels(t, p) for t, p in zip(lab[grid.fused_base], lower, strict=True)]
             labelings += [(arm, "lower", lower)] + [(arm, m, lab[m]) for m in methods]
@@ -351,13 +357,15 @@ def _score_network(model, tours: Mapping[str, Path], arms: Sequence[Arm], grid: 
     return rows
 
 
-def run_scene(data_root: str, work: str, grid_path: str, split: str, scene: tuple[str, int]) -> list[dict]:
+def run_scene(data_root: str, work: str, grid_path: str, split: str, scene: tuple[str, int],
+              method_settings: Mapping[str, Mapping] | None = None) -> list[dict]:
     """One scene of the study (an engine task): render its arms, then score every network.
 
     The person's tour is ``data_root/scenes/<split>/<scene>/upper`` where it exists (the
     pipeline's, e.g. a confirmatory run's), else it is rendered as the pipeline does. Rendered
     frames are kept under ``work/<scene>/<settings key>/``; each network's rows are kept there as
-    ``rows_<network>_<digest>_<scoring key>.json`` (a rerun scores only what is missing).
+    ``rows_<network>_<digest>_<scoring key>.json`` (a rerun scores only what is missing). The
+    methods run with ``method_settings`` (``{method: {parameter: value}}``, a run's ``slic_2d``).
 
     Returns
     -------
@@ -384,12 +392,12 @@ def run_scene(data_root: str, work: str, grid_path: str, split: str, scene: tupl
     render = (time.perf_counter() - t, time.process_time() - c) if fresh else (float("nan"),) * 2
     rows = []
     for net in grid.networks:
-        kept = sdir / f"rows_{net}_{file_digest(layout.model(net))[:12]}_{_scoring_key(grid)}.json"
+        kept = sdir / f"rows_{net}_{file_digest(layout.model(net))[:12]}_{_scoring_key(grid, method_settings)}.json"
         if kept.is_file():
             net_rows, score = json.loads(kept.read_text()), (float("nan"),) * 2
         else:
             t, c = time.perf_counter(), time.process_time()
-            net_rows = _score_network(layout.load_network(net), tours, arms, grid)
+            net_rows = _score_network(layout.load_network(net), tours, arms, grid, method_settings)
             score = (time.perf_counter() - t, time.process_time() - c)
             atomic_write_text(kept, json.dumps(net_rows))
         rows += [dict(scene=sid, kind=kind, seed=seed, network=net, **r, render_s=render[0], render_cpu_s=render[1],
@@ -708,7 +716,8 @@ def plot_crossover(estimates: Mapping[str, dict], grid: StudyGrid, path: str | P
 
 def when_transfer_pays_study(data_root: str | Path, work: str | Path, scenes: Sequence[tuple[str, int]], *,
                              split: str = "eval", grid_path: str | Path | None = None, jobs: int = 1,
-                             scheduler: str | None = None, progress: bool = True) -> pd.DataFrame:
+                             scheduler: str | None = None, progress: bool = True,
+                             method_settings: Mapping[str, Mapping] | None = None) -> pd.DataFrame:
     """Every scene's rows (:func:`run_scene`), scenes as tasks of :func:`semmatch.engine.map_tasks`.
 
     Raises
@@ -724,7 +733,8 @@ def when_transfer_pays_study(data_root: str | Path, work: str | Path, scenes: Se
     missing = [str(Layout(data_root).model(n)) for n in grid.networks if not Layout(data_root).model(n).is_file()]
     if missing:
         raise FileNotFoundError(f"{', '.join(missing)}: no such network (the grid's networks: {list(grid.networks)})")
-    fn = functools.partial(run_scene, str(Path(data_root).resolve()), str(Path(work).resolve()), str(grid_path), split)
+    fn = functools.partial(run_scene, str(Path(data_root).resolve()), str(Path(work).resolve()), str(grid_path), split,
+                           method_settings=dict(method_settings or {}))
     per = map_tasks(fn, list(scenes), jobs=jobs, scheduler=scheduler, desc="when transfer pays (scenes)",
                     progress=progress)
     return pd.DataFrame([r for rows in per for r in rows])
@@ -733,7 +743,7 @@ def when_transfer_pays_study(data_root: str | Path, work: str | Path, scenes: Se
 def run_when_transfer_pays(data_root: str | Path, figures: str | Path, scenes: Sequence[tuple[str, int]], *,
                            work: str | Path | None = None, split: str = "eval", grid_path: str | Path | None = None,
                            jobs: int = 1, scheduler: str | None = None, progress: bool = True,
-                           label: str = "") -> pd.DataFrame:
+                           label: str = "", method_settings: Mapping[str, Mapping] | None = None) -> pd.DataFrame:
     """Run the study and write its results into ``figures`` (each file atomically).
 
     Writes ``when_transfer_pays_per_scene.{csv,md}`` (tidy: one row per scene, network, arm and
@@ -757,6 +767,8 @@ def run_when_transfer_pays(data_root: str | Path, figures: str | Path, scenes: S
         As :func:`semmatch.engine.map_tasks`.
     label : str
         Added to the figure's title (e.g. ``validation scenes``).
+    method_settings : mapping, optional
+        The methods' parameters, ``{method: {parameter: value}}`` (a run's ``slic_2d``).
 
     Returns
     -------
@@ -772,7 +784,7 @@ def run_when_transfer_pays(data_root: str | Path, figures: str | Path, scenes: S
     t0 = time.perf_counter()
     per_scene = when_transfer_pays_study(data_root, work or Path(data_root) / "when_transfer_pays", scenes,
                                          split=split, grid_path=grid_path, jobs=jobs, scheduler=scheduler,
-                                         progress=progress)
+                                         progress=progress, method_settings=method_settings)
     diffs = difference_table(per_scene, grid.measure)
     table, est = crossover_table(diffs, grid)
     save_table(per_scene, figures, "when_transfer_pays_per_scene", floatfmt=".4f")

@@ -22,6 +22,7 @@ from .registry import (
     available_methods,
     method_params,
     register_method,
+    settings_for,
     transfer,
     transfer_frame,
 )
@@ -46,6 +47,7 @@ __all__ = [
     "as_map_index",
     "DEFAULT_MAX_DISTANCE",
     "method_params",
+    "settings_for",
     "fuse_with_probabilities",
     "fuse_labels",
     "write_fused_labels",

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import os
 import time
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 
 import numpy as np
@@ -15,7 +15,7 @@ import numpy as np
 from ..io import Frame
 from ..labels import NUM_CLASSES
 from .index import MapIndex
-from .registry import METHODS, available_methods, method_info, transfer_frame
+from .registry import METHODS, available_methods, method_info, settings_for, transfer_frame
 
 __all__ = ["time_method", "time_methods", "bench_scene", "bench_upper_map", "bench_probs", "one_core"]
 
@@ -100,7 +100,7 @@ def time_method(name: str, frames: Sequence[Frame], index: MapIndex, **params) -
 
 def time_methods(
     frames: Sequence[Frame], index: MapIndex, methods: Sequence[str] = METHODS, *, exact_variant: bool = True,
-    variants: Sequence[tuple[str, str, dict]] = (),
+    variants: Sequence[tuple[str, str, dict]] = (), settings: Mapping[str, Mapping] | None = None,
 ) -> dict:
     """Time each method and the reference backend of ``3d-neighborhood`` on the same frames, on
     one core (:func:`one_core`, :func:`time_method`).
@@ -117,6 +117,9 @@ def time_methods(
         refinement near class edges). Speed-ups compare CPU rates. ``variants``: more rows
         ``(key, method, parameters)``, each method timed again with those parameters (e.g.
         ``("2d-slic [iterations=3]", "2d-slic", {"iterations": 3})``), after the methods.
+        ``settings``: the methods' own parameters (``{method: {parameter: value}}``,
+        :func:`~semmatch.transfer.registry.settings_for`), e.g. a run's ``2d-slic`` lever: the
+        method's main row runs with them.
     """
     for m in [*methods, *(name for _, name, _ in variants)]:
         if m not in available_methods():
@@ -127,7 +130,7 @@ def time_methods(
         ref = time_method("3d-neighborhood", frames, index, backend="reference")
         ref_labels = ref.pop("labels")
         out: dict = {"methods": {}, "reference": ref, "threads": current()}
-        rows = [(m, m, {}) for m in methods]
+        rows = [(m, m, settings_for(m, settings)) for m in methods]
         if exact_variant and "3d-neighborhood" in methods:
             rows.append(("3d-neighborhood (exact)", "3d-neighborhood", {"exact": True}))
         rows += [(key, name, dict(params)) for key, name, params in variants]

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import inspect
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -17,7 +17,7 @@ from .index import MapIndex, as_map_index
 
 __all__ = [
     "METHODS", "ALL_METHODS", "PAPER_FPS", "TransferResult", "transfer", "transfer_frame",
-    "method_params", "check_params", "register_method", "available_methods", "method_info", "MethodInfo",
+    "method_params", "check_params", "settings_for", "register_method", "available_methods", "method_info", "MethodInfo",
 ]
 
 
@@ -201,6 +201,43 @@ def check_params(name: str, params: dict) -> None:
     bad = sorted(set(params) - set(valid))
     if bad:
         raise ValueError(f"{name}: unknown parameter(s) {', '.join(bad)}; valid: {', '.join(valid)}")
+
+
+def settings_for(name: str, settings: Mapping[str, Mapping] | None) -> dict:
+    """The parameters of method ``name`` in a per-method settings mapping, checked.
+
+    A run states the settings of its methods once, as ``{method: {parameter: value}}`` (e.g. the
+    analysis plan v2's ``2d-slic`` lever, ``{"2d-slic": {"iterations": 3}}`` from params.yaml's
+    ``slic_2d``); every study passes ``settings_for(method, settings)`` on to the method.
+
+    Parameters
+    ----------
+    name : str
+        A method (:func:`available_methods`).
+    settings : mapping or None
+        ``{method: {parameter: value}}``; methods it does not name keep their defaults.
+
+    Returns
+    -------
+    dict
+        A copy of ``settings[name]`` (empty when absent).
+
+    Raises
+    ------
+    ValueError
+        An unknown method in ``settings`` or an unknown parameter of ``name``.
+    """
+    settings = dict(settings or {})
+    unknown = sorted(set(settings) - set(available_methods()))
+    if unknown:
+        raise ValueError(f"method settings name unknown method(s) {', '.join(unknown)}; "
+                         f"valid: {', '.join(available_methods())}")
+    own = settings.get(name)
+    if own is not None and not isinstance(own, Mapping):
+        raise ValueError(f"method settings of {name}: expected a mapping of parameters, got {own!r}")
+    out = dict(own or {})
+    check_params(name, out)
+    return out
 
 
 def _call(name: str, fd, index: MapIndex, params: dict):

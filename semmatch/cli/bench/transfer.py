@@ -44,6 +44,9 @@ def register(sub) -> None:
                    help="time METHOD again with these parameters (JSON values) beside its plain row, in the same "
                         "runs, e.g. --variant 2d-slic:iterations=3; repeatable (rows are summarised, not counted "
                         "for the sensor rate)")
+    p.add_argument("--param", action="append", default=[], metavar="METHOD:KEY=VALUE[,KEY=VALUE]",
+                   help="run METHOD's main row with these parameters (JSON values), e.g. --param 2d-slic:iterations=3 "
+                        "(the analysis plan v2's lever; counted for the sensor rate); repeatable, one per method")
     add_json(p, "the timings")
     p.set_defaults(func=run)
 
@@ -69,6 +72,27 @@ def parse_variant(text: str) -> tuple[str, str, dict]:
     return f"{method} [{rest}]", method, params
 
 
+def method_settings(texts: list[str]) -> dict[str, dict]:
+    """``--param`` values (``METHOD:KEY=VALUE[,KEY=VALUE]``) -> ``{method: {parameter: value}}``.
+
+    Raises
+    ------
+    ValueError
+        A malformed value, an unknown method or parameter, or one method given twice.
+    """
+    from semmatch.transfer import settings_for
+
+    out: dict[str, dict] = {}
+    for text in texts:
+        _, method, params = parse_variant(text)
+        if method in out:
+            raise ValueError(f"--param names {method} twice; give all its parameters in one: METHOD:K=V,K=V")
+        out[method] = params
+    for method in out:
+        settings_for(method, out)  # unknown parameters named here, before any frame is rendered
+    return out
+
+
 def run(args) -> int:
     """Run the benchmark."""
     from semmatch.sim import render_frames
@@ -81,6 +105,7 @@ def run(args) -> int:
         raise ValueError("--repeat must be >= 1")
     methods = list(args.methods or (*METHODS, "fused"))  # argparse checked the names
     variants = [parse_variant(v) for v in args.variant]
+    settings = method_settings(args.param)
     scene, poses = bench_scene(args.seed, args.frames, args.camera_height)
     frames = render_frames(scene, poses)
     names = ["mesh", "fused"] if args.map == "both" else [args.map]
@@ -88,11 +113,11 @@ def run(args) -> int:
     for name in names:  # the scene's mesh; the person's fused ground-truth map of it (as Table 1)
         maps[name] = scene.to_semantic_map() if name == "mesh" else bench_upper_map(scene, seed=args.seed)
     target = sensor_rate_fps()
-    result: dict = {"maps": {name: _time_map(m, frames, methods, args.repeat, target, variants)
+    result: dict = {"maps": {name: _time_map(m, frames, methods, args.repeat, target, variants, settings)
                              for name, m in maps.items()},
                     "frames": len(frames), "scene": scene.name,
                     "size": [frames[0].intrinsics.width, frames[0].intrinsics.height],
-                    "repeat": args.repeat, "target_fps": target}
+                    "repeat": args.repeat, "target_fps": target, "settings": settings}
     first = names[0]
     result.update(map=first, **{k: result["maps"][first][k] for k in ("methods", "reference", "threads")})
     blocks = [_table(name, r) for name, r in result["maps"].items()]
@@ -146,11 +171,11 @@ def rate_spread(runs: list[dict], methods, target: float) -> dict:
     return {"spread": spread, "runs_all_at_target": int(every)}
 
 
-def _time_map(semantic_map, frames, methods, repeat: int, target: float, variants=()) -> dict:
+def _time_map(semantic_map, frames, methods, repeat: int, target: float, variants=(), settings=None) -> dict:
     """Index one map and time every method against it ``repeat`` times in a row
     (:func:`semmatch.transfer.benchmark.time_methods`); the first run's timings, with the
-    spread over the runs (:func:`rate_spread`) when ``repeat > 1``; ``variants`` as in
-    :func:`~semmatch.transfer.benchmark.time_methods`."""
+    spread over the runs (:func:`rate_spread`) when ``repeat > 1``; ``variants`` and
+    ``settings`` as in :func:`~semmatch.transfer.benchmark.time_methods`."""
     from tqdm import tqdm
 
     from semmatch.transfer import as_map_index
@@ -159,7 +184,7 @@ def _time_map(semantic_map, frames, methods, repeat: int, target: float, variant
     t, c = time.perf_counter(), time.process_time()
     index = as_map_index(semantic_map)
     build_s, build_cpu_s = time.perf_counter() - t, time.process_time() - c
-    runs = [time_methods(frames, index, methods, variants=variants)
+    runs = [time_methods(frames, index, methods, variants=variants, settings=settings)
             for _ in tqdm(range(repeat), desc="bench runs", disable=repeat == 1, leave=False)]
     out = dict(runs[0])
     if repeat > 1:
