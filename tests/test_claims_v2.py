@@ -114,6 +114,12 @@ def test_check_claims_v2_on_synthetic_scenes():
     assert by.loc["F1", "verdict"] in ("equivalent", "inconclusive") and not by.loc["F1", "min_effect"]
     assert {"cluster_lo", "cluster_hi", "verdict_cluster", "interval_method"} <= set(out.columns)
     assert out["interval_method"].eq("t over scenes (one network); provisional").all()
+    # the same rows transferred from the ground-truth map depend on no network: never provisional
+    gt = [c for c in V2.claims if c.id == "C6-gt"]
+    gt_rows = df.assign(model="ground truth", method=df["method"].map({"lower": "3d-slic", "3d-neighborhood":
+                                                                        "3d-projected-sp", "fused": "dbscan"}))
+    out = check_claims(gt_rows, methods=["3d-slic", "3d-projected-sp", "dbscan"], plan=V2, claims=gt)
+    assert len(out) and out["interval_method"].eq("t over scenes (one network)").all()
 
 
 def test_several_networks_use_the_two_component_t():

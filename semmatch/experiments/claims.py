@@ -285,7 +285,9 @@ def check_claims(
                 wide = wide.dropna(axis=1, how="all")
                 scenes = wide.index.get_level_values("scene")
                 strata = [scene_kind(s) for s in scenes]
-                networks = list(wide.index.get_level_values(NETWORK_COLUMN)) if index != "scene" else None
+                # the networks behind each row: None for the ground truth (no network: never provisional)
+                networks = (list(wide.index.get_level_values(NETWORK_COLUMN)) if index != "scene" else
+                            None if model == _GT else [model] * len(wide))
                 if heights:
                     available = sorted(float(h) for h in wide.columns)
                     top = available[-1] if available else None
