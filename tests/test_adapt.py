@@ -406,6 +406,70 @@ def test_a_shipped_adaptation_is_used_only_for_its_own_request(tiny_network, rob
                            retrain=True, progress=False, **kw)
 
 
+def test_other_fine_tuning_seeds_are_shipped_beside_and_scored_like_notebook_09s(tiny_network, robot, tmp_path,
+                                                                                  monkeypatch):
+    """``ship-adapted --seed 1`` ships a seed's checkpoints into ``adapted@1`` (refusing checkpoints of
+    another seed); notebook 09 finds it for the same request with that seed (copied, not fine-tuned) and
+    scores it as its own seed, the tables over seeds carrying a ``seed`` column."""
+    import shutil
+
+    import pandas as pd
+
+    from semmatch.experiments import finetune_seeds
+    from semmatch.experiments.adapt import adapt_networks
+    from semmatch.experiments.adapt_claims import SEED_TABLES
+    from semmatch.experiments.layout import Layout
+    from semmatch.experiments.shipped_adaptation import ship_adaptation
+
+    sources = ["3d-neighborhood"]
+    params = dict(sources=sources, recipe_grid={"lr": [1e-3]}, recipe_source="3d-neighborhood", steps=2,
+                  batch_size=4, max_forgetting=0.02, seed=0)
+    roots = [tmp_path / "run", tmp_path / "confirm"]
+    for root in roots:
+        Layout(root).model("compact").parent.mkdir(parents=True)
+        shutil.copyfile(tiny_network, Layout(root).model("compact"))
+    made = adapt_networks(roots[0], "compact", robot, sources, steps=2, batch_size=4, lr=1e-3, seed=1, progress=False,
+                          out_dir=tmp_path / "seed_1")
+    table = tmp_path / "validation_adapt_recipe.csv"
+    pd.DataFrame({"candidate": [0], "lr": ["0.001"], "chosen": [True]}).to_csv(table, index=False)
+    base = tmp_path / "models" / "adapted"
+    with pytest.raises(ValueError, match=r"fine-tuned with seed\(s\) \[1\], not the request's 0"):
+        ship_adaptation(roots[0], "compact", base, parameters=params, recipe_table=table,
+                        checkpoints_dir=tmp_path / "seed_1")
+    ship_adaptation(roots[0], "compact", finetune_seeds.seed_folder(base, 1), parameters={**params, "seed": 1},
+                    recipe_table=table, checkpoints_dir=tmp_path / "seed_1", trained_on="CPU (test)")
+    assert (tmp_path / "models" / "adapted@1" / "adaptation.json").is_file()
+    kw = dict(recipe_grid=params["recipe_grid"], recipe_source="3d-neighborhood", defaults={"steps": 2, "batch_size": 4},
+              max_forgetting=0.02)
+    more = finetune_seeds.shipped_finetune_seeds(roots[1], "compact", robot, sources, seeds=[0, 1, 2], base_seed=0,
+                                                 shipped_dir=base, **kw)
+    assert list(more) == [1]
+    for name, p in made.items():
+        assert more[1][name].read_bytes() == p.read_bytes() and more[1][name].parent == roots[1] / "adapted@1"
+
+    def sweep(data_root, network, checkpoints, **_):  # stand-ins for notebook 09's two scorings
+        return pd.DataFrame([dict(model=m, scene="office_9001", height=0.2, miou=0.5) for m in ("compact", *checkpoints)])
+
+    monkeypatch.setattr("semmatch.experiments.adapt.adapted_height_study", sweep)
+    monkeypatch.setattr("semmatch.experiments.adapt.adapted_lower_maps", lambda data_root, nets, **_: pd.DataFrame(
+        [dict(scene="office_9001", model=m, method="lower", mean_acc=0.7) for m in nets]))
+    monkeypatch.setattr("semmatch.experiments.adapt.load_adapted", lambda data_root, network, c: dict(c))
+    figures = tmp_path / "figures"
+    unadapted = pd.DataFrame([dict(scene="office_9001", model="compact", method="lower", mean_acc=0.6)])
+    got = finetune_seeds.score_finetune_seeds(
+        roots[1], "compact", figures, base_seed=0, height_rows=sweep(None, None, made), robot_rows=pd.DataFrame(
+            [dict(scene="office_9001", model=m, method="lower", mean_acc=0.8) for m in made]),
+        unadapted_rows=unadapted, seeds=more)
+    sweeps = pd.read_csv(figures / f"{SEED_TABLES['height sweep']}.csv")
+    maps = pd.read_csv(figures / f"{SEED_TABLES['robot map']}.csv")
+    assert sweeps.groupby("seed")["model"].apply(list).to_dict() == {0: ["compact", *made], 1: ["compact", *made]}
+    assert maps[maps["model"] == "compact"]["seed"].tolist() == [0, 1]  # the unadapted rows, once per seed
+    assert len(got["robot map"]) == len(maps) == 4
+    assert finetune_seeds.score_finetune_seeds(roots[1], "compact", tmp_path / "none", base_seed=0, height_rows=None,
+                                               robot_rows=None, unadapted_rows=None, seeds={}) == {}
+    assert not (tmp_path / "none").exists()
+
+
 def test_gap_bounds_and_the_per_scene_change_figure(tmp_path):
     """One-sided bounds on a hand-made sweep: a source that closes 70 % +- a little of every
     scene's gap clears 60 %, one that closes 60 % on average with a wide spread does not; the

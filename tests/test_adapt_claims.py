@@ -105,3 +105,40 @@ def test_a_broken_plan_is_refused_naming_the_file(tmp_path):
     bad.write_text(yaml.safe_dump(data))
     with pytest.raises(ValueError, match=r"claim ids repeat: \['A1'\]"):
         load_adapt_plan(bad)
+
+
+def test_a_v2_run_is_judged_over_its_fine_tuning_seeds(tmp_path, capsys):
+    """Under the v2 plan the claims read notebook 09's tables over the fine-tuning seeds (A3 on the
+    per-scene mean over them) where the run has them; v1 keeps the shipped seed's tables. The seeds
+    come from the plan, the other seeds' folders sit beside seed 0's, and an unshipped seed is left
+    out with its reason."""
+    from types import SimpleNamespace
+
+    from semmatch.experiments.adapt_claims import SEED_TABLES
+    from semmatch.experiments.analysis_plan import PLAN_FILE, PLAN_V2_FILE, load_analysis_plan
+    from semmatch.experiments.finetune_seeds import plan_finetune_seeds, seed_folder, shipped_finetune_seeds
+
+    v1, v2 = load_analysis_plan(PLAN_FILE), load_analysis_plan(PLAN_V2_FILE)
+    assert plan_finetune_seeds(v2, 0) == [0, 1, 2] and plan_finetune_seeds(v1, 4) == [4]
+    assert seed_folder("models/full/adapted", 0) == seed_folder("models/full/adapted", 2, base_seed=2)
+    assert str(seed_folder("models/full/adapted", 1)) == "models/full/adapted@1"
+    t = _tables()
+    t["height sweep"].to_csv(tmp_path / "adapt_height_per_scene.csv", index=False)
+    t["robot map"].to_csv(tmp_path / "table2_adapted_per_scene.csv", index=False)
+    (tmp_path / "adapt_seeds").mkdir()
+    # three seeds: seed 0 as above, seeds 1 and 2 closing far less of the gap (A3's mean falls below 60 %)
+    seeds = [_tables()["height sweep"].assign(seed=0)] + [
+        _tables(gain_nbh=0.05)["height sweep"].assign(seed=s) for s in (1, 2)]
+    pd.concat(seeds).to_csv(tmp_path / f"{SEED_TABLES['height sweep']}.csv", index=False)
+    one = judge_adaptation(tmp_path, analysis_plan=v1).set_index("claim")
+    over = judge_adaptation(tmp_path, analysis_plan=v2).set_index("claim")
+    assert one.loc["A3", "verdict"] == "holds" and one.loc["A3", "diff"] == pytest.approx(0.75, abs=0.03)
+    assert over.loc["A3", "diff"] == pytest.approx((0.75 + 2 * 0.25) / 3, abs=0.03)
+    assert over.loc["A3", "verdict"] == "does not hold"
+    (tmp_path / "models").mkdir()
+    (tmp_path / "models" / "compact.pt").write_bytes(b"a stand-in: only its digest is read")
+    views = SimpleNamespace(views=[], scenes=["living_room_0001"])  # what the request reads of RobotViews
+    got = shipped_finetune_seeds(tmp_path, "compact", views, ["3d-neighborhood"], seeds=[0, 1], base_seed=0,
+                                 shipped_dir=tmp_path / "adapted", recipe_grid={}, recipe_source="3d-neighborhood",
+                                 defaults={}, max_forgetting=0.02)
+    assert got == {} and "fine-tuning seed 1 left out: no shipped adaptation in" in capsys.readouterr().err

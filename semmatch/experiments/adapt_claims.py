@@ -32,6 +32,11 @@ TABLES = {"height sweep": "adapt_height_per_scene", "robot map": "table2_adapted
 _KINDS = ("beats", "similar", "share")
 #: the fine-tuning seed's column in per-scene tables of several seeds (``adapt_seeds``)
 SEED_COLUMN = "seed"
+#: a run's tables over its fine-tuning seeds (every seed, the ``seed`` column), relative to its
+#: figures folder, by :data:`TABLES`' keys: notebook 09 writes them under a plan that lists
+#: several seeds (:mod:`semmatch.experiments.finetune_seeds`) and :func:`judge_adaptation` reads them
+SEED_TABLES = {"height sweep": "adapt_seeds/adapt_seeds_height_per_scene",
+               "robot map": "adapt_seeds/table2_adapted_seeds_per_scene"}
 _NETWORK = "<network>"
 _ADAPTED = "<adapted:"
 
@@ -317,8 +322,9 @@ def judge_adaptation(figures_dir: str | Path, out_dir: str | Path | None = None,
     """The adaptation claims judged on one run's notebook-09 tables.
 
     Reads ``adapt_height_per_scene.csv`` and ``table2_adapted_per_scene.csv`` from ``figures_dir``
-    and writes ``adapt_claims.csv`` and ``adapt_verdicts.md`` into ``out_dir`` (default
-    ``figures_dir``).
+    (under a v2 plan each one's table over the fine-tuning seeds instead where the run has it:
+    :data:`SEED_TABLES`) and writes ``adapt_claims.csv`` and ``adapt_verdicts.md`` into
+    ``out_dir`` (default ``figures_dir``).
 
     Parameters
     ----------
@@ -347,6 +353,9 @@ def judge_adaptation(figures_dir: str | Path, out_dir: str | Path | None = None,
     if not any(p.is_file() for p in paths.values()):
         raise FileNotFoundError(f"judge_adaptation: neither {' nor '.join(p.name for p in paths.values())} in "
                                 f"{figures_dir} (notebook 09 did not run there)")
+    if analysis_plan is not None and analysis_plan.rules == "v2":  # every fine-tuning seed, where scored
+        paths.update({k: figures_dir / f"{v}.csv" for k, v in SEED_TABLES.items()
+                      if (figures_dir / f"{v}.csv").is_file()})
     tables = {k: pd.read_csv(p) if p.is_file() else None for k, p in paths.items()}
     df = check_adaptation_claims(tables, plan=plan, analysis_plan=analysis_plan)
     save_table(df, out_dir, "adapt_claims")

@@ -496,18 +496,29 @@ def add_ship_adapted_parser(sub) -> None:
     s.add_argument("--to", help="the shipped folder (default models/<profile>/adapted)")
     s.add_argument("--code-version", help="the commit the run fine-tuned with (default: git describe of this checkout)")
     s.add_argument("--note", help="free text recorded in the manifest")
+    s.add_argument("--seed", type=int, default=None,
+                   help="ship another fine-tuning seed of the same request and recipe (analysis plan v2), from "
+                        "--checkpoints, into models/<profile>/adapted@SEED (default: notebook 09's own seed)")
+    s.add_argument("--checkpoints", help="folder of that seed's <network>~<source>.pt (default <data-root>/adapted)")
+    s.add_argument("--trained-on", default="CPU (notebook 09 of a make repro run)",
+                   help="where the fine-tuning ran, recorded in the manifest")
     s.set_defaults(handler=_ship_adapted_main)
 
 
 def _ship_adapted_main(args) -> int:
+    from .finetune_seeds import seed_folder
     from .shipped_adaptation import RECIPE_TABLE, ship_adaptation
 
     params = notebook_parameters("09_adapt_robot_view", args.profile)
     name = params["profile"]
     figures = Path(args.figures_dir or ROOT / "figures" / name)
-    for p in ship_adaptation(args.data_root or ROOT / "data" / name, params["network"],
-                             args.to or ROOT / "models" / name / "adapted", parameters=params,
-                             recipe_table=figures / RECIPE_TABLE, code_version=args.code_version or code_version(),
-                             note=args.note):
+    seed = params["seed"] if args.seed is None else args.seed
+    if seed < 0:
+        raise SystemExit(f"ship-adapted: --seed must be >= 0, got {seed}")
+    dest = args.to or seed_folder(ROOT / "models" / name / "adapted", seed, base_seed=params["seed"])
+    for p in ship_adaptation(args.data_root or ROOT / "data" / name, params["network"], dest,
+                             parameters={**params, "seed": seed}, recipe_table=figures / RECIPE_TABLE,
+                             code_version=args.code_version or code_version(), note=args.note,
+                             checkpoints_dir=args.checkpoints, trained_on=args.trained_on):
         print(p)
     return 0

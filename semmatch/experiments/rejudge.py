@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from .adapt_claims import SEED_TABLES
 from .analysis_plan import PLAN_FILE, PLAN_V2_FILE, AnalysisPlan, load_analysis_plan
 
 __all__ = ["RULE_FILES", "rejudge_claims", "rejudge_adaptation", "rejudge_in_home", "rejudge_markdown",
@@ -24,7 +25,7 @@ __all__ = ["RULE_FILES", "rejudge_claims", "rejudge_adaptation", "rejudge_in_hom
 
 #: the plan file of each set of verdict rules
 RULE_FILES = {"v1": PLAN_FILE, "v2": PLAN_V2_FILE}
-_SEEDS_TABLE = Path("adapt_seeds") / "adapt_seeds_height_per_scene.csv"
+_SEEDS_TABLE = Path(SEED_TABLES["height sweep"] + ".csv")
 
 
 def _interval(d: float, lo: float, hi: float) -> str:

@@ -72,7 +72,9 @@ def adaptation_request(*, network_sha256: str, scenes: Sequence[str], frames: in
 
 def ship_adaptation(data_root: str | os.PathLike, network: str, dest: str | os.PathLike, *,
                     parameters: Mapping[str, Any], recipe_table: str | os.PathLike,
-                    code_version: str | None = None, note: str | None = None) -> list[Path]:
+                    code_version: str | None = None, note: str | None = None,
+                    checkpoints_dir: str | os.PathLike | None = None,
+                    trained_on: str = "CPU (notebook 09 of a make repro run)") -> list[Path]:
     """Copy a pipeline run's adapted checkpoints and recipe choice into a shipped folder.
 
     Parameters
@@ -91,6 +93,11 @@ def ship_adaptation(data_root: str | os.PathLike, network: str, dest: str | os.P
         The run's ``validation_adapt_recipe.csv``.
     code_version, note : str, optional
         Recorded in the manifest.
+    checkpoints_dir : path, optional
+        Where the checkpoints are (default ``data_root/adapted``, the stage's), e.g. another
+        fine-tuning seed's (``parameters["seed"]`` is then that seed).
+    trained_on : str
+        Where the fine-tuning ran, recorded in the manifest.
 
     Returns
     -------
@@ -111,7 +118,7 @@ def ship_adaptation(data_root: str | os.PathLike, network: str, dest: str | os.P
     from ..segment.shipping import file_sha256
 
     sources = list(parameters["sources"])
-    adapted = Path(data_root) / "adapted"
+    adapted = Path(checkpoints_dir) if checkpoints_dir is not None else Path(data_root) / "adapted"
     paths = {s: adapted / f"{adapted_name(network, s)}.pt" for s in sources}
     missing = [str(p) for p in paths.values() if not p.is_file()]
     if missing or not Path(recipe_table).is_file():
@@ -124,6 +131,10 @@ def ship_adaptation(data_root: str | os.PathLike, network: str, dest: str | os.P
     if int(table["chosen"].astype(bool).sum()) != 1:
         raise ValueError(f"{recipe_table}: need exactly one chosen recipe")
     first = records[sources[0]]
+    seeds = {int(r.get("seed", -1)) for r in records.values()}
+    if seeds != {int(parameters["seed"])}:
+        raise ValueError(f"{adapted}: the checkpoints were fine-tuned with seed(s) {sorted(seeds)}, "
+                         f"not the request's {int(parameters['seed'])}")
     recipe = {k: first[k] for k in AdaptRecipe.names() if k != "seed"}
     request = adaptation_request(
         network_sha256=first["from_sha256"], scenes=first["scenes"], frames=first["frames"], sources=sources,
@@ -150,7 +161,7 @@ def ship_adaptation(data_root: str | os.PathLike, network: str, dest: str | os.P
         "checkpoints": {s: {"file": p.name, "sha256": file_sha256(p), "size_bytes": p.stat().st_size,
                             "seconds": records[s].get("seconds"), "final_loss": records[s].get("final_loss"),
                             "label_coverage": records[s].get("label_coverage")} for s, p in paths.items()},
-        "code_version": code_version, "trained_on": "CPU (notebook 09 of a make repro run)",
+        "code_version": code_version, "trained_on": trained_on,
         "shipped_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), **({"note": note} if note else {}),
     }
     atomic_write_text(dest / MANIFEST, json.dumps(_plain(manifest), indent=2) + "\n")
