@@ -372,8 +372,8 @@ def test_editing_views_or_execution_settings_reruns_no_stage():
     is a dependency exactly of the stages that write figure files."""
     import yaml
 
-    untracked = ("semmatch/plots/views.py", "semmatch/experiments/readme.py", "semmatch/experiments/snapshot.py",
-                 "semmatch/experiments/confirm.py")
+    untracked = ("semmatch/plots/views.py", "semmatch/experiments/readme.py",
+                 "semmatch/experiments/snapshot.py", "semmatch/experiments/confirm.py")
     stages = yaml.safe_load((pipeline.ROOT / "dvc.yaml").read_text())["stages"]
     for name, st in stages.items():
         assert not [d for d in st["deps"] if d.startswith(untracked)], name
@@ -406,7 +406,8 @@ def test_stage_modules_leave_out_display_only_modules(tmp_path):
                                                                   "nbformat_minor": 5}))
     mods = stage_modules("nb", root=tmp_path, runner="semmatch.runner", leave_out=("semmatch.plots.views",))
     # the view's package runs when the view is imported: it stays a dependency, the view does not
-    assert mods == ["semmatch/__init__.py", "semmatch/compute.py", "semmatch/plots/__init__.py", "semmatch/runner.py"]
+    assert mods == ["semmatch/__init__.py", "semmatch/compute.py", "semmatch/plots/__init__.py",
+                    "semmatch/runner.py"]
     every = stage_modules("nb", root=tmp_path, runner="semmatch.runner", leave_out=())
     assert {"semmatch/plots/views.py", "semmatch/only_for_views.py"} <= set(every)
 

@@ -1,4 +1,5 @@
-"""Threads set once (semmatch.runtime.threads): which number, where it is set, and that a block restores it."""
+"""Threads set once (semmatch.runtime.threads): which number, where it is set, and that a block
+restores it."""
 
 from __future__ import annotations
 

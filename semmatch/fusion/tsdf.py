@@ -96,7 +96,8 @@ class SemanticTSDF:
     block_count : int
         Initial hash-map capacity in blocks (grows on demand).
     device : str, optional
-        Open3D device, e.g. ``"CPU:0"`` or ``"CUDA:0"``; default :func:`semmatch.runtime.engine.default_device`.
+        Open3D device, e.g. ``"CPU:0"`` or ``"CUDA:0"``; default
+        :func:`semmatch.runtime.engine.default_device`.
 
     Examples
     --------

@@ -81,7 +81,8 @@ def _set_loaded(n: int) -> dict:
     if "cv2" in sys.modules:  # OpenCV keeps its own pool (SLIC, blurs): the variables do not reach it
         cv2 = sys.modules["cv2"]
         previous["cv2"] = cv2.getNumThreads()
-        if previous["cv2"] != n:  # a forked process may not touch a pool it inherited (semmatch.runtime.workers)
+        # a forked process may not touch a pool it inherited (semmatch.runtime.workers)
+        if previous["cv2"] != n:
             cv2.setNumThreads(n)
     try:
         from threadpoolctl import threadpool_limits
