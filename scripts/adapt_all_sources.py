@@ -2,7 +2,7 @@
 
 The full profile's stage 09 adapts with three sources (``3d-neighborhood``, self-training,
 ground truth) to fit its time budget. This script adapts the profile's network with **every**
-source (:data:`semmatch.adapt.LABEL_SOURCES`), with the recipe stage 09 used (the profile's
+source (:data:`semmatch.segment.adapt.LABEL_SOURCES`), with the recipe stage 09 used (the profile's
 ``steps``, ``batch_size`` and the chosen ``lr`` / ``upper_share`` / ``distill`` read from the
 stage's ``validation_adapt_recipe.csv``), on the same adaptation scenes, and scores them as
 notebook 09 does on the **evaluation** scenes: the gap table (paired per-scene differences, 95 %
@@ -26,7 +26,6 @@ from pathlib import Path
 def main() -> None:
     import pandas as pd
 
-    from semmatch.adapt import LABEL_SOURCES, AdaptRecipe, adapted_name
     from semmatch.experiments.adapt import (
         adapt_networks,
         adapted_height_study,
@@ -40,6 +39,7 @@ def main() -> None:
     from semmatch.experiments.summaries import summarize_over_scenes
     from semmatch.experiments.tables import save_interval_table, save_table
     from semmatch.plots import plot_height_study
+    from semmatch.segment.adapt import LABEL_SOURCES, AdaptRecipe, adapted_name
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--profile", default=None, help="profile of params.yaml (default: its 'profile')")

@@ -33,7 +33,7 @@ the **validation** sweeps only (paired per-scene mIoU differences, 95 % interval
   budget reaches at 0.2 m when it sees only the robot's view, with ground truth throughout:
   the ceiling of any adaptation of it.
 
-Frozen batch-norm statistics are not an option of :func:`semmatch.adapt.fine_tune`: for that
+Frozen batch-norm statistics are not an option of :func:`semmatch.segment.adapt.fine_tune`: for that
 variant this script swaps the optimisation step it uses for the length of one run.
 """
 
@@ -115,10 +115,10 @@ def recipe_mode(mode: str):
 
 
 def main() -> None:
-    from semmatch.adapt import fine_tune
     from semmatch.experiments.adapt import gap_table, robot_views, score_on_sweeps, validation_gap_sweeps
     from semmatch.experiments.layout import Layout
     from semmatch.experiments.pipeline import notebook_parameters
+    from semmatch.segment.adapt import fine_tune
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("out", type=Path, help="folder for the checkpoints and tables")

@@ -55,7 +55,7 @@ def trials(p) -> tuple[list[dict], int]:
 
 
 def _checkpoint(args, p, source: str, i: int, same: int) -> Path:
-    from semmatch.adapt import adapted_name
+    from semmatch.segment.adapt import adapted_name
 
     if i == same:
         return Path(p["data_root"]) / "adapted" / f"{adapted_name(p['network'], source)}.pt"
@@ -63,8 +63,8 @@ def _checkpoint(args, p, source: str, i: int, same: int) -> Path:
 
 
 def finetune(args, p) -> None:
-    from semmatch.adapt import fine_tune
     from semmatch.experiments.layout import Layout
+    from semmatch.segment.adapt import fine_tune
 
     robot, _ = pickle.loads(args.views.read_bytes())  # written by scripts/adapt_seeds.py prepare
     cands, same = trials(p)
@@ -90,7 +90,6 @@ def _check_stage_checkpoint(path: Path, recipe: dict, source: str) -> None:
 
 
 def score(args, p) -> None:
-    from semmatch.adapt import adapted_name
     from semmatch.experiments.adapt import (
         adapted_height_study,
         gap_bounds,
@@ -98,6 +97,7 @@ def score(args, p) -> None:
         score_recipe_candidates,
     )
     from semmatch.experiments.tables import save_table
+    from semmatch.segment.adapt import adapted_name
 
     cands, same = trials(p)
     tables, per_scene, gaps, bounds = [], [], [], []

@@ -86,9 +86,9 @@ def finetune(args, p) -> None:
 
 
 def _checkpoints(args, p) -> dict[str, Path]:
-    from semmatch.adapt import adapted_name
     from semmatch.experiments.adapt_studies import HELDOUT_ADAPT_SEEDS, HELDOUT_SUFFIX, stage_recipe
     from semmatch.segment import load_model
+    from semmatch.segment.adapt import adapted_name
 
     want = stage_recipe(p["figures_dir"])
     out = {}
@@ -108,10 +108,10 @@ def _checkpoints(args, p) -> dict[str, Path]:
 
 
 def score(args, p) -> None:
-    from semmatch.adapt import adapted_name
     from semmatch.experiments.adapt import adapted_height_study, gap_bounds, gap_table
     from semmatch.experiments.adapt_studies import heldout_vs_in_sample
     from semmatch.experiments.tables import save_table
+    from semmatch.segment.adapt import adapted_name
 
     stage_table = Path(p["figures_dir"]) / "adapt_height_per_scene.csv"
     if not stage_table.is_file():

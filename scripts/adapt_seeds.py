@@ -65,8 +65,8 @@ def finetune(args, p) -> None:
 
 
 def _checkpoints(args, p, seed: int) -> dict[str, Path]:
-    from semmatch.adapt import adapted_name
     from semmatch.segment import load_model
+    from semmatch.segment.adapt import adapted_name
 
     folder = Path(p["data_root"]) / "adapted" if seed == 0 else args.out / f"seed_{seed}"
     want = _recipe(p, seed)

@@ -7,7 +7,7 @@ Writes a person/robot pair of one procedural home (``semmatch simulate --pair``)
 as adaptation. The network's human-height training views, which every fine-tuning step mixes in, are
 rendered once per machine into a views cache (``--cache-dir``, default OUT/cache; the checkpoint is
 copied into OUT with that cache recorded, so nothing is read or written where it was trained): timed
-apart as the first run's extra cost. Then :func:`semmatch.adapt.adapt_in_home` is timed: the
+apart as the first run's extra cost. Then :func:`semmatch.segment.adapt.adapt_in_home` is timed: the
 per-home cost. Prints and writes OUT/bench_adapt_home.json with the load average at start and end
 and this process's CPU seconds beside each wall time (a busy machine's wall times are upper bounds).
 """
@@ -24,9 +24,9 @@ from pathlib import Path
 def main() -> None:
     import torch
 
-    from semmatch.adapt import AdaptRecipe, adapt_in_home
     from semmatch.cli import main as cli
     from semmatch.cli.common import ImageSize, add_image_size, add_scene_kind
+    from semmatch.segment.adapt import AdaptRecipe, adapt_in_home
     from semmatch.segment.training import TrainConfig, build_views
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])

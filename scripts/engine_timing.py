@@ -26,9 +26,9 @@ def digests(root: Path) -> dict[str, str]:
 
 
 def main() -> None:
-    from semmatch import engine
     from semmatch.experiments.pipeline import notebook_parameters
-    from semmatch.geometry import DEFAULT_INTRINSICS
+    from semmatch.io.geometry import DEFAULT_INTRINSICS
+    from semmatch.runtime import engine
     from semmatch.segment import make_config
     from semmatch.segment.training import build_views
     from semmatch.sim import generate_dataset

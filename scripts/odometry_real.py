@@ -73,7 +73,7 @@ def open3d_plain(seq, init: np.ndarray, *, depth_max: float, prior: np.ndarray |
     import open3d.core as o3c
 
     from semmatch.io import depth_to_uint16
-    from semmatch.progress import tqdm
+    from semmatch.runtime.progress import tqdm
 
     odo = o3d.t.pipelines.odometry
     poses, prev = [np.asarray(init, dtype=np.float64)], None

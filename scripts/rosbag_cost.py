@@ -26,8 +26,8 @@ import numpy as np
 
 
 def _frames(n: int):
-    from semmatch.geometry import DEFAULT_INTRINSICS, look_at
     from semmatch.io import Frame
+    from semmatch.io.geometry import DEFAULT_INTRINSICS, look_at
 
     rng = np.random.default_rng(0)
     h, w = DEFAULT_INTRINSICS.shape

@@ -24,7 +24,7 @@ from semmatch.evaluate.metrics import pixel_metrics
 from semmatch.experiments.speed import _frames_at
 from semmatch.fusion import reconstruct
 from semmatch.io import read_sequence
-from semmatch.threads import limit_threads
+from semmatch.runtime.threads import limit_threads
 from semmatch.transfer import as_map_index, transfer_frame
 
 #: the candidates of docs/speed.md's rule (the current setting first)

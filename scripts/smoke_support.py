@@ -31,8 +31,8 @@ def main(argv: list[str] | None = None) -> None:
     args = ap.parse_args(argv)
 
     from semmatch.fusion import reconstruct_many
-    from semmatch.geometry import DEFAULT_INTRINSICS
     from semmatch.io import read_sequence
+    from semmatch.io.geometry import DEFAULT_INTRINSICS
     from semmatch.sim import generate_dataset
     from semmatch.transfer import load_index, transfer_sequence
 

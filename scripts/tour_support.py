@@ -24,8 +24,8 @@ import pandas as pd
 def main() -> None:
     from semmatch.experiments.pipeline import notebook_parameters
     from semmatch.fusion import extract, fuse_sequence
-    from semmatch.geometry import DEFAULT_INTRINSICS
     from semmatch.io import read_sequence, write_map
+    from semmatch.io.geometry import DEFAULT_INTRINSICS
     from semmatch.sim import generate_scene, simulate_pair
     from semmatch.transfer import load_index, transfer_sequence
 

@@ -37,7 +37,7 @@ def rng() -> np.random.Generator:
 def noisy_scene_root(tmp_path_factory, name: str, n_frames: int) -> Path:
     """A data root with one small evaluation scene, ``bedroom_0003`` (clean and Kinect-like noisy
     recordings of ``n_frames`` frames at 160x120): the real-like chain's test scene."""
-    from semmatch.geometry import DEFAULT_INTRINSICS
+    from semmatch.io.geometry import DEFAULT_INTRINSICS
     from semmatch.sim import NoiseConfig, generate_dataset
 
     root = tmp_path_factory.mktemp(name) / "data"

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from semmatch.geometry import look_at
+from semmatch.io.geometry import look_at
 from semmatch.sim import Scene
 
 _FACES = np.array(

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from semmatch.adapt import LABEL_SOURCES, adapted_name, fine_tune, robot_training_views
 from semmatch.segment import load_model
+from semmatch.segment.adapt import LABEL_SOURCES, adapted_name, fine_tune, robot_training_views
 from semmatch.segment.training import make_config, train
 
 
@@ -127,7 +127,7 @@ def test_ignored_pixels_do_not_contribute_to_the_adaptation_loss():
     there change neither the loss nor the gradients."""
     import torch
 
-    from semmatch.labels import NUM_CLASSES
+    from semmatch.io.labels import NUM_CLASSES
     from semmatch.segment.training import optimisation_step
 
     torch.manual_seed(0)
@@ -216,7 +216,7 @@ def test_recipe_rule_on_hand_made_tables():
 def test_distillation_term_is_zero_at_the_teacher_and_changes_the_weights(tiny_network, robot, tmp_path):
     import torch
 
-    from semmatch.adapt.finetune import _distillation
+    from semmatch.segment.adapt.finetune import _distillation
 
     teacher = load_model(tiny_network, flip=False).net.eval()
     cin = next(m for m in teacher.modules() if isinstance(m, torch.nn.Conv2d)).in_channels
@@ -294,10 +294,10 @@ def test_robot_map_comparison_pairs_scenes_and_judges_the_interval():
 def test_adapt_recipe_is_the_one_source_of_the_fine_tuning_defaults():
     import inspect
 
-    from semmatch.adapt import AdaptRecipe, adapt_in_home
     from semmatch.cli import build_parser
     from semmatch.experiments.adapt import adapt_networks
     from semmatch.experiments.pipeline import notebook_parameters
+    from semmatch.segment.adapt import AdaptRecipe, adapt_in_home
 
     r = AdaptRecipe()
     assert r.as_dict() == {"steps": 400, "batch_size": 16, "lr": 1e-3, "upper_share": 0.5, "distill": 0.0, "seed": 0}
@@ -370,7 +370,7 @@ def test_a_shipped_adaptation_is_used_only_for_its_own_request(tiny_network, rob
         assert checkpoints[name].read_bytes() == p.read_bytes()  # copied, not fine-tuned again
         assert checkpoints[name].parent == roots[1] / "adapted"
 
-    from semmatch.adapt.finetune import file_digest
+    from semmatch.segment.adapt.finetune import file_digest
 
     request = adaptation_request(network_sha256=file_digest(Layout(roots[1]).model("compact")), scenes=robot.scenes,
                                  frames=len(robot.views), sources=sources, **kw)
@@ -513,9 +513,9 @@ def test_ship_adapted_command_writes_the_shipped_folder(tmp_path, capsys):
     import pandas as pd
     import torch
 
-    from semmatch.adapt import AdaptRecipe
     from semmatch.experiments.confirm import add_ship_adapted_parser
     from semmatch.experiments.pipeline import main, notebook_parameters
+    from semmatch.segment.adapt import AdaptRecipe
 
     params = notebook_parameters("09_adapt_robot_view", "smoke")
     data, figures, dest = tmp_path / "data", tmp_path / "figures", tmp_path / "models" / "adapted"

@@ -63,7 +63,7 @@ def test_adapt_in_home_frame_choice_and_fused_source(home, tmp_path):
 def test_home_views_label_the_robot_frames_as_the_training_views_do(home):
     """The in-home labels are :func:`label_robot_frame`'s: transfer labels only where there is depth,
     resized to the network's training size (160x120 here; the home is 64x48)."""
-    from semmatch.adapt import home_views
+    from semmatch.segment.adapt import home_views
 
     robot = home_views(home["net"], home["lower"], home["map"], progress=False)
     lab = robot.pseudo["3d-neighborhood"]

@@ -11,7 +11,6 @@ import pandas as pd
 import pytest
 import yaml
 
-from semmatch.adapt import RobotViews
 from semmatch.experiments.adapt_studies import (
     HELDOUT_ADAPT_SEEDS,
     HELDOUT_SUFFIX,
@@ -22,7 +21,8 @@ from semmatch.experiments.adapt_studies import (
 )
 from semmatch.experiments.pipeline import ROOT
 from semmatch.experiments.protocol import used_seeds
-from semmatch.labels import id_of
+from semmatch.io.labels import id_of
+from semmatch.segment.adapt import RobotViews
 from semmatch.segment.data import Views
 
 _spec = importlib.util.spec_from_file_location("adapt_heldout", ROOT / "scripts" / "adapt_heldout.py")

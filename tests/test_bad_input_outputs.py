@@ -271,7 +271,7 @@ def _bomb_ply(w: Path) -> Path:
 def _huge_checkpoint(w: Path) -> Path:
     import torch
 
-    from semmatch.labels import table_fingerprint
+    from semmatch.io.labels import table_fingerprint
     from semmatch.segment.models import CHECKPOINT_FORMAT
 
     p = w / "huge.pt"

@@ -11,10 +11,10 @@ import cv2
 import numpy as np
 import pytest
 
-from semmatch.geometry import DEFAULT_INTRINSICS, look_at
 from semmatch.io import Frame, write_labels_folder
 from semmatch.io.bag_writer import _BagWriter
 from semmatch.io.bags import OPTICAL_FRAME, RosBagSequence, is_rosbag, write_rosbag
+from semmatch.io.geometry import DEFAULT_INTRINSICS, look_at
 from semmatch.io.ros_images import (
     IMAGE,
     QUANT_A,

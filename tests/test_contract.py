@@ -5,8 +5,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from semmatch import geometry as g
-from semmatch import labels as L
 from semmatch.io import (
     SemanticMap,
     SequenceWriter,
@@ -16,6 +14,8 @@ from semmatch.io import (
     write_map,
     write_tum,
 )
+from semmatch.io import geometry as g
+from semmatch.io import labels as L
 
 
 def random_pose(rng) -> np.ndarray:
@@ -197,7 +197,7 @@ def test_label_pngs_are_palette_images_read_back_id_exact(tmp_path):
     from PIL import Image
 
     from semmatch.io import read_label_image, write_image, write_label_image
-    from semmatch.labels import NUM_CLASSES, PALETTE
+    from semmatch.io.labels import NUM_CLASSES, PALETTE
 
     lab = (np.arange(6 * 7).reshape(6, 7) % NUM_CLASSES).astype(np.uint8)
     write_label_image(tmp_path / "l.png", lab)
@@ -321,7 +321,7 @@ def test_frame_contract_cleans_depth_and_checks_labels():
             check_rgb(img, floats=True)
     with pytest.raises(ValueError, match="no RGB image"):
         check_rgb(None)
-    with pytest.raises(ValueError, match="intrinsics must be a semmatch.geometry.Intrinsics, got tuple"):
+    with pytest.raises(ValueError, match="intrinsics must be a semmatch.io.geometry.Intrinsics, got tuple"):
         check_intrinsics((160, 120))
     ids = np.arange(24, dtype=np.uint8).reshape(4, 6)
     np.testing.assert_array_equal(check_labels(ids, (4, 6), n_classes=41, stride=2), ids[::2, ::2].ravel())

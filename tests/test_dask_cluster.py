@@ -21,7 +21,7 @@ from pathlib import Path
 
 import pytest
 
-from semmatch import engine
+from semmatch.runtime import engine
 
 pytestmark = pytest.mark.slow
 
@@ -140,7 +140,7 @@ def test_tasks_run_on_the_cluster_s_workers_and_equal_the_local_run(cluster, tmp
     remote = engine.map_tasks(_square_where, range(6), scheduler=cluster["address"], progress=False)
     assert [r[0] for r in remote] == [r[0] for r in local] == [x * x for x in range(6)]
     assert {r[1] for r in local} == {None} and {r[1] for r in remote} == set(WORKERS)  # both workers ran tasks
-    assert {r[2] for r in remote} == {"1"}  # the workers' threads were set (semmatch.threads)
+    assert {r[2] for r in remote} == {"1"}  # the workers' threads were set (semmatch.runtime.threads)
 
     tiny = ["--train-seeds", "--eval-seeds", "9001", "--kinds", "living_room", "bedroom", "--frames", "3",
             "--sweep", "--size", "48x36", "--quiet"]

@@ -1,4 +1,4 @@
-"""Per-scene work on Dask (semmatch.engine): the same files serially and on a local cluster; clear
+"""Per-scene work on Dask (semmatch.runtime.engine): the same files serially and on a local cluster; clear
 errors; no orphans; a killed worker's task reruns elsewhere. A scheduler and workers started
 separately: tests/test_dask_cluster.py."""
 
@@ -15,8 +15,8 @@ from pathlib import Path
 
 import pytest
 
-from semmatch import engine
-from semmatch.geometry import DEFAULT_INTRINSICS
+from semmatch.io.geometry import DEFAULT_INTRINSICS
+from semmatch.runtime import engine
 from semmatch.sim import generate_dataset
 
 pytestmark = pytest.mark.slow
@@ -114,7 +114,7 @@ def test_local_workers_die_with_a_killed_parent(tmp_path):
     script = tmp_path / "parent.py"
     script.write_text(
         "import os, sys, time\n"
-        "from semmatch import engine\n"
+        "from semmatch.runtime import engine\n"
         "if __name__ == '__main__':\n"
         "    c = engine._local_client(2)\n"
         "    print(' '.join(str(p) for p in c.run(os.getpid).values()), flush=True)\n"

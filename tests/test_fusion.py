@@ -13,9 +13,9 @@ from semmatch.fusion import (
     reconstruct,
     reconstruct_many,
 )
-from semmatch.geometry import DEFAULT_INTRINSICS, look_at
 from semmatch.io import Frame, SequenceWriter, read_map, read_sequence, write_labels_folder, write_map
-from semmatch.labels import NUM_CLASSES
+from semmatch.io.geometry import DEFAULT_INTRINSICS, look_at
+from semmatch.io.labels import NUM_CLASSES
 from semmatch.sim import Renderer, box_room
 
 INTR = DEFAULT_INTRINSICS.scaled(160, 120)
@@ -257,7 +257,7 @@ def test_reconstructions_are_byte_deterministic(tmp_path):
     from scenes import orbit_poses
 
     from semmatch.fusion import reconstruct
-    from semmatch.geometry import DEFAULT_INTRINSICS
+    from semmatch.io.geometry import DEFAULT_INTRINSICS
     from semmatch.sim import render_frames
 
     scene = box_room(0)

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 from semmatch.evaluate.metrics import compare
 from semmatch.fusion import reconstruct
-from semmatch.geometry import DEFAULT_INTRINSICS
 from semmatch.io import Frame
+from semmatch.io.geometry import DEFAULT_INTRINSICS
 from semmatch.sim import Renderer, generate_scene, make_trajectory
 from semmatch.transfer import MapIndex, transfer
 

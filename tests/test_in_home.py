@@ -37,7 +37,7 @@ def study(tmp_path_factory):
 
 
 def test_the_committed_plan_names_twelve_fresh_homes_and_the_cli_recipe():
-    from semmatch.adapt import AdaptRecipe
+    from semmatch.segment.adapt import AdaptRecipe
 
     plan = ih.load_in_home_plan()
     assert len(plan.homes) == 12 and len(set(plan.homes)) == 12

@@ -1,13 +1,15 @@
-"""The package's layout and import graph: few loose top-level modules, no import circles between
-its parts or its modules, the old flat import paths gone and named nowhere, and the sizes (no function over 80 lines of code, no module over 600 lines without a
+"""The package's layout and import graph: a top level of at most twelve packages or public
+modules, no import circles between its parts or its modules, the old import paths gone and named
+nowhere, and the sizes (no function over 80 lines of code, no module over 600 lines without a
 stated reason at its top).
 
 The graph is read statically (``ast``) from every module of ``semmatch``, counting imports
 anywhere in a module (also those inside functions, which run only when called), but not those
 for type annotations only (``if TYPE_CHECKING:``), which never run. A *unit* is a
-top-level part: a subpackage (``semmatch.transfer``) or a loose module (``semmatch.geometry``).
-The flat module paths of earlier versions (:data:`REMOVED`) were deprecation shims for one
-release and are gone.
+top-level part: a subpackage (``semmatch.transfer``) or a loose module directly under
+``semmatch``. The flat module paths of earlier versions (:data:`REMOVED`) were deprecation shims
+for one release and are gone; the loose modules of the third layout (:data:`MOVED`) moved into
+packages without shims.
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ from __future__ import annotations
 import ast
 import json
 import re
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -23,8 +26,10 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "semmatch"
-#: at most this many loose modules directly under semmatch/ (__init__ and __main__ aside)
-MAX_LOOSE = 10
+#: at most this many entries directly under semmatch/ (__init__.py and __main__.py aside)
+MAX_TOP_LEVEL = 12
+#: what may sit directly under semmatch/ besides the packages and modules (Python's byte-code cache)
+TOP_LEVEL_IGNORED = ("__init__.py", "__main__.py", "__pycache__")
 #: old flat module paths (deprecated for one release, then removed) -> where the module lives now
 REMOVED = {
     "semmatch.dbscan": "semmatch.transfer.dbscan", "semmatch.metrics": "semmatch.evaluate.metrics",
@@ -34,6 +39,15 @@ REMOVED = {
     "semmatch.rgbd_odometry": "semmatch.poses.rgbd_odometry", "semmatch.stats": "semmatch.evaluate.stats",
     "semmatch.trajectory_metrics": "semmatch.poses.trajectory_metrics",
 }
+#: loose top-level modules (and one package) of the second layout -> their package now (moved, no shims)
+MOVED = {
+    "semmatch.engine": "semmatch.runtime.engine", "semmatch.workers": "semmatch.runtime.workers",
+    "semmatch.threads": "semmatch.runtime.threads", "semmatch.progress": "semmatch.runtime.progress",
+    "semmatch.geometry": "semmatch.io.geometry", "semmatch.labels": "semmatch.io.labels",
+    "semmatch.panoptic": "semmatch.transfer.panoptic", "semmatch.viz": "semmatch.plots.views",
+    "semmatch.adapt": "semmatch.segment.adapt",
+}
+OLD_PATHS = {**REMOVED, **MOVED}
 
 
 def _modules() -> dict[str, tuple[Path, bool]]:
@@ -144,15 +158,65 @@ def _unit(module: str) -> str:
 
 
 def test_old_flat_paths_are_gone_and_their_modules_live_on():
-    for old, new in REMOVED.items():
-        assert old not in MODULES, f"{old} is back: the flat paths were removed after one release as shims"
+    for old, new in OLD_PATHS.items():
+        assert old not in MODULES, f"{old} is back: it moved to {new} (no shims at old paths)"
         assert new in MODULES, f"{new} (the home of the old {old}) is not a module of ours"
 
 
-def test_at_most_ten_loose_top_level_modules():
-    loose = sorted(m for m, (_, is_pkg) in MODULES.items()
-                   if m.count(".") == 1 and not is_pkg and m != "semmatch.__main__")
-    assert len(loose) <= MAX_LOOSE, f"{len(loose)} loose top-level modules (at most {MAX_LOOSE}): {loose}"
+def top_level_problems(package: Path, limit: int = MAX_TOP_LEVEL) -> list[str]:
+    """What is wrong with the top level of ``package``: more than ``limit`` entries (its
+    ``__init__.py``, ``__main__.py`` and byte-code cache aside), or an entry that is neither a
+    package (a folder with an ``__init__.py``) nor a public module (a ``.py`` file declaring
+    ``__all__``, the names a user imports from it)."""
+    entries = sorted(p for p in package.iterdir() if p.name not in TOP_LEVEL_IGNORED)
+    out = []
+    if len(entries) > limit:
+        out.append(f"{len(entries)} entries at the top of {package.name}/ (at most {limit}): "
+                   + " ".join(p.name + ("/" if p.is_dir() else "") for p in entries))
+    for p in entries:
+        if p.is_dir() and not (p / "__init__.py").is_file():
+            out.append(f"{p.name}/: a folder that is no package (no __init__.py)")
+        elif p.is_file() and p.suffix != ".py":
+            out.append(f"{p.name}: not a Python module (data belongs inside the package that reads it)")
+        elif p.is_file() and not any(isinstance(n, ast.Assign) and any(
+                isinstance(t, ast.Name) and t.id == "__all__" for t in n.targets)
+                for n in ast.parse(p.read_text(), filename=str(p)).body):
+            out.append(f"{p.name}: a loose module without __all__ (a top-level module is one a user imports)")
+    return out
+
+
+def test_the_top_level_is_at_most_twelve_packages_or_public_modules():
+    problems = top_level_problems(PACKAGE)
+    assert not problems, "the top of semmatch/ (the pipeline's packages and its runtime only):\n" + "\n".join(problems)
+
+
+def test_the_top_level_check_finds_a_crowded_or_untidy_top(tmp_path):
+    """The 22 entries of the second layout are refused; so are a data file, a folder that is no
+    package and a module without a public surface."""
+    top = tmp_path / "semmatch"
+    top.mkdir()
+    for name in ("__init__", "__main__", "engine", "geometry", "labels", "panoptic", "progress", "threads",
+                 "viz", "workers"):
+        (top / f"{name}.py").write_text("__all__ = []\n")
+    for name in ("adapt", "cli", "evaluate", "experiments", "fusion", "io", "online", "plots", "poses", "segment",
+                 "sim", "transfer"):
+        (top / name).mkdir()
+        (top / name / "__init__.py").write_text("")
+    (top / "__pycache__").mkdir()
+    problems = top_level_problems(top)
+    assert len(problems) == 1 and problems[0].startswith("20 entries at the top of semmatch/ (at most 12)")
+    shutil.rmtree(top / "adapt")  # the third layout: twelve packages (adapt/ inside segment/, ...)
+    for name in ("engine", "geometry", "labels", "panoptic", "progress", "threads", "viz", "workers"):
+        (top / f"{name}.py").unlink()
+    (top / "runtime").mkdir()
+    (top / "runtime" / "__init__.py").write_text("")
+    assert top_level_problems(top) == []
+    for name in ("online", "poses", "sim"):  # room for three untidy entries
+        shutil.rmtree(top / name)
+    (top / "plan.yaml").write_text("")
+    (top / "notes").mkdir()
+    (top / "helpers.py").write_text("def f():\n    pass\n")
+    assert sorted(p.split(":")[0] for p in top_level_problems(top)) == ["helpers.py", "notes/", "plan.yaml"]
 
 
 def test_no_circles_between_the_packages_parts():
@@ -194,7 +258,7 @@ def _code_files():
 def test_nothing_of_ours_uses_an_old_import_path():
     """Package, tests, scripts and notebooks name the current paths only (imports, patch targets,
     docstrings): an old flat path would fail to import."""
-    old = re.compile(r"\b(" + "|".join(re.escape(s) for s in sorted(REMOVED)) + r")\b(?!\.py)")
+    old = re.compile(r"\b(" + "|".join(re.escape(s) for s in sorted(OLD_PATHS)) + r")\b(?!\.py)")
     found = [f"{name}: {m.group(1)}" for name, text in _code_files() for m in old.finditer(text)]
     assert not found, "old import paths in use:\n" + "\n".join(found)
 

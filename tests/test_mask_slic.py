@@ -12,7 +12,7 @@ from scipy.ndimage import binary_dilation
 from skimage.segmentation import slic
 
 import semmatch.transfer.methods as methods
-from semmatch.geometry import DEFAULT_INTRINSICS
+from semmatch.io.geometry import DEFAULT_INTRINSICS
 from semmatch.sim import render_frames
 from semmatch.transfer import MapIndex, transfer_frame
 from semmatch.transfer.benchmark import bench_scene

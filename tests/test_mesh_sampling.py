@@ -1,4 +1,4 @@
-"""The one mesh sampler of the package (semmatch.geometry): the barycentric grid of the map index
+"""The one mesh sampler of the package (semmatch.io.geometry): the barycentric grid of the map index
 and of the measures, the random surface points of the reference and of the trajectories, and the
 triangle-label rule; checked against per-triangle loops written here and a few pinned values."""
 
@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from semmatch.geometry import (
+from semmatch.io.geometry import (
     mesh_sample_count,
     mesh_sample_pieces,
     sample_mesh,

@@ -120,8 +120,8 @@ def test_a_stage_run_twice_writes_the_same_bytes(smoke_run):
 def test_per_scene_tasks_on_a_local_cluster_write_the_same_labels(smoke_run):
     import hashlib
 
-    from semmatch.engine import close_local_cluster
     from semmatch.experiments.synthetic import transfer_lower_labels
+    from semmatch.runtime.engine import close_local_cluster
 
     base, _ = smoke_run
     labels = base / "data" / "lower_labels"

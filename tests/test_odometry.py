@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from semmatch.geometry import DEFAULT_INTRINSICS, look_at
 from semmatch.io import Frame
+from semmatch.io.geometry import DEFAULT_INTRINSICS, look_at
 from semmatch.poses.odometry import estimate_poses, shrink_frame
 from semmatch.poses.pose_graph import refine_pose_graph
 from semmatch.poses.trajectory_metrics import align_trajectory, ate, rpe, trajectory_errors

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from semmatch.fusion import reconstruct
-from semmatch.geometry import DEFAULT_INTRINSICS
 from semmatch.io import Frame, SequenceWriter, read_label_image, read_labels_folder
+from semmatch.io.geometry import DEFAULT_INTRINSICS
 from semmatch.online import Initialisation, ModelTracker, RobotSession
 from semmatch.online.replay import frame_schedule, replay
 from semmatch.poses.registration import transform_error

@@ -68,7 +68,7 @@ def test_every_third_party_import_is_declared():
                   if not {canonicalize_name(d) for d in dists.get(m, [])} & declared}
     # allowed: modules of a declared package's declared extra (dask[distributed] -> distributed)
     undeclared.pop("distributed", None)
-    # threadpoolctl: used when present (semmatch.threads falls back without it)
+    # threadpoolctl: used when present (semmatch.runtime.threads falls back without it)
     undeclared.pop("threadpoolctl", None)
     assert not undeclared, f"imported but not declared in pyproject.toml: {undeclared}"
 

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from semmatch.geometry import Intrinsics
 from semmatch.io import Frame, SemanticMap, SequenceWriter, read_map, write_map
-from semmatch.panoptic import (
+from semmatch.io.geometry import Intrinsics
+from semmatch.transfer.panoptic import (
     PanopticFrame,
     fuse_instances,
     panoptic_quality,

@@ -292,7 +292,7 @@ def test_notebook_defaults_in_plain_jupyter_are_the_active_profiles(name, monkey
 def test_progress_is_plain_text_under_the_pipeline(monkeypatch):
     from tqdm.std import tqdm as text_tqdm
 
-    from semmatch.progress import text_mode, tqdm
+    from semmatch.runtime.progress import text_mode, tqdm
 
     monkeypatch.setenv("SEMMATCH_PROGRESS", "text")
     assert text_mode()
@@ -365,15 +365,15 @@ def test_stages_depend_on_what_they_use_and_not_on_the_rest():
         assert "semmatch/experiments/pipeline.py" in st["deps"] and "semmatch" not in st["deps"]
 
 
-def test_editing_viz_or_execution_settings_reruns_no_stage():
-    """DVC reruns a stage when a dependency or a tracked param changes: viz.py (views shown in the
+def test_editing_views_or_execution_settings_reruns_no_stage():
+    """DVC reruns a stage when a dependency or a tracked param changes: plots/views.py (views shown in the
     reports only), the README and snapshot writers, the confirm/ship subcommands and jobs/scheduler
     (how, not what) are neither for any stage; the stage command's entry point is; the figure code
     is a dependency exactly of the stages that write figure files."""
     import yaml
 
-    untracked = ("semmatch/viz", "semmatch/experiments/readme.py", "semmatch/experiments/snapshot.py",
-                 "semmatch/experiments/confirm.py")
+    untracked = ("semmatch/plots/views.py", "semmatch/experiments/readme.py",
+                 "semmatch/experiments/snapshot.py", "semmatch/experiments/confirm.py")
     stages = yaml.safe_load((pipeline.ROOT / "dvc.yaml").read_text())["stages"]
     for name, st in stages.items():
         assert not [d for d in st["deps"] if d.startswith(untracked)], name
@@ -381,7 +381,7 @@ def test_editing_viz_or_execution_settings_reruns_no_stage():
         assert not [p for p in st["params"] if p.split(".")[-1] in ("jobs", "scheduler")], name
         draws = any(str(next(iter(o)) if isinstance(o, dict) else o).endswith(".png") for o in st["outs"])
         assert ("semmatch/plots/charts.py" in st["deps"]) == draws, name
-    # 03 shows a 3D view with viz: its computing code stays tracked, viz does not
+    # 03 shows a 3D view (plots.views): its computing code stays tracked, the view module does not
     assert "semmatch/experiments/synthetic.py" in stages["reconstruct_upper"]["deps"]
 
 
@@ -394,17 +394,22 @@ def test_stage_modules_leave_out_display_only_modules(tmp_path):
     pkg.mkdir()
     (pkg / "__init__.py").write_text("")
     (pkg / "runner.py").write_text("")
-    (pkg / "compute.py").write_text("def show():\n    from .viz import view\n")
-    (pkg / "viz.py").write_text("from .only_for_views import colours\n")
+    (pkg / "compute.py").write_text("def show():\n    from .plots.views import view\n")
+    (pkg / "plots").mkdir()
+    (pkg / "plots" / "__init__.py").write_text("")
+    (pkg / "plots" / "views.py").write_text("from ..only_for_views import colours\n")
     (pkg / "only_for_views.py").write_text("")
     (tmp_path / "notebooks").mkdir()
     cell = {"cell_type": "code", "metadata": {}, "outputs": [], "execution_count": None,
-            "source": ["from semmatch import compute\n", "from semmatch.viz import view\n"]}
+            "source": ["from semmatch import compute\n", "from semmatch.plots.views import view\n"]}
     (tmp_path / "notebooks" / "nb.ipynb").write_text(json.dumps({"cells": [cell], "metadata": {}, "nbformat": 4,
                                                                   "nbformat_minor": 5}))
-    mods = stage_modules("nb", root=tmp_path, runner="semmatch.runner", leave_out=("semmatch.viz",))
-    assert mods == ["semmatch/__init__.py", "semmatch/compute.py", "semmatch/runner.py"]
-    assert "semmatch/viz.py" in stage_modules("nb", root=tmp_path, runner="semmatch.runner", leave_out=())
+    mods = stage_modules("nb", root=tmp_path, runner="semmatch.runner", leave_out=("semmatch.plots.views",))
+    # the view's package runs when the view is imported: it stays a dependency, the view does not
+    assert mods == ["semmatch/__init__.py", "semmatch/compute.py", "semmatch/plots/__init__.py",
+                    "semmatch/runner.py"]
+    every = stage_modules("nb", root=tmp_path, runner="semmatch.runner", leave_out=())
+    assert {"semmatch/plots/views.py", "semmatch/only_for_views.py"} <= set(every)
 
 
 def test_top_level_overrides_reach_the_profile(tmp_path):

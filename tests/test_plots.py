@@ -4,9 +4,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from semmatch.geometry import DEFAULT_INTRINSICS
 from semmatch.io import Frame
-from semmatch.labels import PALETTE, id_of
+from semmatch.io.geometry import DEFAULT_INTRINSICS
+from semmatch.io.labels import PALETTE, id_of
 from semmatch.plots import (
     confusion_figure,
     floor_plans_figure,

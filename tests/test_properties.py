@@ -94,8 +94,8 @@ def scene_and_index():
 @settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(st.integers(0, 2**31 - 1), st.floats(0.2, 1.6), st.floats(0.0, 0.6))
 def test_every_method_gives_map_labels_void_without_support(scene_and_index, seed, height, dropout):
-    from semmatch.geometry import DEFAULT_INTRINSICS
     from semmatch.io import Frame
+    from semmatch.io.geometry import DEFAULT_INTRINSICS
     from semmatch.sim import Renderer, make_trajectory
     from semmatch.transfer import METHODS, transfer_frame
 

@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 from test_recordings import H, W, write_7scenes, write_tum_folder
 
-from semmatch.geometry import Intrinsics, look_at
 from semmatch.io import (
     SequenceWriter,
     write_depth,
@@ -20,6 +19,7 @@ from semmatch.io import (
     write_tum,
 )
 from semmatch.io import readers as registry
+from semmatch.io.geometry import Intrinsics, look_at
 from semmatch.io.readers import LAYOUTS, SequenceView, find_layout, open_recording, register_layout
 
 CAMERA = Intrinsics(W, H, 50.0, 50.0, 32.0, 24.0, 1000.0)
@@ -111,7 +111,7 @@ from pathlib import Path
 
 import numpy as np
 
-from semmatch.geometry import Intrinsics
+from semmatch.io.geometry import Intrinsics
 from semmatch.io import Frame
 
 

@@ -191,7 +191,7 @@ def test_cli_writes_the_tables_and_figure(tiny_root, tmp_path, oracle_network, c
 
 
 def test_the_appearance_severity_is_chosen_on_validation_scenes(tmp_path, oracle_network, capsys):
-    from semmatch.geometry import DEFAULT_INTRINSICS
+    from semmatch.io.geometry import DEFAULT_INTRINSICS
     from semmatch.sim import NoiseConfig, generate_dataset
 
     root = tmp_path / "data"

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from semmatch.geometry import Intrinsics, look_at
 from semmatch.io import write_depth, write_image, write_tum
+from semmatch.io.geometry import Intrinsics, look_at
 from semmatch.io.recordings import TUM_INTRINSICS, associate, interpolate_poses, is_tum_rgbd, read_tum_rgbd
 
 H, W = 48, 64

@@ -10,8 +10,8 @@ from scipy.spatial import cKDTree
 from semmatch.evaluate.metrics import compare
 from semmatch.evaluate.reference import observed_reference, sample_surface, triangle_labels
 from semmatch.fusion import reconstruct
-from semmatch.geometry import DEFAULT_INTRINSICS, backproject, look_at, project
 from semmatch.io import Frame, SemanticMap, SequenceWriter, read_map, read_sequence
+from semmatch.io.geometry import DEFAULT_INTRINSICS, backproject, look_at, project
 from semmatch.sim import Scene, render_frames
 
 INTR = DEFAULT_INTRINSICS.scaled(160, 120)

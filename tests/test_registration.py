@@ -7,8 +7,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from semmatch.geometry import DEFAULT_INTRINSICS
 from semmatch.io import Frame, SemanticMap
+from semmatch.io.geometry import DEFAULT_INTRINSICS
 from semmatch.poses.registration import Registration, register_maps, rigid_perturbation, transform_error
 
 

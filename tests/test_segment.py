@@ -9,9 +9,9 @@ import pytest
 import torch
 
 from semmatch.experiments.layout import Layout
-from semmatch.geometry import DEFAULT_INTRINSICS
 from semmatch.io import SequenceWriter, read_label_image, read_labels_folder, read_sequence
-from semmatch.labels import NUM_CLASSES
+from semmatch.io.geometry import DEFAULT_INTRINSICS
+from semmatch.io.labels import NUM_CLASSES
 from semmatch.segment import load_model, make_config, predict_sequence, train
 from semmatch.segment.data import Views, class_weights, make_scenes, render_views
 from semmatch.segment.models import ModelConfig, build_network

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from semmatch.geometry import DEFAULT_INTRINSICS
 from semmatch.io import Frame
-from semmatch.labels import NUM_CLASSES, id_of
+from semmatch.io.geometry import DEFAULT_INTRINSICS
+from semmatch.io.labels import NUM_CLASSES, id_of
 from semmatch.segment.detectron2 import class_map, instances_to_semantic
 from semmatch.segment.oracle import CONFUSIONS, NoisyOracle, OracleSegmenter, noisy_labels
 

@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from semmatch.geometry import DEFAULT_INTRINSICS, backproject, check_pose, look_at, project
 from semmatch.io import is_sequence, read_map, read_sequence, read_tum
-from semmatch.labels import id_of
+from semmatch.io.geometry import DEFAULT_INTRINSICS, backproject, check_pose, look_at, project
+from semmatch.io.labels import id_of
 from semmatch.sim import (
     SCENE_KINDS,
     NoiseConfig,

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from semmatch.geometry import DEFAULT_INTRINSICS
+from semmatch.io.geometry import DEFAULT_INTRINSICS
 from semmatch.sim import Renderer, generate_scene
 from semmatch.sim.appearance import (
     HELDOUT_ALBEDOS,

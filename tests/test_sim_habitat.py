@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from semmatch.geometry import look_at, quat_to_rotation
+from semmatch.io.geometry import look_at, quat_to_rotation
 from semmatch.sim.habitat import WORLD_TO_HABITAT, HabitatRenderer, habitat_available, to_habitat_pose
 
 
@@ -29,7 +29,7 @@ def test_missing_habitat_says_how_to_get_it(tmp_path):
 
 @pytest.mark.skipif(not habitat_available(), reason="habitat_sim is not importable")
 def test_habitat_renders_a_frame(tmp_path):  # pragma: no cover - needs habitat_sim
-    from semmatch.geometry import DEFAULT_INTRINSICS
+    from semmatch.io.geometry import DEFAULT_INTRINSICS
     from semmatch.sim import generate_scene
 
     scene = generate_scene("box_room", 0)

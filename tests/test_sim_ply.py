@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from plyfile import PlyData, PlyElement
 
-from semmatch.geometry import DEFAULT_INTRINSICS
-from semmatch.labels import id_of, labels_to_colors
+from semmatch.io.geometry import DEFAULT_INTRINSICS
+from semmatch.io.labels import id_of, labels_to_colors
 from semmatch.sim import Renderer, box_room, make_trajectory
 from semmatch.sim.plyscene import scene_from_ply
 

@@ -18,9 +18,9 @@ import numpy as np
 import pytest
 
 from semmatch.cli import main
-from semmatch.geometry import Intrinsics
 from semmatch.io import SemanticMap, SequenceWriter, write_map
 from semmatch.io.files import atomic_write_text, writes_through
+from semmatch.io.geometry import Intrinsics
 
 pytestmark = pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="FIFOs are POSIX")
 

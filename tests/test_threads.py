@@ -1,10 +1,11 @@
-"""Threads set once (semmatch.threads): which number, where it is set, and that a block restores it."""
+"""Threads set once (semmatch.runtime.threads): which number, where it is set, and that a block
+restores it."""
 
 from __future__ import annotations
 
 import pytest
 
-from semmatch import threads
+from semmatch.runtime import threads
 
 
 @pytest.fixture
@@ -110,7 +111,7 @@ def test_thread_rows_rerun_the_same_benchmark_options():
 def test_opencv_pool_is_limited_and_restored():
     import cv2
 
-    from semmatch.threads import limit_threads
+    from semmatch.runtime.threads import limit_threads
 
     before = cv2.getNumThreads()
     cv2.setNumThreads(2)

@@ -10,8 +10,8 @@ import pytest
 from scenes import furnished_room as box_room
 from scenes import orbit_poses
 
-from semmatch.geometry import DEFAULT_INTRINSICS
 from semmatch.io import SemanticMap, SequenceWriter, read_label_image, read_sequence, write_map
+from semmatch.io.geometry import DEFAULT_INTRINSICS
 from semmatch.sim import render_frames
 from semmatch.transfer import (
     METHODS,
@@ -105,7 +105,7 @@ def test_points_farther_than_threshold_get_void(method, scene, frames, gt_map):
     n_far = 0
     for f in frames:
         lab = transfer(method, f, idx)
-        from semmatch.geometry import backproject
+        from semmatch.io.geometry import backproject
 
         pts, pix = backproject(f.depth, f.intrinsics, f.pose)
         _, d = idx.nearest(pts)

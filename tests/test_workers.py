@@ -10,11 +10,11 @@ import time
 
 import pytest
 
-from semmatch.workers import process_pool
+from semmatch.runtime.workers import process_pool
 
 _CHILD = """
 import os, sys, time
-from semmatch.workers import process_pool
+from semmatch.runtime.workers import process_pool
 
 def work(i):
     with open(os.path.join(sys.argv[1], f"{{i}}.pid"), "w") as fh:
@@ -73,7 +73,7 @@ def _omp_threads(_: int) -> str | None:
 
 
 def test_pool_workers_run_on_one_thread(monkeypatch):
-    from semmatch.threads import ENV_VARS, THREADS_ENV
+    from semmatch.runtime.threads import ENV_VARS, THREADS_ENV
 
     for name in (THREADS_ENV, *ENV_VARS):
         monkeypatch.delenv(name, raising=False)
@@ -87,7 +87,7 @@ def test_pool_workers_run_on_one_thread(monkeypatch):
 _OPENCV_THEN_FORK = """
 import cv2
 import numpy as np
-from semmatch.workers import process_pool
+from semmatch.runtime.workers import process_pool
 
 def work(x):
     return float(cv2.GaussianBlur(np.full((64, 64), x, np.float32), (5, 5), 1).mean())

@@ -55,9 +55,9 @@ def main(argv: list[str] | None = None) -> int:
     from concurrent.futures.process import BrokenProcessPool
 
     from semmatch.io.outputs import check_cli_paths, terminate_as_interrupt
-    from semmatch.threads import configure
+    from semmatch.runtime.threads import configure
 
-    try:  # threads set once, before the verbs load torch, Open3D or a BLAS (semmatch.threads)
+    try:  # threads set once, before the verbs load torch, Open3D or a BLAS (semmatch.runtime.threads)
         configure("cli")
     except ValueError as e:
         print(f"semmatch: error: {e}", file=sys.stderr)

@@ -32,7 +32,6 @@ both: --out, --steps, --batch-size, --lr, --upper-share, --seed; --out must not 
 
 def register(sub) -> None:
     """Add ``semmatch adapt``."""
-    from semmatch.adapt import HOME_SOURCES, LABEL_SOURCES, AdaptRecipe
     from semmatch.cli.common import (
         RawDescriptionHelpFormatter,
         add_output_flags,
@@ -41,6 +40,7 @@ def register(sub) -> None:
         number,
     )
     from semmatch.io.outputs import declare_paths
+    from semmatch.segment.adapt import HOME_SOURCES, LABEL_SOURCES, AdaptRecipe
 
     p = sub.add_parser(
         "adapt",
@@ -128,8 +128,8 @@ def run(args: argparse.Namespace) -> int:
     """Prepare the robot's labelled frames and fine-tune."""
     from pathlib import Path
 
-    from semmatch.adapt import fine_tune, robot_training_views
     from semmatch.cli.common import emit
+    from semmatch.segment.adapt import fine_tune, robot_training_views
 
     _check_mode(args)
     if Path(args.out).resolve() == Path(args.model).resolve():
@@ -150,9 +150,9 @@ def run(args: argparse.Namespace) -> int:
 def _run_home(args: argparse.Namespace) -> int:
     import torch
 
-    from semmatch.adapt import adapt_in_home
-    from semmatch.adapt.views import check_home_depth
     from semmatch.cli.common import emit, open_sequence
+    from semmatch.segment.adapt import adapt_in_home
+    from semmatch.segment.adapt.views import check_home_depth
 
     source = args.source or "3d-neighborhood"
     check_home_depth(args.home)

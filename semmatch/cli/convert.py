@@ -46,7 +46,7 @@ def run(args: argparse.Namespace) -> int:
     from semmatch.cli.common import emit, open_sequence
     from semmatch.io import SequenceWriter, check_output_dir
     from semmatch.io.sequences import sequence_scene
-    from semmatch.progress import tqdm
+    from semmatch.runtime.progress import tqdm
 
     # before any work (reading, odometry): never replace what semmatch did not write, nor the input
     check_output_dir(args.out, "sequence", overwrite=args.overwrite, inputs=[args.sequence])

@@ -43,7 +43,7 @@ def register(sub) -> None:
 
 
 def _load_transform(path: str) -> np.ndarray:
-    from semmatch.geometry import check_pose
+    from semmatch.io.geometry import check_pose
 
     if not Path(path).is_file():
         raise FileNotFoundError(f"{path}: no such transform file (--transform)")
@@ -123,7 +123,7 @@ def check_label_sets(gt: str, gt_labels: np.ndarray, pred: str, pred_labels: np.
         Both maps have evaluated labels and no label is in both sets (the message lists them).
     """
     from semmatch.evaluate.metrics import EVAL_CLASSES
-    from semmatch.labels import NAMES
+    from semmatch.io.labels import NAMES
 
     g = set(np.unique(gt_labels).tolist()) & set(EVAL_CLASSES)
     p = set(np.unique(pred_labels).tolist()) & set(EVAL_CLASSES)

@@ -95,8 +95,8 @@ def run_segment(args: argparse.Namespace) -> int:
 
     from semmatch.cli.common import emit
     from semmatch.io import read_map, write_map
-    from semmatch.labels import NAMES
-    from semmatch.panoptic import segment_instances
+    from semmatch.io.labels import NAMES
+    from semmatch.transfer.panoptic import segment_instances
 
     m = segment_instances(read_map(args.map), eps=args.eps, min_vertices=args.min_vertices)
     write_map(args.out, m)
@@ -121,9 +121,9 @@ def run_reference(args: argparse.Namespace) -> int:
     from semmatch.cli.common import open_sequence, sequence_arg
     from semmatch.fusion import reconstruct
     from semmatch.io import write_map
-    from semmatch.panoptic import fuse_instances, sequence_panoptic_frames
+    from semmatch.transfer.panoptic import fuse_instances, sequence_panoptic_frames
 
-    from ..progress import tqdm
+    from ..runtime.progress import tqdm
 
     seq_path = sequence_arg(args)
     seq = open_sequence(args, seq_path, needs_poses=True)
@@ -142,11 +142,11 @@ def run_transfer(args: argparse.Namespace) -> int:
     """Transfer classes and instances into a sequence and fuse its panoptic map."""
     from semmatch.cli.common import index_cache_options, open_sequence, sequence_arg
     from semmatch.fusion import reconstruct
-    from semmatch.io import read_map, write_map
-    from semmatch.panoptic import PanopticFrame, fuse_instances, require_instances, transfer_panoptic
+    from semmatch.io import read_map, require_instances, write_map
     from semmatch.transfer import load_index
+    from semmatch.transfer.panoptic import PanopticFrame, fuse_instances, transfer_panoptic
 
-    from ..progress import tqdm
+    from ..runtime.progress import tqdm
 
     seq_path = sequence_arg(args)
     upper = require_instances(read_map(args.map), "panoptic transfer")
@@ -173,7 +173,7 @@ def run_evaluate(args: argparse.Namespace) -> int:
 
     from semmatch.cli.common import emit_table
     from semmatch.io import atomic_write_text
-    from semmatch.panoptic import panoptic_quality, panoptic_voxels
+    from semmatch.transfer.panoptic import panoptic_quality, panoptic_voxels
 
     gt = panoptic_voxels(args.gt, args.voxel_size)
     rows = []

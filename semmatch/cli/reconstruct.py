@@ -102,7 +102,7 @@ def estimate_tsdf_bytes(seq, voxel_size: float, *, depth_max: float = 6.0, trunc
     extent : ndarray (3,)
         Metres.
     """
-    from semmatch.labels import NUM_CLASSES
+    from semmatch.io.labels import NUM_CLASSES
 
     n = len(seq)
     band = 1.0 + 2.0 * trunc_voxels / 8.0  # blocks a surface patch allocates across its truncation band

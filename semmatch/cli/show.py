@@ -40,7 +40,7 @@ def register(sub) -> None:
 def run(args: argparse.Namespace) -> int:
     """Write the page."""
     from semmatch.cli.common import emit, open_sequence
-    from semmatch.viz import error_figure, map_figure, trajectory_name, trajectory_trace, write_html
+    from semmatch.plots.views import error_figure, map_figure, trajectory_name, trajectory_trace, write_html
 
     if args.reference and args.instances:
         raise ValueError("--instances and --reference cannot be combined")

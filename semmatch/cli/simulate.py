@@ -16,8 +16,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from ..geometry import DEFAULT_INTRINSICS, Intrinsics
 from ..io import read_intrinsics
+from ..io.geometry import DEFAULT_INTRINSICS, Intrinsics
 
 
 def _noise(text: str | None):

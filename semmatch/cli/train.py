@@ -38,7 +38,7 @@ def register(sub) -> None:
     p.add_argument("--eval-seeds", nargs="+", type=number(int, lo=0), help="evaluation scene seeds (checked to be disjoint)")
     p.add_argument("--seed", type=number(int, lo=0), default=0, help="seed of the views, the weights and the batches")
     p.add_argument("--device", choices=("auto", "cpu", "cuda"), default="auto", help="auto: CUDA when present")
-    p.add_argument("--threads", type=number(int, lo=1), help="torch threads (default: left as the command set them, semmatch.threads)")
+    p.add_argument("--threads", type=number(int, lo=1), help="torch threads (default: left as the command set them, semmatch.runtime.threads)")
     p.add_argument("--cache-dir", help="cache rendered views here")
     p.add_argument("--jobs", type=number(int, lo=1), default=1, help="scenes rendered in parallel (local worker processes)")
     p.add_argument("--scheduler", default=None,

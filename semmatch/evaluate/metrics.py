@@ -20,7 +20,7 @@ A ratio whose denominator is 0 is reported as 0.0. Per-class IoU and the confusi
 computed over ``G ∩ P`` (rows: ground truth, columns: prediction, classes 1..10).
 
 Everything is vectorised NumPy: voxel keys are packed into one int64
-(:func:`semmatch.geometry.pack_keys`), the majority comes from one ``np.unique`` and a
+(:func:`semmatch.io.geometry.pack_keys`), the majority comes from one ``np.unique`` and a
 ``bincount`` over (voxel, label) pairs, set operations are sorted-array intersections.
 :func:`compare_dict_loop` is the plain per-point Python dictionary version of the authors'
 evaluator, kept only as the speed and correctness reference of ``semmatch bench metrics``.
@@ -37,9 +37,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..geometry import longest_edges, pack_keys, sample_mesh, transform, voxel_keys
 from ..io import SemanticMap, read_map
-from ..labels import EVAL_CLASSES, NAMES, NUM_CLASSES
+from ..io.geometry import longest_edges, pack_keys, sample_mesh, transform, voxel_keys
+from ..io.labels import EVAL_CLASSES, NAMES, NUM_CLASSES
 
 __all__ = [
     "VoxelGrid",
@@ -137,7 +137,7 @@ def voxelize(
             pts = np.concatenate([pts, extra_p])
             labels = np.concatenate([labels, extra_l])
     if transform_matrix is not None:
-        from ..geometry import check_pose
+        from ..io.geometry import check_pose
 
         pts = transform(pts.astype(np.float64), check_pose(transform_matrix, what="transform"))
     origin = None if grid_origin is None else np.broadcast_to(np.asarray(grid_origin, dtype=np.float64), (3,))
@@ -155,7 +155,7 @@ def voxelize(
 
 def _densify(m: SemanticMap, max_edge: float, spacing: float) -> tuple[np.ndarray, np.ndarray]:
     """Surface samples (barycentric grid, ``spacing`` apart) of the triangles longer than ``max_edge``;
-    a sample takes its triangle's majority label (:func:`semmatch.geometry.sample_mesh`)."""
+    a sample takes its triangle's majority label (:func:`semmatch.io.geometry.sample_mesh`)."""
     big = np.flatnonzero(longest_edges(m.points, m.faces) > max_edge)
     if big.size == 0:
         return np.zeros((0, 3), np.float32), np.zeros(0, np.uint8)

@@ -36,8 +36,8 @@ from typing import TYPE_CHECKING, NamedTuple
 import numpy as np
 
 from ..fusion.reconstruction import _check_poses
-from ..geometry import Intrinsics, check_pose, sample_mesh_at_random, triangle_labels
 from ..io import Frame, SemanticMap, check_depth_units, read_map
+from ..io.geometry import Intrinsics, check_pose, sample_mesh_at_random, triangle_labels
 
 if TYPE_CHECKING:
     from ..sim.scene import Scene
@@ -124,7 +124,7 @@ def sample_surface(
     Each triangle receives ``floor(area / spacing**2 + U)`` points (``U`` uniform in [0, 1):
     the expected count is exactly proportional to its area, with less spread than drawing the
     triangles at random), placed uniformly with barycentric coordinates
-    ``(1 - sqrt(r1), sqrt(r1) (1 - r2), sqrt(r1) r2)`` (:func:`semmatch.geometry.sample_mesh_at_random`).
+    ``(1 - sqrt(r1), sqrt(r1) (1 - r2), sqrt(r1) r2)`` (:func:`semmatch.io.geometry.sample_mesh_at_random`).
 
     Parameters
     ----------
@@ -423,7 +423,7 @@ def observed_reference(
     ...                          read_sequence("data/full/scenes/eval/s0/lower"))
     >>> compare(ref, "lower_3d-neighborhood.ply", 0.05)["mean_acc"]
     """
-    from ..progress import tqdm
+    from ..runtime.progress import tqdm
 
     if not (np.isfinite(tolerance) and tolerance > 0):
         raise ValueError(f"tolerance must be > 0 (metres), got {tolerance}")

@@ -1,6 +1,6 @@
 """Notebook 09: adapt a network to the robot's viewpoint with transferred labels, and score it.
 
-Adaptation happens on training scenes only (:mod:`semmatch.adapt`); the adapted networks are
+Adaptation happens on training scenes only (:mod:`semmatch.segment.adapt`); the adapted networks are
 scored on the **evaluation** scenes: the height sweep of Fig. 3 (every adapted network beside
 the unadapted one), a table at 0.2 m and 1.6 m with the share of the viewpoint gap closed and
 the change at human height (paired per-scene differences with 95 % intervals), and the adapted
@@ -17,10 +17,10 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from ..adapt import AdaptRecipe, RobotViews, adapted_name, fine_tune, robot_training_views
 from ..evaluate.metrics import MEASURES, compare
 from ..evaluate.stats import bootstrap_ci, paired_difference_ci, ratio_lower_bound, ratio_of_means_ci
 from ..io import read_sequence
+from ..segment.adapt import AdaptRecipe, RobotViews, adapted_name, fine_tune, robot_training_views
 from .layout import Layout
 from .synthetic import eval_grid_origin, reference_grid
 
@@ -51,7 +51,7 @@ def robot_views(
     Returns
     -------
     robot : RobotViews
-        :func:`semmatch.adapt.robot_training_views` of ``network``.
+        :func:`semmatch.segment.adapt.robot_training_views` of ``network``.
     quality : DataFrame
         ``source``, ``coverage`` (share of the robot's pixels with depth that carry a label),
         ``agreement`` (share of the labelled pixels that match the ground truth).
@@ -89,7 +89,7 @@ def adapt_networks(
     data_root, network, robot, sources
         The pipeline's data root, the network to adapt, :func:`robot_views` and the label sources.
     recipe : AdaptRecipe, optional
-        The fine-tuning recipe (default :class:`semmatch.adapt.AdaptRecipe`'s).
+        The fine-tuning recipe (default :class:`semmatch.segment.adapt.AdaptRecipe`'s).
     reuse : dict, optional
         ``{source: checkpoint}`` already fine-tuned with this very recipe from the same network
         (e.g. :func:`chosen_recipe_checkpoint`): copied instead of trained again.
@@ -130,8 +130,8 @@ def _reuse_checkpoint(path: Path, target: Path, source_net: Path, source: str, r
     """Copy an adapted checkpoint to ``target`` after checking that its provenance is the request's."""
     import shutil
 
-    from ..adapt.finetune import file_digest
     from ..io.files import atomic_path
+    from ..segment.adapt.finetune import file_digest
     from ..segment.models import read_checkpoint
 
     ckpt = read_checkpoint(path)  # weights only: a checkpoint found in the data folder is data, never code
@@ -170,7 +170,7 @@ def recipe_candidates(grid: dict) -> list[dict]:
     Raises
     ------
     ValueError
-        An empty grid, a key that is not a field of :class:`semmatch.adapt.AdaptRecipe` (the seed
+        An empty grid, a key that is not a field of :class:`semmatch.segment.adapt.AdaptRecipe` (the seed
         aside), or an empty list.
     """
     import itertools
@@ -222,13 +222,13 @@ def choose_adaptation_recipe(
     robot : RobotViews
         :func:`robot_views` (must carry ``source``).
     candidates : sequence of dict
-        Fields of :class:`semmatch.adapt.AdaptRecipe` (``lr``, ``upper_share``, ``steps``,
+        Fields of :class:`semmatch.segment.adapt.AdaptRecipe` (``lr``, ``upper_share``, ``steps``,
         ``batch_size``, ``distill``), e.g. :func:`recipe_candidates`.
     source : str
         The label source the recipe is chosen with (one recipe for every source).
     defaults : dict, optional
         Fields every candidate starts from (the profile's ``steps``, ``batch_size`` ...); the
-        rest are :class:`semmatch.adapt.AdaptRecipe`'s defaults.
+        rest are :class:`semmatch.segment.adapt.AdaptRecipe`'s defaults.
     max_forgetting : float
         Largest acceptable mean mIoU loss at ``high``.
     low, high : float
@@ -508,7 +508,7 @@ def adapted_lower_maps(data_root: str | Path, networks: dict[str, object], *, vo
     voxel_size, eval_voxel_size : float
         Fusion and evaluation voxel sizes (m).
     jobs : int
-        Scenes run as tasks of :func:`semmatch.engine.map_tasks` on ``jobs`` local worker
+        Scenes run as tasks of :func:`semmatch.runtime.engine.map_tasks` on ``jobs`` local worker
         processes (1: in this process).
     scheduler : str, optional
         Dask scheduler address to run the scenes on (default ``SEMMATCH_SCHEDULER``; none: local).

@@ -51,7 +51,7 @@ def stage_recipe(stage_figures: str | Path, **changes):
 
     Returns
     -------
-    semmatch.adapt.AdaptRecipe
+    semmatch.segment.adapt.AdaptRecipe
 
     Raises
     ------
@@ -60,7 +60,7 @@ def stage_recipe(stage_figures: str | Path, **changes):
     ValueError
         The table has no chosen row.
     """
-    from ..adapt import AdaptRecipe
+    from ..segment.adapt import AdaptRecipe
 
     table = Path(stage_figures) / "validation_adapt_recipe.csv"
     if not table.is_file():
@@ -110,7 +110,7 @@ def label_quality_by_class(robot, sources: Sequence[str]) -> pd.DataFrame:
 
     Parameters
     ----------
-    robot : semmatch.adapt.RobotViews
+    robot : semmatch.segment.adapt.RobotViews
         The labelled robot frames (their ground truth in ``robot.views.labels``).
     sources : sequence of str
         Label sources of ``robot.pseudo``.
@@ -124,7 +124,7 @@ def label_quality_by_class(robot, sources: Sequence[str]) -> pd.DataFrame:
         pixels with depth that the source labelled correctly). Categories absent from both the
         ground truth and the labels are left out.
     """
-    from ..labels import NAMES
+    from ..io.labels import NAMES
 
     gt = np.asarray(robot.views.labels)
     valid = (np.asarray(robot.views.depth) > 0) & (gt > 0)
@@ -174,8 +174,8 @@ def heldout_vs_in_sample(per_scene: pd.DataFrame, network: str, sources: Sequenc
     ValueError
         A source without both adapted models in ``per_scene``.
     """
-    from ..adapt import adapted_name
     from ..evaluate.stats import interval
+    from ..segment.adapt import adapted_name
     from .adapt import per_scene_changes
 
     ch = per_scene_changes(per_scene, network, low=low, high=high, measure=measure).set_index(["model", "scene"])

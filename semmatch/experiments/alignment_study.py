@@ -112,7 +112,7 @@ def simulate_validation_pairs(out: Path, seeds: Sequence[int], *, params: dict |
     list of Path
         The scene folders.
     """
-    from ..geometry import DEFAULT_INTRINSICS
+    from ..io.geometry import DEFAULT_INTRINSICS
     from ..sim import generate_scene
     from ..sim.noise import NoiseConfig
     from ..sim.simulate import simulate_pair

@@ -34,7 +34,7 @@ def look_digest() -> str:
     ``materials``, ``render``): a change to any of them changes the key of every cache made from
     held-out-look frames (recordings, labels, poses, the arms' results). Computed once per process
     (every cache path of every arm asks for it; the code does not change during a run)."""
-    from ..adapt.finetune import file_digest
+    from ..segment.adapt.finetune import file_digest
     from ..sim import appearance, materials, render
 
     parts = [file_digest(Path(m.__file__)) for m in (appearance, materials, render)]
@@ -103,7 +103,7 @@ def appearance_severity_on_validation(data_root: str | Path, network: str = "com
     voxel_size, eval_voxel_size : float
         Fusion and evaluation voxels (Table 3's).
     jobs : int
-        Scenes in parallel (:func:`semmatch.engine.map_tasks`).
+        Scenes in parallel (:func:`semmatch.runtime.engine.map_tasks`).
     progress : bool
 
     Returns
@@ -114,7 +114,7 @@ def appearance_severity_on_validation(data_root: str | Path, network: str = "com
     severity : float
         The chosen level.
     """
-    from ..engine import map_tasks
+    from ..runtime.engine import map_tasks
 
     layout = Layout(data_root)
     scenes = [sd.name for sd in layout.scene_dirs("val") if (sd / "lower_noisy").is_dir()]

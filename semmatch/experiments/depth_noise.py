@@ -73,7 +73,7 @@ def depth_noise_study(
         Seed of the noise: each scene and level draws from ``(seed, scene id, level)``; every
         method sees the same noisy frames.
     jobs : int
-        Scenes as tasks of :func:`semmatch.engine.map_tasks` on ``jobs`` local processes.
+        Scenes as tasks of :func:`semmatch.runtime.engine.map_tasks` on ``jobs`` local processes.
     scheduler : str, optional
         Dask scheduler address (default ``SEMMATCH_SCHEDULER``; none: local).
     progress : bool

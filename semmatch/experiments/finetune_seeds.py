@@ -23,7 +23,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from ..adapt import RobotViews
+from ..segment.adapt import RobotViews
 from .adapt_claims import SEED_COLUMN, SEED_TABLES
 from .layout import Layout
 
@@ -60,7 +60,7 @@ def shipped_finetune_seeds(data_root: str | os.PathLike, network: str, robot: Ro
         ``{seed: {adapted name: checkpoint}}``; a seed without a shipped adaptation is left out,
         and a line on stderr says why.
     """
-    from ..adapt.finetune import file_digest
+    from ..segment.adapt.finetune import file_digest
     from .adapt import adapt_networks
     from .shipped_adaptation import adaptation_request, shipped_adaptation
 

@@ -40,7 +40,7 @@ def height_study(
 ) -> pd.DataFrame:
     """Score each network on every evaluation scene's height sweep; write Fig. 3.
 
-    The scenes are tasks of :func:`semmatch.engine.map_tasks` (``jobs`` local worker processes,
+    The scenes are tasks of :func:`semmatch.runtime.engine.map_tasks` (``jobs`` local worker processes,
     or the cluster at ``scheduler``; the networks are pickled to the workers).
 
     Writes ``fig3_height_per_scene.csv`` (one row per network, scene and height),

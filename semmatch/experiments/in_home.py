@@ -2,7 +2,7 @@
 
 A person has mapped a home with a human-height camera and a segmentation network. A robot
 arrives; its first tour of the home, labelled from the person's map
-(:func:`semmatch.adapt.adapt_in_home`), is its adaptation data. Every arm then labels the robot's
+(:func:`semmatch.segment.adapt.adapt_in_home`), is its adaptation data. Every arm then labels the robot's
 *second* tour of the same home, which no arm adapted on, and is scored there as in Table 2: the
 tour's frames fused with the arm's labels, against the tour fused with ground-truth labels, on
 the evaluation grid. Arms: the unadapted network, the shipped network adapted across homes (on
@@ -29,7 +29,7 @@ import numpy as np
 import pandas as pd
 import yaml
 
-from ..adapt import AdaptRecipe
+from ..segment.adapt import AdaptRecipe
 
 __all__ = ["InHomePlan", "load_in_home_plan", "simulate_home", "person_map", "score_home", "run_home",
            "in_home_study", "run_in_home_study", "in_home_comparisons", "plot_in_home", "write_in_home_results",
@@ -125,7 +125,7 @@ def simulate_home(kind: str, seed: int, folder: str | Path, sim: Mapping) -> dic
     dict
         ``{"upper", "first", "second"}``: sequence folders (rendered once; complete ones are kept).
     """
-    from ..geometry import DEFAULT_INTRINSICS
+    from ..io.geometry import DEFAULT_INTRINSICS
     from ..sim import generate_scene
     from ..sim.raster import make_renderer
     from ..sim.simulate import carrier_poses, simulate_sequence
@@ -220,8 +220,8 @@ def _check_settings(hdir: Path, plan: InHomePlan, models: Path) -> None:
     ValueError
         The folder holds files but no settings record, or a record of other settings (named).
     """
-    from ..adapt.finetune import file_digest
     from ..io import atomic_write_text
+    from ..segment.adapt.finetune import file_digest
 
     want = {"simulation": plan.simulation, "voxel_size": plan.voxel_size, "network": plan.network,
             "network_sha256": file_digest(models / f"{plan.network}.pt"), "source": plan.source,
@@ -253,8 +253,8 @@ def run_home(data: str, plan_path: str, models: str, views_cache: str | None, ho
         wall seconds, from the checkpoint's record) and ``adapt_s`` / ``adapt_cpu_s`` (wall and CPU
         seconds of the whole adaptation, labelling included; NaN for a checkpoint of an earlier run).
     """
-    from ..adapt import adapt_in_home
     from ..segment import load_model
+    from ..segment.adapt import adapt_in_home
 
     plan = load_in_home_plan(plan_path)
     kind, seed = home
@@ -291,10 +291,10 @@ def in_home_study(data: str | Path, *, plan_path: str | Path | None = None, mode
     """Run the study on every home of the plan (or ``homes``); per-home rows, one per arm.
 
     The first home runs alone (it renders the network's human-height views into ``views_cache``
-    when they are not cached yet), the others as tasks of :func:`semmatch.engine.map_tasks`.
+    when they are not cached yet), the others as tasks of :func:`semmatch.runtime.engine.map_tasks`.
     A home whose adapted checkpoint exists is not adapted again.
     """
-    from ..engine import map_tasks
+    from ..runtime.engine import map_tasks
     from .pipeline import ROOT
 
     plan_path = Path(plan_path or PLAN_PATH)

@@ -101,7 +101,7 @@ class Layout:
 
         ``root`` is this layout's root, resolved, as text (a task may run in another process or
         on another machine, where it makes its own :class:`Layout`). The scenes run as tasks of
-        :func:`semmatch.engine.map_tasks` (``jobs`` local worker processes, or the cluster at
+        :func:`semmatch.runtime.engine.map_tasks` (``jobs`` local worker processes, or the cluster at
         ``scheduler``); the results come back in the scenes' order.
 
         Parameters
@@ -120,7 +120,7 @@ class Layout:
             Each task returns a list of rows: return one list of every scene's rows, in order
             (False: each task's result as it is, one per scene).
         jobs, scheduler, desc, progress
-            As :func:`semmatch.engine.map_tasks`.
+            As :func:`semmatch.runtime.engine.map_tasks`.
 
         Returns
         -------
@@ -134,7 +134,7 @@ class Layout:
         """
         from functools import partial
 
-        from ..engine import map_tasks
+        from ..runtime.engine import map_tasks
 
         ids = [Path(s).name for s in (self.scene_dirs(split) if scenes is None else scenes)]
         per_scene = map_tasks(partial(task, str(self.root.resolve()), *args), ids, jobs=jobs, scheduler=scheduler,

@@ -101,7 +101,7 @@ def misregistration_study(
         Seed of the perturbations: each scene draws its own axis and direction from
         ``(seed, scene id)``, the same for all sizes, so a series grows along one direction.
     jobs : int
-        Scenes run as tasks of :func:`semmatch.engine.map_tasks` on ``jobs`` local worker
+        Scenes run as tasks of :func:`semmatch.runtime.engine.map_tasks` on ``jobs`` local worker
         processes (with one scene: its label transfer in ``jobs`` processes).
     scheduler : str, optional
         Dask scheduler address to run the scenes on (default ``SEMMATCH_SCHEDULER``; none: local).
@@ -124,7 +124,7 @@ def misregistration_study(
     ValueError
         Negative or non-finite perturbation sizes.
     """
-    from ..engine import resolve_scheduler
+    from ..runtime.engine import resolve_scheduler
 
     layout = Layout(data_root)
     cases = _perturbations(translations, rotations_deg)

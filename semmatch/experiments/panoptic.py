@@ -26,8 +26,9 @@ from pathlib import Path
 import pandas as pd
 
 from ..io import read_map, read_sequence, write_map
-from ..labels import THING_CLASSES
-from ..panoptic import (
+from ..io.labels import THING_CLASSES
+from ..transfer.index import MapIndex
+from ..transfer.panoptic import (
     PanopticFrame,
     fuse_instances,
     panoptic_quality,
@@ -36,7 +37,6 @@ from ..panoptic import (
     sequence_panoptic_frames,
     transfer_panoptic,
 )
-from ..transfer.index import MapIndex
 from .layout import GT, Layout
 from .synthetic import eval_grid_origin
 
@@ -74,7 +74,7 @@ def choose_clustering(
     Each validation scene's upper frames (every ``frame_step``-th) are fused with ground-truth
     classes; the map is clustered at every radius of ``eps_grid`` and scored (PQ over thing
     classes, voxels of ``eval_voxel_size``) against the same map with instances fused from the
-    ground-truth instance images. The scenes are tasks of :func:`semmatch.engine.map_tasks`
+    ground-truth instance images. The scenes are tasks of :func:`semmatch.runtime.engine.map_tasks`
     (``jobs`` local worker processes, or the cluster at ``scheduler``).
 
     Returns
@@ -206,7 +206,7 @@ def panoptic_study(
     layer from the transferred instances of every ``frame_step``-th robot frame; the reference
     is 05's ``reference.ply`` with instances from the robot's ground-truth instance images. The
     panoptic maps are written under ``panoptic/<scene>/`` (the upper maps with their instance
-    layers as ``upper_<source>.ply``). Scenes are tasks of :func:`semmatch.engine.map_tasks`
+    layers as ``upper_<source>.ply``). Scenes are tasks of :func:`semmatch.runtime.engine.map_tasks`
     (``jobs`` local worker processes, or the cluster at ``scheduler``); the result does not
     depend on where they run.
 
@@ -249,8 +249,8 @@ def panoptic_figure(
     Columns: the reference (robot frames with ground-truth instances), then ``method``'s map from
     each upper-map source (written by :func:`panoptic_study`).
     """
-    from ..geometry import Intrinsics
-    from ..panoptic import instance_colors
+    from ..io.geometry import Intrinsics
+    from ..io.labels import instance_colors
     from ..plots import image_grid
     from .qualitative import overview_pose, render_map
 

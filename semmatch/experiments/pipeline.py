@@ -319,7 +319,7 @@ def run_notebook(
     process's log while the notebook runs (papermill's ``--log-output``), so a long stage run by
     ``dvc repro`` shows its progress on the console. ``scheduler`` (else the profile's
     ``common.scheduler``) is the address of a Dask scheduler the notebook's per-scene tasks run
-    on (:mod:`semmatch.engine`; passed to the kernel as ``SEMMATCH_SCHEDULER``).
+    on (:mod:`semmatch.runtime.engine`; passed to the kernel as ``SEMMATCH_SCHEDULER``).
 
     Raises
     ------
@@ -330,7 +330,7 @@ def run_notebook(
     import papermill as pm
 
     params = notebook_parameters(notebook, profile, params_file, **overrides)
-    from ..engine import SCHEDULER_ENV, check_scheduler, resolve_scheduler
+    from ..runtime.engine import SCHEDULER_ENV, check_scheduler, resolve_scheduler
 
     # --scheduler, else the profile's common.scheduler, else SEMMATCH_SCHEDULER: reached first,
     # before anything is written (an unreachable address is a clear error within seconds)
@@ -349,7 +349,7 @@ def run_notebook(
     out = out_dir / f"{notebook}.ipynb"
     t0 = time.perf_counter()
     # the kernel inherits the environment: plain-text progress lines instead of widgets that an
-    # executed notebook would keep frozen at 0 % (semmatch.progress); papermill sets the working
+    # executed notebook would keep frozen at 0 % (semmatch.runtime.progress); papermill sets the working
     # directory itself (notebook_setup leaves it)
     kernel_env = {"SEMMATCH_PROGRESS": "text", "SEMMATCH_PIPELINE": "1",
                   "SEMMATCH_PARAMS": str(Path(params_file).resolve())}

@@ -7,9 +7,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..geometry import Intrinsics, look_at
 from ..io import SemanticMap, read_map
-from ..labels import PALETTE
+from ..io.geometry import Intrinsics, look_at
+from ..io.labels import PALETTE
 from .layout import GT, Layout
 
 __all__ = ["overview_pose", "render_map", "qualitative_figure", "transferred_frames_figure"]
@@ -39,7 +39,7 @@ def render_map(
 
     Triangles whose vertices all lie within ``cut_ceiling`` metres of the map's top are
     dropped so that the room can be seen from above. ``colors`` (uint8 (N,3), one per vertex,
-    e.g. :func:`semmatch.panoptic.instance_colors`) replaces the label colours; a triangle
+    e.g. :func:`semmatch.io.labels.instance_colors`) replaces the label colours; a triangle
     takes its first vertex's colour.
     """
     from ..sim import Renderer, Scene

@@ -154,7 +154,7 @@ def evaluate_real_like(
     registration_voxel, registration_seed, registration_restarts
         ``voxel_size``, ``seed`` and ``restarts`` of :func:`semmatch.poses.registration.register_maps`.
     jobs : int
-        Scenes run as tasks of :func:`semmatch.engine.map_tasks` on ``jobs`` local worker
+        Scenes run as tasks of :func:`semmatch.runtime.engine.map_tasks` on ``jobs`` local worker
         processes (with one scene: its label transfer in ``jobs`` processes).
     scheduler : str, optional
         Dask scheduler address instead (default ``SEMMATCH_SCHEDULER``).
@@ -198,7 +198,7 @@ def evaluate_real_like(
     sources = ([GT] if include_ground_truth else []) + list(networks)
     if not sources:
         raise ValueError("nothing to evaluate: no networks and include_ground_truth=False")
-    from ..engine import resolve_scheduler
+    from ..runtime.engine import resolve_scheduler
 
     scenes = [sd.name for sd in layout.scene_dirs("eval")]
     o = dict(voxel_size=voxel_size, eval_voxel_size=eval_voxel_size, tol=tol, fused_base=fused_base,

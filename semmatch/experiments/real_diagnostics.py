@@ -199,7 +199,7 @@ def _inputs_digest(data_root: str | Path, sid: str, networks: Sequence[str]) -> 
     without a checkpoint file, e.g. a test's oracle)."""
     import hashlib
 
-    from ..adapt.finetune import file_digest
+    from ..segment.adapt.finetune import file_digest
 
     layout = Layout(data_root)
     sd = layout.scenes / "eval" / sid
@@ -400,7 +400,7 @@ def real_like_diagnostics(data_root: str | Path, *, networks: Sequence[str] = ("
     voxel_size, eval_voxel_size, prior_tolerance, fused_base, registration_voxel, registration_restarts
         As :func:`semmatch.experiments.real.evaluate_real_like` (Table 3's values by default).
     jobs, scheduler, progress
-        Tasks (arm, draw, scene) on :func:`semmatch.engine.map_tasks`.
+        Tasks (arm, draw, scene) on :func:`semmatch.runtime.engine.map_tasks`.
 
     Returns
     -------
@@ -415,7 +415,7 @@ def real_like_diagnostics(data_root: str | Path, *, networks: Sequence[str] = ("
     ValueError
         ``draws < 1``, ``fused_base`` not among the methods, an unknown scene.
     """
-    from ..engine import map_tasks
+    from ..runtime.engine import map_tasks
     from .real_poses import check_tolerance
 
     if int(draws) < 1:

@@ -20,7 +20,7 @@ import numpy as np
 import pandas as pd
 
 from ..io import Frame, InMemorySequence, SequenceReader, read_sequence, read_tum, write_tum
-from ..progress import tqdm
+from ..runtime.progress import tqdm
 
 __all__ = [
     "PosedSequence",

@@ -25,8 +25,8 @@ from typing import Any
 
 import pandas as pd
 
-from ..adapt import AdaptRecipe, RobotViews, adapted_name
 from ..io import atomic_path, atomic_write_text
+from ..segment.adapt import AdaptRecipe, RobotViews, adapted_name
 from .adapt import adapt_networks, choose_adaptation_recipe, chosen_recipe_checkpoint, recipe_candidates
 from .layout import Layout
 
@@ -175,7 +175,7 @@ def shipped_adaptation(shipped_dir: str | os.PathLike, request: Mapping) -> tupl
     Returns
     -------
     shipped : (recipe, recipe_table, checkpoints) or None
-        The chosen recipe (fields of :class:`semmatch.adapt.AdaptRecipe`, the seed aside), the
+        The chosen recipe (fields of :class:`semmatch.segment.adapt.AdaptRecipe`, the seed aside), the
         validation table of the choice and ``{source: checkpoint path}``.
     why : str
         Why nothing is shipped for ``request`` ("" when something is).
@@ -264,7 +264,7 @@ def provide_adaptation(
         ``require_shipped`` and no shipped adaptation answers the request (naming why), or
         ``retrain`` with ``require_shipped``.
     """
-    from ..adapt.finetune import file_digest
+    from ..segment.adapt.finetune import file_digest
 
     request = adaptation_request(
         network_sha256=file_digest(Layout(data_root).model(network)), scenes=robot.scenes, frames=len(robot.views),

@@ -24,8 +24,8 @@ def _frames_at(sd: Path, n_frames: int, width: int, height: int) -> list:
     """
     import json
 
-    from ..geometry import DEFAULT_INTRINSICS
     from ..io import Frame
+    from ..io.geometry import DEFAULT_INTRINSICS
 
     seq = read_sequence(sd / "lower")
     idx = np.unique(np.linspace(0, len(seq) - 1, min(n_frames, len(seq))).round().astype(int))

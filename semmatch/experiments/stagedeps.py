@@ -10,7 +10,7 @@ table of ``name -> submodule``, as :mod:`semmatch.segment` has).
 
 Modules that no stage computes with are left out (``leave_out``, default :data:`LEAVE_OUT`),
 and imports are not followed into them: the presentation-only :data:`DISPLAY_ONLY` (the
-interactive 3D views of :mod:`semmatch.viz` appear only in the executed report; the README's
+interactive 3D views of :mod:`semmatch.plots.views` appear only in the executed report; the README's
 results section and the report snapshots are written from finished tables by their own
 commands) and :data:`OTHER_COMMANDS` (the stage command's other subcommands, ``confirm`` and
 ``ship``, which only register their arguments when a stage runs). Editing them reruns no
@@ -44,7 +44,7 @@ _PACKAGE = "semmatch"
 #: presentation-only modules (with their submodules): what they draw or write is only shown or
 #: read by people, never by a stage (3D views in the reports; the README's results section and
 #: the report snapshots, written from finished tables by their own commands)
-DISPLAY_ONLY = ("semmatch.viz", "semmatch.experiments.readme", "semmatch.experiments.snapshot")
+DISPLAY_ONLY = ("semmatch.plots.views", "semmatch.experiments.readme", "semmatch.experiments.snapshot")
 #: the stage command's other subcommands (confirmatory runs, shipping networks, re-judging a run)
 OTHER_COMMANDS = ("semmatch.experiments.confirm", "semmatch.experiments.rejudge")
 #: what no stage depends on, nor on what only these import

@@ -60,7 +60,7 @@ def reconstruct_upper_maps(
 
     For each scene the upper sequence is fused with its ground-truth labels (``upper/<id>/gt.ply``)
     and with the labels each network predicts on the upper frames (``upper/<id>/<net>.ply``).
-    Scenes are tasks of :func:`semmatch.engine.map_tasks` (``jobs`` local processes or the
+    Scenes are tasks of :func:`semmatch.runtime.engine.map_tasks` (``jobs`` local processes or the
     cluster at ``scheduler``).
 
     Returns
@@ -131,8 +131,8 @@ def transfer_lower_labels(
     baseline) and ``lower_labels/<scene>/<network>/fused/`` (``fused_base`` from the network's
     own upper map where it supports a pixel, the network elsewhere). Where the scene has the
     route ablation (``lower_shared/``), the same for ``fused_base`` under ``shared_route/``.
-    Scenes are tasks of :func:`semmatch.engine.map_tasks` (``jobs`` local worker processes, or
-    the cluster at ``scheduler``); the labels do not depend on where they ran. ``method_settings``:
+    Scenes are tasks of :func:`semmatch.runtime.engine.map_tasks` (``jobs`` local worker processes,
+    or the cluster at ``scheduler``); the labels do not depend on where they ran. ``method_settings``:
     the methods' parameters, ``{method: {parameter: value}}`` (the notebooks' ``slic_2d``).
 
     Returns
@@ -213,7 +213,7 @@ def reconstruct_lower_maps(
     every ``mesh_spacing`` metres and kept where the lower / upper camera observed it
     (:func:`semmatch.evaluate.reference.observed_reference`), which shares no geometry with any fusion.
     The same under ``shared_route/`` for the route ablation. Scenes are tasks of
-    :func:`semmatch.engine.map_tasks` (``jobs`` local processes or the cluster at ``scheduler``).
+    :func:`semmatch.runtime.engine.map_tasks` (``jobs`` local processes or the cluster at ``scheduler``).
     """
     Layout(data_root).map_scenes(_lower_maps_scene, tuple(methods), tuple(networks), float(voxel_size), fused_base,
                                  float(mesh_spacing), flatten=False, jobs=jobs, scheduler=scheduler,
@@ -258,7 +258,7 @@ def evaluate_synthetic(
 
     Each reference is voxelised once per scene and compared with every map as a
     :class:`~semmatch.evaluate.metrics.VoxelGrid` (the same numbers as voxelising it per comparison).
-    Scenes are tasks of :func:`semmatch.engine.map_tasks` (``jobs`` local processes or the
+    Scenes are tasks of :func:`semmatch.runtime.engine.map_tasks` (``jobs`` local processes or the
     cluster at ``scheduler``); the rows come back in scene order.
 
     Parameters

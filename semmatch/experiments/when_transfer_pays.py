@@ -233,8 +233,8 @@ def _render_scene(kind: str, seed: int, sdir: Path, upper_src: Path | None, arms
     """The tours of one scene (rendered once; complete folders are kept): ``upper`` (the person's,
     ``upper_src`` when given), ``upper_look`` and the robot's frames of every arm; and how many
     folders were rendered now."""
-    from ..geometry import DEFAULT_INTRINSICS
     from ..io import read_tum
+    from ..io.geometry import DEFAULT_INTRINSICS
     from ..sim import generate_scene
     from ..sim.appearance import HeldOutRenderer, heldout_appearance
     from ..sim.raster import make_renderer
@@ -376,8 +376,8 @@ def run_scene(data_root: str, work: str, grid_path: str, split: str, scene: tupl
         ``render_cpu_s`` (the scene's rendering, NaN when it was already rendered) and
         ``score_s`` / ``score_cpu_s`` (this network's scoring, NaN when its rows were kept).
     """
-    from ..adapt.finetune import file_digest
     from ..io import atomic_write_text, is_sequence
+    from ..segment.adapt.finetune import file_digest
     from .layout import Layout
 
     grid = load_grid(grid_path)
@@ -718,14 +718,14 @@ def when_transfer_pays_study(data_root: str | Path, work: str | Path, scenes: Se
                              split: str = "eval", grid_path: str | Path | None = None, jobs: int = 1,
                              scheduler: str | None = None, progress: bool = True,
                              method_settings: Mapping[str, Mapping] | None = None) -> pd.DataFrame:
-    """Every scene's rows (:func:`run_scene`), scenes as tasks of :func:`semmatch.engine.map_tasks`.
+    """Every scene's rows (:func:`run_scene`), scenes as tasks of :func:`semmatch.runtime.engine.map_tasks`.
 
     Raises
     ------
     FileNotFoundError
         A network of the grid that ``data_root/models`` does not hold (before any work).
     """
-    from ..engine import map_tasks
+    from ..runtime.engine import map_tasks
     from .layout import Layout
 
     grid_path = Path(grid_path or GRID_PATH)
@@ -764,7 +764,7 @@ def run_when_transfer_pays(data_root: str | Path, figures: str | Path, scenes: S
     grid_path : path, optional
         Default the committed grid.
     jobs, scheduler, progress
-        As :func:`semmatch.engine.map_tasks`.
+        As :func:`semmatch.runtime.engine.map_tasks`.
     label : str
         Added to the figure's title (e.g. ``validation scenes``).
     method_settings : mapping, optional

@@ -5,12 +5,12 @@ with one log-evidence channel per category, a Bayesian label update per surface 
 :mod:`~semmatch.fusion.reconstruction` the drivers that fuse a whole sequence with it
 (:func:`fuse_sequence`, :func:`extract`, :func:`reconstruct`, :func:`reconstruct_many`). Every public
 name is importable from ``semmatch.fusion`` itself; :func:`check_depth_units` (from
-:mod:`semmatch.io`) and :func:`default_device` (from :mod:`semmatch.engine`) are re-exported
+:mod:`semmatch.io`) and :func:`default_device` (from :mod:`semmatch.runtime.engine`) are re-exported
 here as before.
 """
 
-from ..engine import default_device
 from ..io import DEPTH_UNIT_RANGE, check_depth_units  # noqa: F401 (DEPTH_UNIT_RANGE: as before)
+from ..runtime.engine import default_device
 from .reconstruction import extract, fuse_sequence, reconstruct, reconstruct_many
 from .tsdf import EvidencePixels, SemanticTSDF
 

@@ -67,7 +67,7 @@ def _check_dropouts(vol: SemanticTSDF, count: int, name: str) -> None:
 
 def _posed_frames(seq, poses, n: int | None, name: str, progress: bool):
     """Yield ``(i, where, frame, pose)``: the pose is ``poses[i]`` or the frame's own."""
-    from ..progress import tqdm
+    from ..runtime.progress import tqdm
 
     for i, frame in enumerate(tqdm(seq, total=n, desc="fuse", disable=not progress, leave=False)):
         where = f"{name} frame {getattr(frame, 'index', i)}"
@@ -148,9 +148,6 @@ def fuse_sequence(
         warnings.warn(f"{name}: no label evidence was integrated; all labels are 0 (void)", stacklevel=2)
     vol.name = name
     return vol
-
-
-#: the old name of :func:`fuse_sequence` (deprecated; one release)
 
 
 def reconstruct(

@@ -31,10 +31,10 @@ import dataclasses
 
 import numpy as np
 
-from ..engine import default_device
-from ..geometry import Intrinsics, check_pose, pixel_rays
 from ..io import SemanticMap, check_depth, check_labels, check_rgb, depth_to_uint16
-from ..labels import NUM_CLASSES
+from ..io.geometry import Intrinsics, check_pose, pixel_rays
+from ..io.labels import NUM_CLASSES
+from ..runtime.engine import default_device
 
 __all__ = ["SemanticTSDF", "EvidencePixels"]
 
@@ -96,7 +96,8 @@ class SemanticTSDF:
     block_count : int
         Initial hash-map capacity in blocks (grows on demand).
     device : str, optional
-        Open3D device, e.g. ``"CPU:0"`` or ``"CUDA:0"``; default :func:`semmatch.engine.default_device`.
+        Open3D device, e.g. ``"CPU:0"`` or ``"CUDA:0"``; default
+        :func:`semmatch.runtime.engine.default_device`.
 
     Examples
     --------

@@ -6,10 +6,13 @@ label PNGs, the depth-unit check), :mod:`~semmatch.io.sequences` (intrinsics, TU
 frames, sequence readers and the writer, label folders), :mod:`~semmatch.io.contract` (the
 frame contract: the checks of a frame's RGB, depth, labels and intrinsics that segmentation,
 transfer and fusion share), :mod:`~semmatch.io.maps` (semantic maps as PLY),
-:mod:`~semmatch.io.outputs` (the output policy of every command). Every public name
-is importable from ``semmatch.io`` itself, except those of the recording readers:
-:mod:`~semmatch.io.readers` (the reader registry, one module per recording layout,
-``open_recording``) and :mod:`~semmatch.io.reading_checks` (the checks every reader shares).
+:mod:`~semmatch.io.outputs` (the output policy of every command). Every public name of these
+is importable from ``semmatch.io`` itself. Imported from their modules instead: the vocabulary
+every file and every package shares, :mod:`~semmatch.io.labels` (the category table and its
+palette) and :mod:`~semmatch.io.geometry` (camera intrinsics, pose conventions, projection,
+voxel keys, mesh sampling), and the recording readers: :mod:`~semmatch.io.readers` (the reader
+registry, one module per recording layout, ``open_recording``) and
+:mod:`~semmatch.io.reading_checks` (the checks every reader shares).
 
 Writers never leave a half-written file behind: files are written to a temporary name in the
 same folder and renamed; a sequence is written into a hidden temporary folder and renamed to
@@ -39,7 +42,7 @@ from .images import (
     write_image,
     write_label_image,
 )
-from .maps import INSTANCE_MAX, SemanticMap, check_ply_header, read_map, write_map
+from .maps import INSTANCE_MAX, SemanticMap, check_ply_header, read_map, require_instances, write_map
 from .sequences import (
     Frame,
     InMemorySequence,
@@ -98,5 +101,6 @@ __all__ = [
     "read_sequence",
     "check_ply_header",
     "read_map",
+    "require_instances",
     "write_map",
 ]

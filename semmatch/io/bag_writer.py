@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..geometry import Intrinsics
+from .geometry import Intrinsics
 from .ros_images import camera_info_message, colour_message, depth_message
 from .ros_transforms import LINK_TO_OPTICAL, TF_TYPES, pose_message, transform_message
 from .sequences import Frame

@@ -67,8 +67,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..geometry import Intrinsics
 from .bag_writer import OPTICAL_FRAME, write_rosbag
+from .geometry import Intrinsics
 from .images import check_depth_units
 from .readers.base import ImageSequence as _ImageSequence
 from .ros_images import (
@@ -300,7 +300,7 @@ class RosBagSequence(_ImageSequence):
         check_units: bool = True,
         intrinsics: Intrinsics | None = None,
     ) -> None:
-        from ..progress import tqdm
+        from ..runtime.progress import tqdm
 
         self.path = Path(path)
         if not self.path.exists():

@@ -3,7 +3,7 @@
 A frame (:class:`semmatch.io.Frame`) holds ``rgb`` uint8 (H,W,3), ``depth`` float metres (H,W)
 (0, NaN, inf or a negative value: no measurement), ``labels`` category ids (H,W) (or, where a
 labeling is fused, per-pixel class probabilities (H,W,C)) and its
-:class:`~semmatch.geometry.Intrinsics`, whose ``shape`` is (H,W). Segmentation
+:class:`~semmatch.io.geometry.Intrinsics`, whose ``shape`` is (H,W). Segmentation
 (:mod:`semmatch.segment.predict`), label transfer (:func:`semmatch.transfer.frames.check_frame`)
 and fusion (:meth:`semmatch.fusion.SemanticTSDF.integrate`) check their inputs with these
 functions, so a frame is accepted or refused alike everywhere, with the same messages. Each
@@ -16,13 +16,13 @@ from typing import Any
 
 import numpy as np
 
-from ..geometry import MAX_PIXELS, Intrinsics
+from .geometry import MAX_PIXELS, Intrinsics
 from .images import check_depth_units
 
 __all__ = ["check_intrinsics", "check_rgb", "check_depth", "check_labels", "MAX_FRAME_PIXELS"]
 
 #: the largest frame semmatch reads or makes, in pixels (64 Mi, e.g. 8192 x 8192: beyond any RGB-D
-#: camera); the same limit as :class:`~semmatch.geometry.Intrinsics`. Image files are measured
+#: camera); the same limit as :class:`~semmatch.io.geometry.Intrinsics`. Image files are measured
 #: from their headers and refused above it before they are decoded (:func:`semmatch.io.images.image_size`).
 MAX_FRAME_PIXELS = MAX_PIXELS
 
@@ -32,7 +32,7 @@ def _wxh(shape: tuple[int, ...]) -> str:
 
 
 def check_intrinsics(intrinsics: Any, *, where: str = "frame") -> Intrinsics:
-    """``intrinsics``, checked to be a :class:`~semmatch.geometry.Intrinsics`.
+    """``intrinsics``, checked to be a :class:`~semmatch.io.geometry.Intrinsics`.
 
     Raises
     ------
@@ -40,7 +40,7 @@ def check_intrinsics(intrinsics: Any, *, where: str = "frame") -> Intrinsics:
         Anything else.
     """
     if not isinstance(intrinsics, Intrinsics):
-        raise ValueError(f"{where}: intrinsics must be a semmatch.geometry.Intrinsics, got {type(intrinsics).__name__}")
+        raise ValueError(f"{where}: intrinsics must be a semmatch.io.geometry.Intrinsics, got {type(intrinsics).__name__}")
     return intrinsics
 
 

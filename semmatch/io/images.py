@@ -15,8 +15,8 @@ import warnings
 import cv2
 import numpy as np
 
-from ..geometry import MAX_PIXELS as MAX_FRAME_PIXELS  # semmatch.io.contract.MAX_FRAME_PIXELS
 from .files import atomic_path
+from .geometry import MAX_PIXELS as MAX_FRAME_PIXELS  # semmatch.io.contract.MAX_FRAME_PIXELS
 
 __all__ = ['read_image', 'read_rgb', 'write_image', 'read_label_image', 'write_label_image', 'read_depth', 'write_depth',
            'depth_to_uint16', 'check_depth_units', 'DEPTH_UNIT_RANGE', 'image_size']
@@ -40,7 +40,7 @@ def write_image(path: PathLike, image: np.ndarray) -> None:
 
 
 def _png_palette() -> list[int]:
-    from ..labels import PALETTE
+    from .labels import PALETTE
 
     pal = np.zeros((256, 3), np.uint8)
     pal[: len(PALETTE)] = PALETTE

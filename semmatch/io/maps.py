@@ -10,13 +10,13 @@ from pathlib import Path
 
 import numpy as np
 
-from ..labels import NUM_CLASSES, colors_to_labels, labels_to_colors
 from .files import atomic_path
+from .labels import NUM_CLASSES, colors_to_labels, labels_to_colors
 
 #: largest instance id a map or an instance image may hold (PLY ``instance`` is int32)
 INSTANCE_MAX = 2**31 - 1
 
-__all__ = ['SemanticMap', 'INSTANCE_MAX', 'check_ply_header', 'read_map', 'write_map']
+__all__ = ['SemanticMap', 'INSTANCE_MAX', 'check_ply_header', 'read_map', 'write_map', 'require_instances']
 
 PathLike = str | os.PathLike
 
@@ -177,6 +177,17 @@ def map_scene(path: PathLike) -> str | None:
             if len(tok) == 3 and tok[0] == "comment" and tok[1] == _SCENE_COMMENT:
                 return tok[2].strip()
     return None
+
+
+def require_instances(m: SemanticMap, what: str = "panoptic output") -> SemanticMap:
+    """Raise a clear ``ValueError`` when ``m`` has no instance layer; return ``m``."""
+    if m.instances is None:
+        raise ValueError(
+            f"{m.source}: the map has no instance layer (no 'instance' vertex property), needed for "
+            f"{what}; add one with `semmatch panoptic segment` (clustering) or from ground-truth "
+            "instance images"
+        )
+    return m
 
 
 def check_ply_header(path: PathLike) -> None:

@@ -4,7 +4,7 @@
   rotation blocks orthonormal with determinant +1 (within :data:`ROTATION_TOLERANCE`);
 * :func:`check_depth_scale`: a depth scale that contradicts the depth statistics (millimetre PNGs
   read at TUM's 1/5000 m, which shrinks the room five times) is refused;
-* :func:`check_label_ids`: label images hold ids of the category table (:mod:`semmatch.labels`).
+* :func:`check_label_ids`: label images hold ids of the category table (:mod:`semmatch.io.labels`).
 
 Each raises a ``ValueError`` naming the file or frame and what is wrong.
 """
@@ -156,7 +156,7 @@ def check_depth_scale(depth_paths: Sequence[PathLike], depth_scale: float, *, wh
 
 
 def check_label_ids(labels: np.ndarray, *, where: PathLike) -> np.ndarray:
-    """Refuse a label image with ids outside the category table (:data:`semmatch.labels.NUM_CLASSES`).
+    """Refuse a label image with ids outside the category table (:data:`semmatch.io.labels.NUM_CLASSES`).
 
     Parameters
     ----------
@@ -175,10 +175,10 @@ def check_label_ids(labels: np.ndarray, *, where: PathLike) -> np.ndarray:
     ValueError
         An id outside ``0 .. NUM_CLASSES - 1`` (labels of another label table).
     """
-    from ..labels import NUM_CLASSES
+    from .labels import NUM_CLASSES
 
     top = int(labels.max(initial=0))
     if top >= NUM_CLASSES:
         raise ValueError(f"{where}: label id {top} outside 0..{NUM_CLASSES - 1} (the category table of "
-                         "semmatch.labels); labels of another label table?")
+                         "semmatch.io.labels); labels of another label table?")
     return labels

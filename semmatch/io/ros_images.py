@@ -4,7 +4,7 @@ Decoding (what :class:`semmatch.io.bags.RosBagSequence` reads): :func:`decode_co
 ``rgb8``, ``bgr8``, ``rgba8``, ``bgra8``, ``mono8``; compressed JPEG/PNG) to uint8 RGB,
 :func:`decode_depth` (raw ``16UC1``/``mono16`` millimetres or ``32FC1`` metres; image_transport's
 ``compressedDepth`` PNG of either) to float32 metres, :func:`camera_info_intrinsics` to
-:class:`~semmatch.geometry.Intrinsics`. Encoding (what :func:`semmatch.io.bags.write_rosbag`
+:class:`~semmatch.io.geometry.Intrinsics`. Encoding (what :func:`semmatch.io.bags.write_rosbag`
 writes): :func:`colour_message`, :func:`depth_message`, :func:`camera_info_message`, given the
 message classes of a rosbags typestore (``typestore.types``).
 
@@ -21,7 +21,7 @@ import warnings
 import cv2
 import numpy as np
 
-from ..geometry import Intrinsics
+from .geometry import Intrinsics
 from .images import depth_to_uint16
 from .reading_checks import DEPTH_HOLE
 
@@ -192,7 +192,7 @@ def decode_depth(msg, where: str = "depth") -> np.ndarray:
 
 
 def camera_info_intrinsics(msg, where: str = "camera_info") -> Intrinsics:
-    """The :class:`~semmatch.geometry.Intrinsics` of a ``sensor_msgs/CameraInfo`` (its ``K``).
+    """The :class:`~semmatch.io.geometry.Intrinsics` of a ``sensor_msgs/CameraInfo`` (its ``K``).
 
     ``depth_scale`` is 1000 (millimetres: what a sequence written from the bag stores).
 

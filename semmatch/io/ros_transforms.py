@@ -14,7 +14,7 @@ from collections import deque
 
 import numpy as np
 
-from ..geometry import pose_to_tum, quat_to_rotation
+from .geometry import pose_to_tum, quat_to_rotation
 from .timestamps import interpolate_poses
 
 __all__ = [

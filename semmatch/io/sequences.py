@@ -22,7 +22,6 @@ from pathlib import Path
 
 import numpy as np
 
-from ..geometry import Intrinsics, check_pose, pose_from_tum, pose_to_tum
 from .files import (
     OUTPUT_MARKER,
     _recover,
@@ -33,6 +32,7 @@ from .files import (
     replace_output_dir,
     write_json,
 )
+from .geometry import Intrinsics, check_pose, pose_from_tum, pose_to_tum
 from .images import (
     read_depth,
     read_image,
@@ -370,7 +370,7 @@ class InMemorySequence(_SequenceABC):
     """
 
     def __init__(self, reader: SequenceReader, *, progress: bool = False) -> None:
-        from ..progress import tqdm
+        from ..runtime.progress import tqdm
 
         self.path, self.intrinsics = reader.path, reader.intrinsics
         self.timestamps, self.poses = reader.timestamps, reader.poses

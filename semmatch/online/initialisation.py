@@ -15,8 +15,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..geometry import backproject, check_pose
 from ..io import Frame, SemanticMap
+from ..io.geometry import backproject, check_pose
 
 __all__ = ["Initialisation", "Initialiser", "given_pose", "register_frame", "align_frame"]
 

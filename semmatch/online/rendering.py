@@ -21,8 +21,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..geometry import Intrinsics
 from ..io import SemanticMap
+from ..io.geometry import Intrinsics
 
 __all__ = ["ModelView", "MeshRenderer", "render_tsdf", "render_view"]
 

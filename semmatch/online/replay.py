@@ -170,7 +170,7 @@ def replay(session: RobotSession, frames: Sequence, *, rate: float = 30.0, poses
     -------
     ReplayReport
     """
-    from ..progress import tqdm
+    from ..runtime.progress import tqdm
 
     if rate < 0:
         raise ValueError(f"rate must be >= 0 frames per second, got {rate}")

@@ -30,8 +30,8 @@ class RerunLog:
     def __init__(self, path, *, map_every: int = 10) -> None:
         import rerun as rr
 
+        from ..io.labels import CATEGORIES
         from ..io.outputs import temp_dir
-        from ..labels import CATEGORIES
 
         self.path = Path(path)
         if self.path.suffix != ".rrd":
@@ -80,7 +80,7 @@ class RerunLog:
     def _map(self, semantic_map) -> None:
         import rerun as rr
 
-        from ..labels import labels_to_colors
+        from ..io.labels import labels_to_colors
 
         self.rec.log("world/map", rr.Points3D(semantic_map.points, colors=labels_to_colors(semantic_map.labels),
                                               radii=0.01))

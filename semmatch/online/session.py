@@ -26,8 +26,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..geometry import check_pose
 from ..io import Frame, SemanticMap
+from ..io.geometry import check_pose
 from .initialisation import Initialisation, Initialiser, given_pose, register_frame
 from .tracking import LOST, TRACKED, ModelTracker, TrackingResult
 

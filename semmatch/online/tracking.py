@@ -14,8 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..geometry import Intrinsics
 from ..io import Frame, depth_to_uint16
+from ..io.geometry import Intrinsics
 from ..poses.trajectory_metrics import rotation_deg
 from .rendering import MeshRenderer, ModelView, render_view
 

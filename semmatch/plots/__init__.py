@@ -5,8 +5,9 @@ write the figure atomically (:func:`semmatch.io.save_figure`); reading files, re
 computing statistics stay in the modules that own them, which hand the results over (e.g.
 :func:`semmatch.experiments.qualitative.qualitative_figure` renders the maps and calls
 :func:`image_grid`). :mod:`~semmatch.plots.images` holds grids of images and floor plans,
-:mod:`~semmatch.plots.charts` curves, bars and matrices. Interactive 3D views are
-:mod:`semmatch.viz` (Plotly), not figures.
+:mod:`~semmatch.plots.charts` curves, bars and matrices. Interactive 3D views (Plotly, for
+JupyterLab and HTML pages) are :mod:`~semmatch.plots.views`, imported from there: they are
+shown, never written as figure files.
 """
 
 from .charts import (

@@ -19,7 +19,7 @@ def confusion_figure(results: dict[str, dict], path: str | Path) -> Path:
     """Row-normalised confusion matrices (one panel per prediction), written atomically."""
     import matplotlib.pyplot as plt
 
-    from ..labels import NAMES
+    from ..io.labels import NAMES
 
     n = len(results)
     fig, axes = plt.subplots(1, n, figsize=(5.2 * n, 4.8), squeeze=False)

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from ..io import save_figure
-from ..labels import EVAL_CLASSES, NAMES, PALETTE, labels_to_colors
+from ..io.labels import EVAL_CLASSES, NAMES, PALETTE, labels_to_colors
 
 __all__ = ["frame_figure", "image_grid", "floor_plans_figure"]
 

@@ -534,8 +534,8 @@ def write_aligned_poses(path, timestamps: np.ndarray, poses: np.ndarray, result:
     """
     from pathlib import Path
 
-    from ..geometry import pose_to_tum
     from ..io import atomic_write_text, write_json
+    from ..io.geometry import pose_to_tum
 
     path = Path(path)
     status = "accepted" if result.accepted else "FORCED: below the checks (--accept-weak-alignment): " + "; ".join(

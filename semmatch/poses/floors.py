@@ -93,7 +93,7 @@ def label_up(m: SemanticMap) -> np.ndarray | None:
 
     Returns None when fewer than 100 points are labelled floor (or the map has no labels).
     """
-    from ..labels import NAMES
+    from ..io.labels import NAMES
 
     if m.labels is None:
         return None

@@ -17,9 +17,9 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..engine import default_device
-from ..geometry import check_pose
 from ..io import Frame, check_depth_units, depth_to_uint16
+from ..io.geometry import check_pose
+from ..runtime.engine import default_device
 from .pose_graph import CompressedDepths, refine_pose_graph
 from .trajectory_metrics import rotation_deg
 
@@ -98,7 +98,7 @@ def estimate_poses(
         Track on frames shrunk by this factor (RGB area-averaged, depth by nearest pixel so
         that no depth is invented at edges; intrinsics scaled to match).
     device : str, optional
-        Open3D device (default :func:`semmatch.engine.default_device`).
+        Open3D device (default :func:`semmatch.runtime.engine.default_device`).
     progress : bool
         Show a tqdm bar.
 
@@ -118,7 +118,7 @@ def estimate_poses(
         Frames for which no residual converged to a plausible motion (their motion is the
         prior's, or extrapolated without a prior); the message lists them.
     """
-    from ..progress import tqdm
+    from ..runtime.progress import tqdm
 
     n = len(seq) if hasattr(seq, "__len__") else None
     if prior is not None:
@@ -336,7 +336,7 @@ def _misfit(cur: Frame, prev: Frame, T_prev_cur: np.ndarray, depth_max: float, s
     Mean absolute grey difference (0..1) over pixels whose depths agree within 5 cm, plus the
     share of previous pixels that land outside the current frame or disagree in depth.
     """
-    from ..geometry import backproject, project
+    from ..io.geometry import backproject, project
 
     intr = prev.intrinsics
     d = np.where(prev.depth <= depth_max, prev.depth, 0)

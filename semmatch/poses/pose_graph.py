@@ -21,7 +21,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from ..engine import default_device
+from ..runtime.engine import default_device
 from .rgbd_odometry import multi_scale_odometry, open3d_threads, rgbd_pyramid
 from .trajectory_metrics import rotation_deg
 
@@ -134,7 +134,7 @@ class _LRU:
 
 def _overlap(points_i: np.ndarray, depth_j: np.ndarray, T_j_i: np.ndarray, intr, tol: float = 0.1) -> float:
     """Share of frame i's sample points (camera i) that frame j (depth in mm) sees at the same depth (within ``tol`` m)."""
-    from ..geometry import project
+    from ..io.geometry import project
 
     if len(points_i) == 0:
         return 0.0
@@ -229,8 +229,8 @@ def refine_pose_graph(
     import open3d as o3d
     import open3d.core as o3c
 
-    from ..geometry import backproject
-    from ..progress import tqdm
+    from ..io.geometry import backproject
+    from ..runtime.progress import tqdm
 
     poses = np.asarray(poses, dtype=np.float64)
     n = len(poses)

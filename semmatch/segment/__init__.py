@@ -9,8 +9,9 @@ Public surface::
 Submodules: :mod:`~semmatch.segment.models` (architectures), :mod:`~semmatch.segment.data`
 (rendered views), :mod:`~semmatch.segment.training`, :mod:`~semmatch.segment.predict`,
 :mod:`~semmatch.segment.oracle`, :mod:`~semmatch.segment.detectron2`,
-:mod:`~semmatch.segment.viewpoint`. Names are imported lazily so that ``import
-semmatch.segment`` does not import PyTorch.
+:mod:`~semmatch.segment.viewpoint`, and :mod:`~semmatch.segment.adapt` (fine-tuning a network
+to the robot's viewpoint with transferred labels; imported from there). Names are imported
+lazily so that ``import semmatch.segment`` does not import PyTorch.
 """
 
 from __future__ import annotations

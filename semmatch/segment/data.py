@@ -18,10 +18,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..geometry import DEFAULT_INTRINSICS, Intrinsics
 from ..io import atomic_path
-from ..labels import NUM_CLASSES, VOID
-from ..progress import tqdm
+from ..io.geometry import DEFAULT_INTRINSICS, Intrinsics
+from ..io.labels import NUM_CLASSES, VOID
+from ..runtime.progress import tqdm
 
 __all__ = [
     "Views",
@@ -168,7 +168,7 @@ def render_views(
     progress : bool
         Show a tqdm bar.
     jobs : int
-        Scenes rendered in parallel: tasks of :func:`semmatch.engine.map_tasks` on ``jobs`` local
+        Scenes rendered in parallel: tasks of :func:`semmatch.runtime.engine.map_tasks` on ``jobs`` local
         worker processes (1: in this process); the views do not depend on it.
     scheduler : str, optional
         Dask scheduler address to render the scenes on (default ``SEMMATCH_SCHEDULER``; none: local).
@@ -179,7 +179,7 @@ def render_views(
     """
     from functools import partial
 
-    from ..engine import map_tasks
+    from ..runtime.engine import map_tasks
 
     if n_frames < 1:
         raise ValueError(f"n_frames must be >= 1, got {n_frames}")

@@ -11,7 +11,7 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from ..labels import NAMES, NUM_CLASSES, VOID, id_of
+from ..io.labels import NAMES, NUM_CLASSES, VOID, id_of
 from .oracle import one_hot
 
 __all__ = ["ALIASES", "class_map", "instances_to_semantic", "Detectron2Segmenter"]

@@ -11,7 +11,7 @@
 
 Both take an RGB image (optionally with a depth channel) normalised by
 :func:`semmatch.segment.models.normalise_inputs` and return logits over the
-:data:`semmatch.labels.NUM_CLASSES` categories at input resolution.
+:data:`semmatch.io.labels.NUM_CLASSES` categories at input resolution.
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from ..labels import NUM_CLASSES
+from ..io.labels import NUM_CLASSES
 
 #: the ``format`` entry of a semmatch segmentation checkpoint
 CHECKPOINT_FORMAT = "semmatch-segment/1"
@@ -52,7 +52,7 @@ class ModelConfig:
         Resolution the network runs at; other image sizes are resized in and the
         probabilities restored to the input size.
     num_classes : int
-        Output channels, one per category of :mod:`semmatch.labels`.
+        Output channels, one per category of :mod:`semmatch.io.labels`.
     """
 
     arch: str = "compact"

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..io import Frame
-from ..labels import NUM_CLASSES, VOID, id_of
+from ..io.labels import NUM_CLASSES, VOID, id_of
 
 __all__ = ["CONFUSIONS", "OracleSegmenter", "NoisyOracle", "noisy_labels", "one_hot"]
 

@@ -30,8 +30,8 @@ import torch
 import torch.nn.functional as F
 
 from ..io import Frame, contract, read_sequence, write_labels_folder
-from ..labels import NUM_CLASSES, table_fingerprint
-from ..progress import tqdm
+from ..io.labels import NUM_CLASSES, table_fingerprint
+from ..runtime.progress import tqdm
 from .models import CHECKPOINT_FORMAT, ModelConfig, build_network, normalise_inputs, read_checkpoint
 
 __all__ = ["Segmenter", "load_model", "training_histories", "predict_sequence", "check_rgb", "check_depth"]
@@ -157,7 +157,7 @@ class Segmenter:
         Returns
         -------
         ndarray float32 (H,W,NUM_CLASSES)
-            Probabilities over the categories of :mod:`semmatch.labels`, summing to 1 per pixel.
+            Probabilities over the categories of :mod:`semmatch.io.labels`, summing to 1 per pixel.
 
         Raises
         ------

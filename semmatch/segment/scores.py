@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..evaluate.metrics import class_iou
-from ..labels import EVAL_CLASSES, NUM_CLASSES, VOID
+from ..io.labels import EVAL_CLASSES, NUM_CLASSES, VOID
 
 __all__ = ["confusion", "scores"]
 

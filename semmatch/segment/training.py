@@ -24,10 +24,10 @@ import pandas as pd
 import torch
 import torch.nn.functional as F
 
-from ..geometry import DEFAULT_INTRINSICS
 from ..io import atomic_path
-from ..labels import table_fingerprint
-from ..progress import tqdm
+from ..io.geometry import DEFAULT_INTRINSICS
+from ..io.labels import table_fingerprint
+from ..runtime.progress import tqdm
 from ..sim.trajectory import TRAJECTORY_VERSION
 from . import data as D
 from .models import CHECKPOINT_FORMAT, build_network, count_parameters
@@ -187,7 +187,7 @@ def optimisation_step(net, x: torch.Tensor, y: torch.Tensor, weights: torch.Tens
         Names the loss in the error message.
     aux_loss : callable, optional
         ``aux_loss(x, logits) -> scalar tensor`` added to the cross-entropy before the backward
-        pass (a regulariser, e.g. distillation in :func:`semmatch.adapt.fine_tune`).
+        pass (a regulariser, e.g. distillation in :func:`semmatch.segment.adapt.fine_tune`).
 
     Returns
     -------
@@ -298,7 +298,7 @@ def train(config: TrainConfig, *, views: tuple[D.Views, D.Views] | None = None) 
     -------
     Path
         The checkpoint: ``format``, ``model`` (architecture config), ``state_dict``,
-        ``categories`` (:func:`semmatch.labels.table_fingerprint`), ``metrics`` (best
+        ``categories`` (:func:`semmatch.io.labels.table_fingerprint`), ``metrics`` (best
         validation scores), ``history`` (per evaluation: step, train loss, val mIoU/accuracy,
         learning rate, seconds), ``train_config``, ``class_weights``, ``n_parameters``.
 
@@ -493,7 +493,7 @@ def validation_table(checkpoints: dict) -> pd.DataFrame:
         ``network, arch, parameters, steps, best_step, train_minutes, val_miou, val_pixel_acc,
         val_mean_acc`` and ``iou_<class>`` for classes 1..10.
     """
-    from ..labels import EVAL_CLASSES, NAMES
+    from ..io.labels import EVAL_CLASSES, NAMES
 
     rows = []
     for name, path in checkpoints.items():

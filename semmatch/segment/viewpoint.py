@@ -17,9 +17,9 @@ import numpy as np
 import pandas as pd
 
 from ..evaluate.metrics import MEASURES
-from ..geometry import DEFAULT_INTRINSICS, Intrinsics
 from ..io import read_sequence
-from ..progress import tqdm
+from ..io.geometry import DEFAULT_INTRINSICS, Intrinsics
+from ..runtime.progress import tqdm
 from .scores import confusion, scores
 
 __all__ = [
@@ -169,7 +169,7 @@ def viewpoint_gap_sequences(
     frame_step : int
         Every ``frame_step``-th frame of each sequence (1: all), the first included.
     jobs : int
-        Scenes (all their heights) run as tasks of :func:`semmatch.engine.map_tasks` on ``jobs``
+        Scenes (all their heights) run as tasks of :func:`semmatch.runtime.engine.map_tasks` on ``jobs``
         local worker processes (1: in this process; the models are pickled to the workers). The
         confusion counts are integers, summed over scenes in the same way wherever they ran.
     scheduler : str, optional
@@ -182,7 +182,7 @@ def viewpoint_gap_sequences(
     """
     from functools import partial
 
-    from ..engine import map_tasks
+    from ..runtime.engine import map_tasks
 
     if not models:
         raise ValueError("viewpoint gap: no models given")

@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..geometry import DEFAULT_INTRINSICS, Intrinsics
+from ..io.geometry import DEFAULT_INTRINSICS, Intrinsics
 from .materials import texture_factor
 from .render import Renderer
 from .scene import Scene
@@ -256,7 +256,7 @@ def write_heldout_recording(noisy: str | Path, out: str | Path, *, severity: flo
 
     from ..io import read_intrinsics, read_sequence, read_tum, write_image
     from ..io.outputs import sweep_stale, temp_dir
-    from ..progress import tqdm
+    from ..runtime.progress import tqdm
     from .noise import NoiseConfig, exposure_gains, noisy_rgb
     from .procedural import generate_scene
 

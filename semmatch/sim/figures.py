@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..labels import EVAL_CLASSES
+from ..io.labels import EVAL_CLASSES
 from ..plots import frame_figure
 
 __all__ = ["scene_frames_figure", "sequence_frames_figure", "dataset_summary", "routes_figure"]
@@ -42,7 +42,7 @@ def scene_frames_figure(
     n_frames, seed : int
     intrinsics : Intrinsics, optional
     """
-    from ..geometry import DEFAULT_INTRINSICS
+    from ..io.geometry import DEFAULT_INTRINSICS
     from .render import Renderer
     from .trajectory import make_trajectory
 
@@ -119,7 +119,7 @@ def dataset_summary(root: str | os.PathLike, *, stride: int = 5):
     import pandas as pd
 
     from ..io import is_sequence, read_sequence
-    from ..labels import id_of
+    from ..io.labels import id_of
 
     rows = []
     for seq_dir in sorted(Path(root).glob("*/*/*")):
@@ -155,7 +155,7 @@ def routes_figure(split_dir: str | os.PathLike, path: str | os.PathLike, *, max_
     import json
 
     from ..io import read_map, read_sequence
-    from ..labels import id_of
+    from ..io.labels import id_of
     from ..plots import floor_plans_figure
     from .procedural import generate_scene
     from .trajectory import free_space, tour_coverage

@@ -18,8 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..geometry import DEFAULT_INTRINSICS, Intrinsics, check_pose, rotation_to_quat
-from ..labels import NAMES
+from ..io.geometry import DEFAULT_INTRINSICS, Intrinsics, check_pose, rotation_to_quat
+from ..io.labels import NAMES
 from .render import RenderResult
 
 __all__ = ["HabitatRenderer", "to_habitat_pose", "habitat_available", "WORLD_TO_HABITAT"]

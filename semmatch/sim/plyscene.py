@@ -18,9 +18,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..geometry import triangle_labels as _triangle_labels
 from ..io import read_map
-from ..labels import NUM_CLASSES, STUFF_CLASSES, id_of
+from ..io.geometry import triangle_labels as _triangle_labels
+from ..io.labels import NUM_CLASSES, STUFF_CLASSES, id_of
 from .materials import MATERIALS
 from .scene import Scene
 
@@ -31,7 +31,7 @@ _STUFF = STUFF_CLASSES
 
 def triangle_labels(faces: np.ndarray, vertex_labels: np.ndarray) -> np.ndarray:
     """Majority label of each triangle's three vertices (first vertex when all differ):
-    :func:`semmatch.geometry.triangle_labels` with ``ties="first"``, the rule of these scenes."""
+    :func:`semmatch.io.geometry.triangle_labels` with ``ties="first"``, the rule of these scenes."""
     return _triangle_labels(faces, vertex_labels, ties="first")
 
 

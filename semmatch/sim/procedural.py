@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..labels import id_of
+from ..io.labels import id_of
 from .materials import MATERIALS, ROLE_CHOICES
 from .scene import Scene
 

@@ -15,7 +15,7 @@ lighting tables (it is built by the same constructor):
   curve (:func:`semmatch.sim.materials.texture_factor` ported to GLSL).
 
 Pixel ``(u, v)`` samples the camera ray through ``((u - cx) / fx, (v - cy) / fy, 1)``, as
-:func:`semmatch.geometry.pixel_rays`. The depth range is ``[near, far]`` with ``near = 1 cm`` and
+:func:`semmatch.io.geometry.pixel_rays`. The depth range is ``[near, far]`` with ``near = 1 cm`` and
 ``far`` the farthest corner of the scene's bounds seen from anywhere inside them (plus a metre):
 nothing of the scene is clipped.
 
@@ -31,7 +31,7 @@ import warnings
 
 import numpy as np
 
-from ..geometry import DEFAULT_INTRINSICS, Intrinsics, check_pose
+from ..io.geometry import DEFAULT_INTRINSICS, Intrinsics, check_pose
 from .materials import _TEX
 from .render import Renderer, RenderResult
 from .scene import Scene

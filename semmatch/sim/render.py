@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..geometry import DEFAULT_INTRINSICS, Intrinsics, check_pose, pixel_rays
+from ..io.geometry import DEFAULT_INTRINSICS, Intrinsics, check_pose, pixel_rays
 from .materials import texture_factor
 from .scene import Scene
 

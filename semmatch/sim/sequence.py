@@ -15,8 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..geometry import DEFAULT_INTRINSICS, Intrinsics
 from ..io import write_json
+from ..io.geometry import DEFAULT_INTRINSICS, Intrinsics
 from .noise import NoiseConfig
 from .procedural import SCENE_KINDS, generate_scene
 from .raster import make_renderer
@@ -262,7 +262,7 @@ def generate_dataset(
         Renderer backend (:func:`semmatch.sim.raster.make_renderer`).
     scheduler : str, optional
         Dask scheduler address to run the scenes on (default ``SEMMATCH_SCHEDULER``; none: ``jobs``
-        local worker processes, see :func:`semmatch.engine.map_tasks`).
+        local worker processes, see :func:`semmatch.runtime.engine.map_tasks`).
     camera_step : float
         Largest camera step between frames of the upper and lower tours (m,
         :func:`carrier_poses`): the tours are at most ``(frames - 1) * camera_step`` long. Fewer
@@ -311,7 +311,7 @@ def generate_dataset(
                 camera_step=float(camera_step))
     from functools import partial
 
-    from ..engine import map_tasks, resolve_scheduler
+    from ..runtime.engine import map_tasks, resolve_scheduler
 
     # scenes are independent tasks (own seeds, atomic writes): serial, a local cluster or a
     # scheduler's workers give the same files

@@ -33,9 +33,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..geometry import DEFAULT_INTRINSICS, Intrinsics
 from ..io import SequenceWriter, is_sequence, read_intrinsics, write_tum
-from ..progress import tqdm
+from ..io.geometry import DEFAULT_INTRINSICS, Intrinsics
+from ..runtime.progress import tqdm
 from .noise import NoiseConfig, estimated_poses, exposure_gains, noisy_depth, noisy_rgb
 from .raster import make_renderer
 from .render import Renderer

@@ -29,8 +29,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..geometry import sample_mesh_at_random
-from ..labels import id_of
+from ..io.geometry import sample_mesh_at_random
+from ..io.labels import id_of
 from .scene import Scene
 
 __all__ = [

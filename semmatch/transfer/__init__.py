@@ -9,7 +9,9 @@ The paper's five projection methods (§3.2) behind one call::
 
 plus ``fused`` (transferred labels + a network's probabilities) and
 :func:`transfer_sequence` (a whole sequence into a labels folder). :func:`register_method` adds
-a method (the CLI, the benchmark and the notebooks pick it up).
+a method (the CLI, the benchmark and the notebooks pick it up). Instances travel the same way:
+:mod:`~semmatch.transfer.panoptic` (instance layers of maps, panoptic transfer and fusion, PQ;
+imported from there).
 """
 
 from .fused import fuse_labels, fuse_with_probabilities, write_fused_labels

@@ -13,7 +13,7 @@ from contextlib import contextmanager
 import numpy as np
 
 from ..io import Frame
-from ..labels import NUM_CLASSES
+from ..io.labels import NUM_CLASSES
 from .index import MapIndex
 from .registry import METHODS, available_methods, method_info, settings_for, transfer_frame
 
@@ -23,11 +23,11 @@ __all__ = ["time_method", "time_methods", "bench_scene", "bench_upper_map", "ben
 @contextmanager
 def one_core() -> Iterator[None]:
     """Run the block on one thread: torch, Open3D, numba and the OpenMP / BLAS runtimes
-    (:func:`semmatch.threads.limit_threads`) and OpenCV, whose two-thread SLIC costs a fifth more
+    (:func:`semmatch.runtime.threads.limit_threads`) and OpenCV, whose two-thread SLIC costs a fifth more
     CPU time on a busy machine. The previous settings are restored on exit."""
     import cv2
 
-    from ..threads import limit_threads
+    from ..runtime.threads import limit_threads
 
     cv_threads = cv2.getNumThreads()
     cv2.setNumThreads(1)
@@ -125,7 +125,7 @@ def time_methods(
         if m not in available_methods():
             raise ValueError(f"unknown method {m!r}; valid: {', '.join(available_methods())}")
     with one_core():
-        from ..threads import current
+        from ..runtime.threads import current
 
         ref = time_method("3d-neighborhood", frames, index, backend="reference")
         ref_labels = ref.pop("labels")
@@ -173,7 +173,7 @@ def bench_upper_map(scene, seed: int = 0, n_frames: int = 60, height: float = 1.
         Labelled triangle mesh.
     """
     from ..fusion import reconstruct
-    from ..geometry import DEFAULT_INTRINSICS
+    from ..io.geometry import DEFAULT_INTRINSICS
     from ..sim import make_trajectory, render_frames
 
     poses = make_trajectory(scene, height, n_frames, seed=seed, kind="upper")

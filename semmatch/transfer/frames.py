@@ -8,8 +8,8 @@ from functools import lru_cache
 import cv2
 import numpy as np
 
-from ..geometry import Intrinsics, check_pose
 from ..io import Frame, check_depth, check_intrinsics, check_rgb
+from ..io.geometry import Intrinsics, check_pose
 
 __all__ = ["FrameData", "check_frame"]
 

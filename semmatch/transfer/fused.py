@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..labels import NUM_CLASSES
+from ..io.labels import NUM_CLASSES
 
 __all__ = ["fuse_with_probabilities", "fuse_labels", "write_fused_labels"]
 
@@ -72,9 +72,6 @@ def fuse_with_probabilities(
             rows = probs.reshape(-1, C).take(need, axis=0)
             out.reshape(-1)[need] = np.argmax(rows[:, 1:], axis=1) + 1
     return out
-
-
-#: the old name of :func:`fuse_with_probabilities` (deprecated; one release)
 
 
 def fuse_labels(transferred: np.ndarray, predicted: np.ndarray) -> np.ndarray:

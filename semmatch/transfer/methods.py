@@ -5,7 +5,7 @@ index and returns ``(labels, purity, groups)``: ``uint8 (H,W)`` labels (0 = no s
 per-pixel share of its group's votes that agreed (``float32 (H,W)``), which ``fused`` uses,
 and the method's grouping of the pixels (``int64 (H,W)`` superpixel / supervoxel / cluster
 id, -1 = in no group; None for the per-pixel ``3d-neighborhood``), which panoptic transfer
-uses to give a group one instance (:mod:`semmatch.panoptic`).
+uses to give a group one instance (:mod:`semmatch.transfer.panoptic`).
 
 Common rules: pixels without depth get 0; a pixel whose own 3D point is farther than the
 index's ``max_distance`` from the map gets 0 even when its group has a label (the group vote
@@ -21,7 +21,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from ..geometry import Intrinsics, pixel_rays
+from ..io.geometry import Intrinsics, pixel_rays
 from .dbscan import dbscan_labels
 from .frames import FrameData
 from .index import MapIndex

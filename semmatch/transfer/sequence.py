@@ -22,8 +22,8 @@ from ..io import (
 )
 from ..io.files import output_dir_writer
 from ..io.sequences import _frame_name
-from ..progress import tqdm
-from ..workers import process_pool
+from ..runtime.progress import tqdm
+from ..runtime.workers import process_pool
 from .index import MapIndex, as_map_index
 from .registry import available_methods, check_params, transfer_frame
 

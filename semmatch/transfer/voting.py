@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..labels import NUM_CLASSES
+from ..io.labels import NUM_CLASSES
 
 __all__ = ["vote", "paint"]
 

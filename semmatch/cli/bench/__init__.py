@@ -43,7 +43,7 @@ def add_thread_flags(parser, what: str) -> None:
 
     parser.add_argument("--threads", type=number(int, lo=0), default=None,
                         help="CPU threads of torch, Open3D, OpenMP and the BLAS; 0: the libraries' own (default: "
-                             "semmatch's setting, SEMMATCH_THREADS, else 1; semmatch.threads)")
+                             "semmatch's setting, SEMMATCH_THREADS, else 1; semmatch.runtime.threads)")
     parser.add_argument("--thread-rows", action="store_true",
                         help=f"run this {what} benchmark in fresh processes with no thread variable set (semmatch's "
                              "own setting), with OMP_NUM_THREADS=1, and with no limit (SEMMATCH_THREADS=0: the "
@@ -52,8 +52,8 @@ def add_thread_flags(parser, what: str) -> None:
 
 
 def apply_threads(args) -> dict:
-    """Set ``args.threads`` (when given) through :func:`semmatch.threads.configure`; the limits now in force."""
-    from semmatch.threads import configure, current
+    """Set ``args.threads`` (when given) through :func:`semmatch.runtime.threads.configure`; the limits now in force."""
+    from semmatch.runtime.threads import configure, current
 
     if args.threads is not None:
         if args.threads < 0:
@@ -100,7 +100,7 @@ def thread_rows(args, what: str, timeout_s: float = 1800) -> list[dict]:
     import os
     import subprocess
 
-    from semmatch.threads import ENV_VARS, THREADS_ENV
+    from semmatch.runtime.threads import ENV_VARS, THREADS_ENV
 
     code = "import sys; from semmatch.cli import main; sys.exit(main(sys.argv[1:]))"
     cmd = [sys.executable, "-c", code, "bench", what, "--json", *_argv_of(args)]

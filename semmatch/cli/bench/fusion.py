@@ -54,7 +54,7 @@ def render_frames(
 ):
     """The first ``n`` frames (semmatch.io.Frame) of a ``path_frames``-frame trajectory through a
     seeded procedural scene (consecutive frames a few centimetres apart, as a video stream)."""
-    from semmatch.geometry import DEFAULT_INTRINSICS
+    from semmatch.io.geometry import DEFAULT_INTRINSICS
     from semmatch.sim import generate_scene, make_trajectory
     from semmatch.sim import render_frames as render
 
@@ -75,7 +75,7 @@ def run(args: argparse.Namespace) -> int:
         return _print_thread_rows(args)
     apply_threads(args)  # before Open3D and torch load
     from semmatch.fusion import SemanticTSDF
-    from semmatch.threads import current
+    from semmatch.runtime.threads import current
 
     width, height = args.image_size
     frames = render_frames(args.scene_kind, args.frames, width, height, args.camera_height, args.seed)
@@ -149,7 +149,7 @@ def _as_probabilities(labels):
     """(H,W,C) class probabilities: 0.8 + 0.2/C on the label's class, 0.2/C elsewhere."""
     import numpy as np
 
-    from semmatch.labels import NUM_CLASSES
+    from semmatch.io.labels import NUM_CLASSES
 
     eye = np.eye(NUM_CLASSES, dtype=np.float32) * 0.8 + 0.2 / NUM_CLASSES
     return eye[labels]
@@ -161,7 +161,7 @@ def _time_labelings(frames, args: argparse.Namespace) -> dict:
     import numpy as np
 
     from semmatch.fusion import reconstruct, reconstruct_many
-    from semmatch.labels import NUM_CLASSES
+    from semmatch.io.labels import NUM_CLASSES
 
     rng = np.random.default_rng(args.seed)
     sets = []

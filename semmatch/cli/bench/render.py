@@ -161,7 +161,7 @@ def _stream_memory(scene, intr, args) -> dict:
 
 def run(args) -> int:
     """Run the benchmark."""
-    from ...geometry import DEFAULT_INTRINSICS
+    from ...io.geometry import DEFAULT_INTRINSICS
     from ...sim import generate_scene, make_trajectory
 
     w, h = args.image_size

@@ -91,7 +91,7 @@ def _timed_steps(cfg, arch: str, steps: int, warmup: int, seed: int) -> float:
     import numpy as np
     import torch
 
-    from semmatch.labels import NUM_CLASSES
+    from semmatch.io.labels import NUM_CLASSES
     from semmatch.segment.models import build_network
     from semmatch.segment.training import augment, make_optimiser, optimisation_step
 

@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from ...geometry import Intrinsics
+from ..geometry import Intrinsics
 from ..images import check_depth_units, read_label_image, read_rgb
 from ..reading_checks import check_label_ids, read_raw_depth
 from ..sequences import Frame, frame_index, read_intrinsics

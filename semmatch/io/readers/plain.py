@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ...geometry import Intrinsics
+from ..geometry import Intrinsics
 from ..reading_checks import check_depth_scale
 from ..sequences import read_intrinsics, read_tum
 from .base import ImageSequence

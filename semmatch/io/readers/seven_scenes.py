@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ...geometry import Intrinsics
+from ..geometry import Intrinsics
 from ..images import read_image
 from ..reading_checks import check_depth_scale, check_poses
 from .base import ImageSequence

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ...geometry import Intrinsics
+from ..geometry import Intrinsics
 from ..reading_checks import check_depth_scale
 from ..sequences import listed_file, read_tum
 from ..timestamps import associate_frames, interpolate_poses, read_file_list

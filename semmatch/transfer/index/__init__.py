@@ -29,8 +29,8 @@ map object).
 
 from __future__ import annotations
 
-from ...geometry import MAX_MESH_SAMPLES, sample_mesh
 from ...io import SemanticMap
+from ...io.geometry import MAX_MESH_SAMPLES, sample_mesh
 from .cache import (
     CACHE_DIR_ENV,
     INDEX_CACHE_VERSION,

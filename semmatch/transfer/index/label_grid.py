@@ -5,7 +5,7 @@ beyond ``max_distance``), with two flag bits: *ambiguous* (its 26 neighbours do 
 same value: an exact query decides) and *shell* (the neighbourhood mixes void and labelled voxels).
 Only blocks of ``BLOCK**3`` voxels near the surface are stored; a block table over the bounding box
 points to them (row 0 of the blocks: the all-void block). The map is sampled (a mesh on a
-barycentric grid, :func:`semmatch.geometry.mesh_sample_pieces`), the samples reduced to occupied
+barycentric grid, :func:`semmatch.io.geometry.mesh_sample_pieces`), the samples reduced to occupied
 voxels piece by piece, and the distance transforms computed chunk by chunk, so memory follows the
 map's surface, not its bounding box (docs/map_index.md). :func:`dense_label_grid` is the naive
 reference: one distance transform over the whole box, same values.
@@ -21,8 +21,8 @@ from functools import partial
 import numpy as np
 from scipy import ndimage
 
-from ...geometry import mesh_sample_count, mesh_sample_pieces
 from ...io import SemanticMap
+from ...io.geometry import mesh_sample_count, mesh_sample_pieces
 
 __all__ = ["LabelGrid", "build_label_grid", "dense_label_grid", "grid_geometry", "sample_bounds", "sample_pieces",
            "BLOCK", "MAX_TABLE_BLOCKS", "MAX_INDEX_SAMPLES"]
@@ -95,7 +95,7 @@ def _point_piece(points: np.ndarray, labels: np.ndarray, a: int) -> tuple[np.nda
 
 def sample_pieces(semantic_map: SemanticMap, spacing: float) -> list:
     """The map's samples as functions making ``(points, labels)`` pieces: a mesh's barycentric grid
-    (:func:`semmatch.geometry.sample_mesh` order), a point map's points.
+    (:func:`semmatch.io.geometry.sample_mesh` order), a point map's points.
 
     Parameters
     ----------

@@ -13,9 +13,9 @@ import cv2
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ...geometry import Intrinsics, check_pose, pixel_rays
 from ...io import SemanticMap
-from ...labels import NUM_CLASSES, THING_CLASSES
+from ...io.geometry import Intrinsics, check_pose, pixel_rays
+from ...io.labels import NUM_CLASSES, THING_CLASSES
 from .label_grid import AMBIGUOUS, BLOCK, BSHIFT, LABEL_BITS, SHELL, LabelGrid, build_label_grid
 from .reach import ReachTest
 
@@ -330,7 +330,7 @@ class MapIndex:
         if self.map.instances is None:
             raise ValueError(
                 f"{self.source}: the map has no instance layer (no 'instance' vertex property); "
-                "add one with semmatch.panoptic.segment_instances or `semmatch panoptic segment`"
+                "add one with semmatch.transfer.panoptic.segment_instances or `semmatch panoptic segment`"
             )
         p = np.asarray(points, dtype=np.float32).reshape(-1, 3)
         lab = np.asarray(labels).reshape(-1)

@@ -24,8 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .io import SemanticMap, atomic_path, read_map
-from .labels import NAMES, PALETTE
+from ..io import SemanticMap, atomic_path, read_map, require_instances
+from ..io.labels import NAMES, PALETTE, instance_colors
 
 __all__ = ["map_figure", "error_figure", "trajectory_trace", "trajectory_name", "write_html", "decimate",
            "ERROR_COLOURS", "PLOTLYJS_MODES"]
@@ -92,8 +92,6 @@ def _colors(m: SemanticMap, by: str) -> np.ndarray:
     if by == "labels":
         return PALETTE[m.labels]
     if by == "instances":
-        from .panoptic import instance_colors, require_instances
-
         require_instances(m, "an instance view")
         return instance_colors(m.instances, m.labels)
     raise ValueError(f"colour by 'labels' or 'instances', got {by!r}")
@@ -141,7 +139,7 @@ def map_figure(
     """
     import plotly.graph_objects as go
 
-    from .labels import id_of
+    from ..io.labels import id_of
 
     m = decimate(_as_map(m), max_vertices)
     if hide:
@@ -188,8 +186,8 @@ def error_figure(
     counts are in its title and legend."""
     import plotly.graph_objects as go
 
-    from .evaluate.metrics import voxelize
-    from .geometry import unpack_keys
+    from ..evaluate.metrics import voxelize
+    from ..io.geometry import unpack_keys
 
     g = voxelize(_as_map(reference), voxel_size, grid_origin=grid_origin)
     p = voxelize(_as_map(pred), voxel_size, grid_origin=grid_origin)

@@ -1,7 +1,7 @@
 """Fine-tune a network on the robot's labelled frames: the recipe and the training loop.
 
 :class:`AdaptRecipe` holds the recipe and its defaults; :func:`fine_tune` fine-tunes on
-:class:`~semmatch.adapt.views.RobotViews` (half of each batch, by default, the network's own
+:class:`~semmatch.segment.adapt.views.RobotViews` (half of each batch, by default, the network's own
 human-height training views), :func:`adapt_in_home` does it in one home the person has mapped.
 """
 
@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from ..io import atomic_path
+from ...io import atomic_path
 from .views import MIN_COVERAGE, RobotViews, _check_sources, home_views
 
 __all__ = ["AdaptRecipe", "fine_tune", "adapt_in_home", "file_digest"]
@@ -132,7 +132,7 @@ def adapt_in_home(
 ) -> Path:
     """Adapt a network in a home: the robot's tour labelled from the person's map of it.
 
-    :func:`~semmatch.adapt.views.home_views` labels the robot's frames, :func:`fine_tune` fine-tunes on them (half of
+    :func:`~semmatch.segment.adapt.views.home_views` labels the robot's frames, :func:`fine_tune` fine-tunes on them (half of
     each batch, by default, the network's own human-height training views).
 
     Parameters
@@ -140,19 +140,19 @@ def adapt_in_home(
     checkpoint : path
         The network to adapt.
     sequence, person_map : paths
-        The robot's tour of the home and the person's semantic map of it (:func:`~semmatch.adapt.views.home_views`).
+        The robot's tour of the home and the person's semantic map of it (:func:`~semmatch.segment.adapt.views.home_views`).
     out : path
         The adapted checkpoint (never ``checkpoint`` nor an input).
     recipe : AdaptRecipe, optional
         The fine-tuning recipe (default :class:`AdaptRecipe`'s).
     source, frames, frame_step, min_purity, min_coverage
-        As :func:`~semmatch.adapt.views.home_views`.
+        As :func:`~semmatch.segment.adapt.views.home_views`.
     cache_dir : path, "checkpoint", "checkpoint-if-present" or None
         The cache of the network's human-height training views (:func:`fine_tune`); by default
         the checkpoint's recorded folder where it exists, else the views are rendered each run.
     progress : bool
     recording : sequence of Frame, optional
-        ``sequence`` already opened (:func:`~semmatch.adapt.views.home_views`).
+        ``sequence`` already opened (:func:`~semmatch.segment.adapt.views.home_views`).
     **changes
         Fields of the recipe set over ``recipe`` (``steps=800``).
 
@@ -168,12 +168,12 @@ def adapt_in_home(
     Raises
     ------
     ValueError
-        ``out`` is the network or an input; the errors of :func:`~semmatch.adapt.views.home_views` and
+        ``out`` is the network or an input; the errors of :func:`~semmatch.segment.adapt.views.home_views` and
         :func:`fine_tune`.
     TypeError
         A change that is not a field of the recipe.
     """
-    from ..io.sequences import sequence_scene
+    from ...io.sequences import sequence_scene
 
     recipe = AdaptRecipe.of(recipe, **changes)
     out = Path(out)
@@ -195,7 +195,7 @@ def adapt_in_home(
 def file_digest(path: str | Path) -> str:
     """The first 16 hex digits of a file's SHA-256 (:func:`semmatch.segment.shipping.file_sha256`): how
     an adapted checkpoint's record names the network and the map it came from."""
-    from ..segment.shipping import file_sha256
+    from ..shipping import file_sha256
 
     return file_sha256(path)[:16]
 
@@ -230,9 +230,9 @@ def fine_tune(
         The network to adapt (:func:`semmatch.segment.load_model`: a checkpoint of another
         category table is refused).
     robot : RobotViews
-        :func:`~semmatch.adapt.views.robot_training_views`, prepared with ``source``.
+        :func:`~semmatch.segment.adapt.views.robot_training_views`, prepared with ``source``.
     source : str
-        Label source (:data:`~semmatch.adapt.views.LABEL_SOURCES`).
+        Label source (:data:`~semmatch.segment.adapt.views.LABEL_SOURCES`).
     out : path
         Where the adapted checkpoint goes (written to a temporary file, then renamed).
     recipe : AdaptRecipe, optional
@@ -275,9 +275,9 @@ def fine_tune(
     """
     import torch
 
-    from ..progress import tqdm
-    from ..segment import load_model
-    from ..segment.training import TrainConfig, augment, build_views, make_optimiser, optimisation_step
+    from ...runtime.progress import tqdm
+    from .. import load_model
+    from ..training import TrainConfig, augment, build_views, make_optimiser, optimisation_step
 
     _check_sources([source])
     if source not in robot.pseudo:
@@ -353,7 +353,7 @@ def _seeded_device(device: str, seed: int):
     seeded and deterministic (on a GPU: where its kernels allow, with a warning otherwise)."""
     import torch
 
-    from ..segment.training import resolve_device
+    from ..training import resolve_device
 
     dev = resolve_device(device)
     if dev.type == "cuda":

@@ -10,7 +10,7 @@ runs every kind of work on a fixed number of threads:
 
 * **CLI verbs**: :func:`configure` (``"cli"``) at the entry point, before any library is loaded;
 * **Dask workers**: :func:`configure` (``"worker"``) when a worker starts and before each task
-  (:mod:`semmatch.engine`), so that a worker of any cluster, started by any means, runs alike;
+  (:mod:`semmatch.runtime.engine`), so that a worker of any cluster, started by any means, runs alike;
 * **library calls**: ``with limit_threads():`` around a call, restoring the previous settings.
 
 The number is ``SEMMATCH_THREADS`` where it is set, else ``OMP_NUM_THREADS`` where the user set
@@ -81,7 +81,8 @@ def _set_loaded(n: int) -> dict:
     if "cv2" in sys.modules:  # OpenCV keeps its own pool (SLIC, blurs): the variables do not reach it
         cv2 = sys.modules["cv2"]
         previous["cv2"] = cv2.getNumThreads()
-        if previous["cv2"] != n:  # a forked process may not touch a pool it inherited (semmatch.workers)
+        # a forked process may not touch a pool it inherited (semmatch.runtime.workers)
+        if previous["cv2"] != n:
             cv2.setNumThreads(n)
     try:
         from threadpoolctl import threadpool_limits

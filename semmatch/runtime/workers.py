@@ -4,7 +4,7 @@ A ``ProcessPoolExecutor`` worker outlives a parent killed with SIGKILL (nothing 
 parent to stop it): it keeps its CPU and memory forever. Every pool of semmatch is made by
 :func:`process_pool`, whose workers ask the kernel (Linux ``prctl(PR_SET_PDEATHSIG)``) for
 SIGKILL when their parent dies, and exit at once when the parent is already gone. Each worker
-runs on the workers' thread limit (:func:`semmatch.threads.configure`, ``"worker"``).
+runs on the workers' thread limit (:func:`semmatch.runtime.threads.configure`, ``"worker"``).
 
 A pool must also end promptly when one of its workers dies, or when the command is stopped:
 
@@ -85,7 +85,7 @@ def _start(parent_pid: int, initializer: Callable | None, initargs: tuple) -> No
 
     reset_worker_signals()
     die_with_parent(parent_pid)
-    configure("worker")  # one thread per worker process (semmatch.threads), as Dask workers
+    configure("worker")  # one thread per worker process (semmatch.runtime.threads), as Dask workers
     if initializer is not None:
         initializer(*initargs)
 

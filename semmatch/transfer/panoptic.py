@@ -39,13 +39,13 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .geometry import Intrinsics, check_pose, pack_keys, voxel_keys
-from .io import Frame, SemanticMap, read_map
-from .labels import NAMES, NUM_CLASSES, STUFF_CLASSES, THING_CLASSES
-from .transfer.dbscan import dbscan_labels
-from .transfer.frames import check_frame
-from .transfer.index import MapIndex, as_map_index
-from .transfer.registry import transfer_frame
+from ..io import Frame, SemanticMap, read_map, require_instances
+from ..io.geometry import Intrinsics, check_pose, pack_keys, voxel_keys
+from ..io.labels import NAMES, NUM_CLASSES, STUFF_CLASSES, THING_CLASSES
+from .dbscan import dbscan_labels
+from .frames import check_frame
+from .index import MapIndex, as_map_index
+from .registry import transfer_frame
 
 __all__ = [
     "PanopticFrame",
@@ -55,24 +55,11 @@ __all__ = [
     "transfer_panoptic",
     "panoptic_voxels",
     "panoptic_quality",
-    "instance_colors",
-    "require_instances",
     "sequence_panoptic_frames",
 ]
 
 _THINGS = np.zeros(NUM_CLASSES, bool)
 _THINGS[list(THING_CLASSES)] = True
-
-
-def require_instances(m: SemanticMap, what: str = "panoptic output") -> SemanticMap:
-    """Raise a clear ``ValueError`` when ``m`` has no instance layer; return ``m``."""
-    if m.instances is None:
-        raise ValueError(
-            f"{m.source}: the map has no instance layer (no 'instance' vertex property), needed for "
-            f"{what}; add one with `semmatch panoptic segment` (clustering) or from ground-truth "
-            "instance images"
-        )
-    return m
 
 
 def _with_instances(m: SemanticMap, instances: np.ndarray) -> SemanticMap:
@@ -90,7 +77,7 @@ def segment_instances(
 ) -> SemanticMap:
     """Give a semantic map an instance layer by clustering each thing class's vertices.
 
-    Every thing class (:data:`~semmatch.labels.THING_CLASSES`) is clustered on its own with
+    Every thing class (:data:`~semmatch.io.labels.THING_CLASSES`) is clustered on its own with
     Open3D DBSCAN; each cluster of at least ``min_vertices`` vertices becomes one instance
     (ids 1, 2, ... in class order, then by cluster size). Stuff, DBSCAN noise and small clusters
     keep instance 0.
@@ -525,22 +512,4 @@ def panoptic_quality(
         for k in ("pq", "sq", "rq"):
             vals = [r[k] for r in rows if not np.isnan(r[k])]
             out[k + suffix] = float(np.mean(vals)) if vals else float("nan")
-    return out
-
-
-def instance_colors(instances: np.ndarray, labels: np.ndarray | None = None) -> np.ndarray:
-    """Distinct, repeatable colours per instance id (uint8 (N,3)); instance 0 grey, or the
-    label's palette colour when ``labels`` is given (stuff shows in its class colour)."""
-    from .labels import PALETTE
-
-    inst = np.asarray(instances).reshape(-1).astype(np.int64)
-    rng = np.random.default_rng(12345)
-    n = int(inst.max(initial=0)) + 1
-    table = rng.integers(40, 256, size=(n, 3)).astype(np.uint8)
-    out = table[inst]
-    none = inst == 0
-    if labels is None:
-        out[none] = 128
-    else:
-        out[none] = PALETTE[np.asarray(labels).reshape(-1)[none]]
     return out

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from semmatch.io import SemanticMap, write_map
-from semmatch.viz import (
+from semmatch.plots.views import (
     ERROR_COLOURS,
     decimate,
     error_figure,
@@ -68,7 +68,7 @@ def test_error_figure_counts_correct_wrong_unsupported():
 
 
 def test_label_view_has_a_category_legend():
-    from semmatch.labels import NAMES
+    from semmatch.io.labels import NAMES
 
     fig = map_figure(_room_mesh())
     entries = [t.name for t in fig.data if t.showlegend]
@@ -173,8 +173,8 @@ def test_show_pages_have_readable_legends_in_a_browser(tmp_path):
     import json
 
     from semmatch.cli import main
-    from semmatch.geometry import Intrinsics
     from semmatch.io import SequenceWriter
+    from semmatch.io.geometry import Intrinsics
 
     m = _room_mesh()
     write_map(tmp_path / "m.ply", m)

@@ -18,9 +18,9 @@ from the network's own human-height training views with their ground truth.
 The adapted checkpoint records what it was adapted from and with (``adapted``); it loads with
 :func:`semmatch.segment.load_model` like any other.
 
-Submodules: :mod:`~semmatch.adapt.views` (the robot's frames and their labels of every source)
-and :mod:`~semmatch.adapt.finetune` (the recipe and the fine-tuning); every public name is
-importable from ``semmatch.adapt`` itself.
+Submodules: :mod:`~semmatch.segment.adapt.views` (the robot's frames and their labels of every
+source) and :mod:`~semmatch.segment.adapt.finetune` (the recipe and the fine-tuning); every public
+name is importable from ``semmatch.segment.adapt`` itself.
 """
 
 from .finetune import AdaptRecipe, adapt_in_home, fine_tune

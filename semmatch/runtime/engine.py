@@ -8,7 +8,7 @@ frames, the panoptic study) is a list of independent tasks, each a pure function
 * ``jobs == 1`` and no scheduler: in this process, one after the other (no cluster; debugging);
 * ``jobs > 1``: on a ``dask.distributed.LocalCluster`` of ``jobs`` single-threaded worker
   processes, started once per process and reused (its workers die with this process, also when
-  it is killed: :func:`semmatch.workers.die_with_parent` runs in each of them; each is pinned to
+  it is killed: :func:`semmatch.runtime.workers.die_with_parent` runs in each of them; each is pinned to
   its own CPU, so that the workers do not compete for the cores: :func:`dask_setup`);
 * a scheduler address (``scheduler=`` argument, else ``SEMMATCH_SCHEDULER``, which
   ``python -m semmatch.experiments run --scheduler`` and a profile's ``common.scheduler`` set):
@@ -22,10 +22,10 @@ message, no traceback from the CLI) when a task has killed ``distributed.schedul
 worker for ``worker_timeout`` seconds (``SEMMATCH_WORKER_TIMEOUT``, default 300). On any failure,
 Ctrl-C included, the run's unfinished tasks are cancelled and the workers still executing one are
 ended (their nannies start new ones; a local cluster is closed), so that nothing of the run keeps writing after the error is reported. Every task
-runs with the thread limits of :func:`semmatch.threads.configure` (``"worker"``).
+runs with the thread limits of :func:`semmatch.runtime.threads.configure` (``"worker"``).
 
 The per-frame pool inside one sequence (``transfer_sequence(..., jobs=N)``) stays a process pool
-(:mod:`semmatch.workers`): its tasks are milliseconds long and share one large map index, which a
+(:mod:`semmatch.runtime.workers`): its tasks are milliseconds long and share one large map index, which a
 pool initialiser hands each worker once.
 
 :func:`default_device` names the Open3D device the GPU-capable kernels (fusion, odometry) use
@@ -144,7 +144,7 @@ def _local_client(jobs: int, most: int | None = None):
         dashboard = None
     os.environ["SEMMATCH_PARENT_PID"] = str(os.getpid())  # read by dask_setup in the workers
     cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True, dashboard_address=dashboard,
-                           silence_logs=logging.ERROR, preload=["semmatch.engine"])
+                           silence_logs=logging.ERROR, preload=["semmatch.runtime.engine"])
     client = Client(cluster, set_as_default=False)  # no default client left behind for other code
     if dashboard:
         print(f"[semmatch] Dask dashboard: {client.dashboard_link}", file=sys.stderr)  # stdout: results only
@@ -376,7 +376,7 @@ def map_tasks(fn: Callable[..., Any], items: Iterable[Any], *, jobs: int | None 
     desc : str
         Progress bar label.
     progress : bool
-        Show progress (plain text lines under the pipeline, :mod:`semmatch.progress`).
+        Show progress (plain text lines under the pipeline, :mod:`semmatch.runtime.progress`).
     timeout : float, optional
         Seconds the run may wait while the cluster has no worker (default
         ``SEMMATCH_WORKER_TIMEOUT``, else 300); a task that runs long is not a timeout.

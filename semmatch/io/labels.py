@@ -26,6 +26,7 @@ __all__ = [
     "id_of",
     "name_of",
     "labels_to_colors",
+    "instance_colors",
     "colors_to_labels",
     "table_fingerprint",
 ]
@@ -121,6 +122,22 @@ def labels_to_colors(labels: np.ndarray) -> np.ndarray:
     if labels.size and (labels.min() < 0 or labels.max() >= NUM_CLASSES):
         raise ValueError(f"category ids must lie in 0..{NUM_CLASSES - 1}")
     return PALETTE[labels.astype(np.intp)]
+
+
+def instance_colors(instances: np.ndarray, labels: np.ndarray | None = None) -> np.ndarray:
+    """Distinct, repeatable colours per instance id (uint8 (N,3)); instance 0 grey, or the
+    label's palette colour when ``labels`` is given (stuff shows in its class colour)."""
+    inst = np.asarray(instances).reshape(-1).astype(np.int64)
+    rng = np.random.default_rng(12345)
+    n = int(inst.max(initial=0)) + 1
+    table = rng.integers(40, 256, size=(n, 3)).astype(np.uint8)
+    out = table[inst]
+    none = inst == 0
+    if labels is None:
+        out[none] = 128
+    else:
+        out[none] = PALETTE[np.asarray(labels).reshape(-1)[none]]
+    return out
 
 
 def colors_to_labels(

@@ -3,7 +3,7 @@
 :func:`robot_training_views` renders the person's and the robot's tours of training scenes and
 labels the robot's frames from the network's map of each (:func:`label_robot_frame`);
 :func:`home_views` labels a robot's recorded tour of a home from the person's map of it. The
-label sources are :data:`LABEL_SOURCES`; :mod:`semmatch.adapt.finetune` learns from them.
+label sources are :data:`LABEL_SOURCES`; :mod:`semmatch.segment.adapt.finetune` learns from them.
 """
 
 from __future__ import annotations
@@ -15,11 +15,11 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..io import Frame
+from ...io import Frame
 
 if TYPE_CHECKING:
-    from ..segment.predict import Segmenter
-    from ..transfer import MapIndex
+    from ...transfer import MapIndex
+    from ..predict import Segmenter
 
 __all__ = ["BASELINES", "LABEL_SOURCES", "HOME_SOURCES", "MIN_COVERAGE", "RobotViews", "adapted_name",
            "label_robot_frame", "robot_training_views", "home_views"]
@@ -29,7 +29,7 @@ BASELINES = ("self-training", "ground-truth")
 
 
 def _label_sources() -> tuple[str, ...]:
-    from ..transfer import METHODS
+    from ...transfer import METHODS
 
     return (*METHODS, "fused", *BASELINES)
 
@@ -37,10 +37,10 @@ def _label_sources() -> tuple[str, ...]:
 #: every label source: the paper's transfer methods, ``fused``, self-training, ground truth
 LABEL_SOURCES: tuple[str, ...] = _label_sources()
 
-#: label sources of in-home adaptation (:func:`~semmatch.adapt.finetune.adapt_in_home`): labels from the person's map only
+#: label sources of in-home adaptation (:func:`~semmatch.segment.adapt.finetune.adapt_in_home`): labels from the person's map only
 HOME_SOURCES: tuple[str, ...] = tuple(s for s in LABEL_SOURCES if s not in BASELINES)
 
-#: smallest share of the robot's pixels with depth that the labels must cover (:func:`~semmatch.adapt.finetune.fine_tune`)
+#: smallest share of the robot's pixels with depth that the labels must cover (:func:`~semmatch.segment.adapt.finetune.fine_tune`)
 MIN_COVERAGE = 0.005
 
 
@@ -91,7 +91,7 @@ def label_robot_frame(
     self_threshold: float = 0.9,
     fused_base: str = "3d-neighborhood",
 ) -> dict[str, np.ndarray]:
-    """Label one robot frame with each label source (the pseudo-labels :func:`~semmatch.adapt.finetune.fine_tune` learns from).
+    """Label one robot frame with each label source (the pseudo-labels :func:`~semmatch.segment.adapt.finetune.fine_tune` learns from).
 
     Parameters
     ----------
@@ -117,7 +117,7 @@ def label_robot_frame(
         ``{source: uint8 (H,W)}``, 0 = ignored by the loss; a transfer method labels only
         pixels with depth.
     """
-    from ..transfer import transfer_frame
+    from ...transfer import transfer_frame
 
     probs = None
     if {"fused", "self-training"} & set(sources):
@@ -185,14 +185,14 @@ def robot_training_views(
     ValueError
         Unknown source, or seeds that are validation/evaluation seeds of the network.
     """
-    from ..fusion import reconstruct
-    from ..geometry import DEFAULT_INTRINSICS
-    from ..progress import tqdm
-    from ..segment import load_model
-    from ..segment.data import Views, make_scenes
-    from ..sim import Renderer
-    from ..sim.trajectory import make_trajectory
-    from ..transfer import MapIndex
+    from ...fusion import reconstruct
+    from ...io.geometry import DEFAULT_INTRINSICS
+    from ...runtime.progress import tqdm
+    from ...sim import Renderer
+    from ...sim.trajectory import make_trajectory
+    from ...transfer import MapIndex
+    from .. import load_model
+    from ..data import Views, make_scenes
 
     _check_sources(sources)
     seg = load_model(checkpoint)
@@ -250,7 +250,7 @@ def check_home_depth(sequence: str | Path) -> None:
     ValueError
         The folder has no ``depth/``: adapting in a home needs the robot's depth.
     """
-    from ..io import is_sequence
+    from ...io import is_sequence
 
     sequence = Path(sequence)
     if is_sequence(sequence) and not (sequence / "depth").is_dir():
@@ -318,13 +318,13 @@ def home_views(
     """
     import cv2
 
-    from ..io import read_map, read_sequence
-    from ..io.maps import map_scene
-    from ..io.sequences import sequence_scene
-    from ..progress import tqdm
-    from ..segment import load_model
-    from ..segment.data import Views
-    from ..transfer import load_index
+    from ...io import read_map, read_sequence
+    from ...io.maps import map_scene
+    from ...io.sequences import sequence_scene
+    from ...runtime.progress import tqdm
+    from ...transfer import load_index
+    from .. import load_model
+    from ..data import Views
 
     if source not in HOME_SOURCES:
         raise ValueError(f"in-home adaptation takes labels from the person's map: source must be one of "
@@ -371,7 +371,7 @@ def home_views(
         gt.append(truth)
         cam_z.append(frame.pose[2, 3])
     if valid_px == 0:
-        from ..io.readers import frame_files
+        from ...io.readers import frame_files
 
         files = frame_files(seq, picks[0])
         where = (f"{files[-1].parent}: no depth in any of the {len(picks)} frames used (frame {picks[0]}: {files[-1]})"
