@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import nbformat
@@ -513,6 +514,29 @@ def test_snapshots_leave_out_machine_notices_and_machine_paths(tmp_path):
                               "lower_noisy: RGB-D odometry found no solution for 1 frame(s)\n"
                               "  est = estimate_poses(seq)\ntransfer: 100%\n")
     assert out.metadata["papermill"] == {"input_path": "notebooks/04_x.ipynb", "parameters": {"seed": 1}}
+
+
+def test_snapshots_show_injected_parameters_and_printed_values_from_the_repository(tmp_path):
+    from semmatch.experiments.snapshot import snapshot_notebook
+
+    nb = nbformat.v4.new_notebook()
+    params = nbformat.v4.new_code_cell('data_root = "/tmp/pytest-of-u/pytest-1/smoke0/data"\nseed = 1')
+    params.metadata["tags"] = ["injected-parameters"]
+    shown = nbformat.v4.new_code_cell("cfg")
+    shown.outputs = [nbformat.v4.new_output("execute_result", execution_count=1, data={
+        "text/plain": "TrainConfig(out='/tmp/pytest-of-u/pytest-1/smoke0/data/models/compact.pt')"})]
+    nb.cells = [params, shown]
+    nbformat.write(nb, tmp_path / "02_x.ipynb")
+    out = nbformat.read(snapshot_notebook(tmp_path / "02_x.ipynb", tmp_path / "s.ipynb"), as_version=4)
+    assert out.cells[0].source == 'data_root = "data"\nseed = 1'
+    assert out.cells[1].outputs[0]["data"]["text/plain"] == "TrainConfig(out='data/models/compact.pt')"
+
+
+def test_committed_snapshots_hold_no_machine_path_or_machine_notice():
+    for p in sorted((ROOT / "reports" / "snapshot").rglob("*.ipynb")):
+        text = p.read_text()
+        assert "NumbaWarning" not in text, p
+        assert not re.search(r"[\"'(]/(?:tmp|root|home|work)/", text), p
 
 
 def test_a_notebook_run_with_another_parameter_file_reads_that_file(tmp_path):
