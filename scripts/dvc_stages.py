@@ -9,10 +9,10 @@ import sys
 
 import yaml
 
-from semmatch.experiments.pipeline import OVERRIDABLE, ROOT
+from semmatch.experiments.pipeline import OVERRIDABLE, PROFILES_FILE, ROOT, read_params
 from semmatch.experiments.stagedeps import LEAVE_OUT, stage_modules
 
-PROFILES = yaml.safe_load((ROOT / "params.yaml").read_text())["profiles"]
+PROFILES = read_params(ROOT / "params.yaml")["profiles"]
 
 P = "${profile}"
 
@@ -104,7 +104,8 @@ stages = {
     figs=[*tbl("validation_panoptic_clustering", "table_panoptic_per_scene", "table_panoptic"),
           "table_panoptic.png", "fig_panoptic.png"]),
 }
-# stages whose headline numbers go to figures/<profile>/metrics/<stage>.json (semmatch.experiments.headline)
+# stages whose headline numbers go to figures/<profile>/metrics/<stage>.json (semmatch.experiments.headline),
+# gathered into the one metrics file figures/<profile>/metrics.json that `dvc metrics show` reads
 METRICS = ("train_segmentation", "reconstruct_upper", "label_transfer", "evaluate_synthetic", "height_study",
            "real_data", "adapt_robot_view", "panoptic")
 # curves and tables for `dvc plots show`: file -> (stage, x, y, template, title). Templates are the
@@ -143,19 +144,23 @@ out = {"stages": {}}
 for name, st in stages.items():
     plots = {f: v for f, v in PLOTS.items() if v[0] == name}
     figs = [f for f in st["figs"] if f not in plots]
+    params = with_overrides(st["params"])
     stage = {
         "cmd": f"python -m semmatch.experiments run {st['nb']}",
         "deps": [f"notebooks/{st['nb']}.ipynb", *(mods := modules(st["nb"], st["figs"])),
                  *(f for m in mods for f in MODULE_DATA.get(m, ())), *st["deps"]],
-        "params": with_overrides(st["params"]),
-        "outs": [*st["outs"], f"reports/{P}/{st['nb']}.ipynb", *fig(*figs)],
+        # params.yaml: the profile's name and the overrides; profiles.yaml: this stage's keys of the active
+        # profile only (DVC shows all of params.yaml but only the tracked keys of other files)
+        "params": [*(p for p in params if not p.startswith("profiles.")),
+                   {PROFILES_FILE: [p for p in params if p.startswith("profiles.")]}],
+        "outs": [*st["outs"], f"reports/{P}/{st['nb']}.ipynb", *fig(*figs),
+                 *([{f"figures/{P}/metrics/{name}.json": {"cache": False}}] if name in METRICS else [])],
     }
-    if name in METRICS:
-        stage["metrics"] = [{f"figures/{P}/metrics/{name}.json": {"cache": False}}]
     if plots:
         stage["plots"] = [{f"figures/{P}/{f}": {"cache": False, "x": x, "y": y, "template": tpl, "title": title}}
                           for f, (_, x, y, tpl, title) in plots.items()]
     out["stages"][name] = stage
+out["metrics"] = [f"figures/{P}/metrics.json"]  # every stage's headline numbers in one row (headline.gather_metrics)
 head = """# The paper's results, one stage per notebook, run through papermill by
 # `python -m semmatch.experiments run NN_name` with the parameters of the active profile
 # (params.yaml: `profile`). Data goes to data/<profile>/, executed notebooks to

@@ -21,6 +21,23 @@ def _index_cache_in_a_temp_folder(tmp_path_factory):
         yield
 
 
+def pytest_collection_finish(session):
+    """Start the library-install dry run in the background when its test is selected: it waits on
+    the package index for minutes and needs almost no CPU (tests/library_install.py)."""
+    import library_install
+
+    if library_install.STARTED is None and any(i.nodeid.endswith(library_install.TEST) for i in session.items):
+        library_install.STARTED = library_install.DryRun(ROOT)
+
+
+def pytest_sessionfinish(session):
+    import library_install
+
+    if library_install.STARTED is not None:
+        library_install.STARTED.stop()
+        library_install.STARTED = None
+
+
 @pytest.fixture(scope="session")
 def shared_dir() -> Path:
     """``../shared`` beside the project; tests using it skip when it is absent."""

@@ -9,7 +9,6 @@ import importlib.util
 import numpy as np
 import pandas as pd
 import pytest
-import yaml
 
 from semmatch.experiments.adapt_studies import (
     HELDOUT_ADAPT_SEEDS,
@@ -19,7 +18,7 @@ from semmatch.experiments.adapt_studies import (
     label_quality_by_class,
     stage_recipe,
 )
-from semmatch.experiments.pipeline import ROOT
+from semmatch.experiments.pipeline import ROOT, read_params
 from semmatch.experiments.protocol import used_seeds
 from semmatch.io.labels import id_of
 from semmatch.segment.adapt import RobotViews
@@ -29,7 +28,7 @@ _spec = importlib.util.spec_from_file_location("adapt_heldout", ROOT / "scripts"
 heldout = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(heldout)
 
-_PROFILES = yaml.safe_load((ROOT / "params.yaml").read_text())["profiles"]
+_PROFILES = read_params(ROOT / "params.yaml")["profiles"]
 
 
 def test_heldout_seeds_are_fresh():  # make confirm refuses them: tests/test_confirm.py

@@ -81,6 +81,25 @@ def _scaled_map(base: Path, w: Path, name: str, factor: float, points_only: bool
     return w / name
 
 
+def _odd_map(base: Path, w: Path, name: str, kind: str) -> Path:
+    """``base/map.ply`` with one vertex at 1e30 m (``far``), or with no vertex at all (``empty``)."""
+    from semmatch.io import SemanticMap, read_map, write_map
+
+    m = read_map(base / "map.ply")
+    if kind == "far":
+        m.points[0] = 1e30
+    else:
+        m = SemanticMap(m.points[:0], m.labels[:0], source=m.source)
+    write_map(w / name, m)
+    return w / name
+
+
+def _empty_probs(base: Path, w: Path) -> Path:
+    (w / "probs").mkdir()
+    (w / "probs" / "000000.npy").write_bytes(b"")
+    return w / "probs"
+
+
 def _checkpoint(w: Path, kind: str) -> Path:
     p = w / f"{kind}.pt"
     if kind == "junk":
@@ -192,6 +211,11 @@ CASES = [
     ("transfer-negative-distance", transfer_with("{base}/map.ply", "--max-distance", "-1"), r"--max-distance: must be > 0"),
     ("transfer-fused-without-probs", transfer_with("{base}/map.ply", method="fused"), r"--method fused needs --probs"),
     ("transfer-jobs-zero", transfer_with("{base}/map.ply", "--jobs", "0"), r"--jobs: must be >= 1"),
+    ("transfer-empty-probabilities", lambda b, w: transfer_with("{base}/map.ply", "--probs", str(_empty_probs(b, w)),
+                                                                method="fused")(b, w),
+     r"000000\.npy: probabilities of frame 0 are not a readable \.npy array"),
+    ("transfer-vertex-at-1e30", transfer_with(lambda b, w: _odd_map(b, w, "far.ply", "far")),
+     r"far\.ply: 1 vertices lie beyond 10000 m of the origin"),
     ("transfer-missing-sequence", argv_of("transfer", "{w}/nope", "--map", "{base}/map.ply", "--method",
                                           "3d-neighborhood", "--out", "{w}/out"), r"nope: no such sequence folder"),
     # evaluate
@@ -252,6 +276,10 @@ CASES = [
      r"none\.json: no intrinsics file"),
     # show / panoptic
     ("show-missing-map", argv_of("show", "{w}/none.ply", "--html", "{w}/x.html"), r"no such map file"),
+    ("show-empty-map", lambda b, w: ["show", str(_odd_map(b, w, "empty.ply", "empty")), "--html", str(w / "x.html")],
+     r"empty\.ply: the map is empty \(no vertices\)"),
+    ("evaluate-vertex-at-1e30", lambda b, w: ["evaluate", str(b / "scene.ply"), str(_odd_map(b, w, "far.ply", "far"))],
+     r"far\.ply: 1 vertices lie beyond 10000 m"),
     ("show-html-is-a-folder", argv_of("show", "{base}/map.ply", "--html", "{w}"), r"is a folder"),
     ("panoptic-evaluate-missing", argv_of("panoptic", "evaluate", "{w}/none.ply", "{base}/map.ply"), r"no such map file"),
     ("panoptic-evaluate-no-instances", argv_of("panoptic", "evaluate", "{base}/scene.ply", "{base}/map.ply"),

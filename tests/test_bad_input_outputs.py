@@ -462,6 +462,25 @@ def test_index_cache_that_lies_is_rebuilt_with_a_warning(base, tmp_path):
         np.testing.assert_array_equal(load_index(m).lookup(pts), truth)
 
 
+def test_a_folder_at_the_index_caches_path_means_no_cache_not_a_failed_transfer(base, tmp_path):
+    from semmatch.io import read_map
+    from semmatch.transfer import MapIndex, load_index
+    from semmatch.transfer.index import index_cache_path
+
+    m = tmp_path / "map.ply"
+    shutil.copy(base / "map.ply", m)
+    cf = index_cache_path(m)
+    cf.unlink(missing_ok=True)  # another test's transfer of the same map bytes
+    cf.mkdir(parents=True)
+    try:
+        with pytest.warns(UserWarning, match=r"index cache not written \(.*is a folder"):
+            index = load_index(m)
+    finally:
+        cf.rmdir()
+    pts = read_map(base / "scene.ply").points[::7]
+    np.testing.assert_array_equal(index.lookup(pts), MapIndex(read_map(m)).lookup(pts))
+
+
 # ------------------------------------------------------------------------------------------ code from data
 def test_no_checkpoint_is_loaded_with_pickle_code():
     """The package, the scripts and the notebooks load checkpoints as data only (weights_only=True)."""

@@ -13,7 +13,7 @@ from semmatch.experiments import confirm, pipeline
 from semmatch.experiments.protocol import RETIRED_SEEDS, check_confirm_seeds
 
 ROOT = Path(__file__).resolve().parents[1]
-PROFILES = yaml.safe_load((ROOT / "params.yaml").read_text())["profiles"]
+PROFILES = pipeline.read_params(ROOT / "params.yaml")["profiles"]
 
 
 @pytest.mark.parametrize("seed, split", [
@@ -91,7 +91,7 @@ def test_notebook_02_declares_the_train_switch_and_the_shipped_folder(monkeypatc
 def test_a_smoke_sized_confirm_run_writes_every_table(tmp_path):
     """One fresh seed through every evaluation study of the smoke profile."""
     # the smoke profile with 2 training steps per network: the run trains them (smoke ships none)
-    data = yaml.safe_load((ROOT / "params.yaml").read_text())
+    data = pipeline.read_params(ROOT / "params.yaml")
     data["profiles"]["smoke"]["train_segmentation"]["steps"] = {"compact": 2, "strong": 2}
     params = tmp_path / "params.yaml"
     params.write_text(yaml.safe_dump(data))
@@ -354,7 +354,7 @@ def test_the_plans_speed_lever_is_read_from_the_runs_parameters_and_must_be_the_
         run_method_settings({"slic_2d": 3})
     cmd = speed_bench_command(plan, {"2d-slic": {"iterations": 3, "backend": "cv2-slic"}, "dbscan": {}})
     assert cmd[-2:] == ['--param=2d-slic:iterations=3,backend="cv2-slic"', "--json"]
-    data = yaml.safe_load((pipeline.ROOT / "params.yaml").read_text())
+    data = pipeline.read_params(pipeline.ROOT / "params.yaml")  # with the profiles of profiles.yaml
     data["profiles"]["full"]["common"]["slic_2d"] = {"iterations": 4}
     other = tmp_path / "params.yaml"
     other.write_text(yaml.safe_dump(data))

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import nbformat
@@ -254,15 +255,27 @@ def test_stage_metrics_are_declared_and_written(tmp_path):
 
     from semmatch.experiments.headline import STAGE_METRICS, write_stage_metrics
 
-    stages = yaml.safe_load((pipeline.ROOT / "dvc.yaml").read_text())["stages"]
-    declared = {next(iter(m)) for st in stages.values() for m in st.get("metrics", [])}
-    assert declared == {f"figures/${{profile}}/metrics/{s}.json" for s in STAGE_METRICS}
+    dvc = yaml.safe_load((pipeline.ROOT / "dvc.yaml").read_text())
+    stage_files = {next(iter(o)) if isinstance(o, dict) else o for st in dvc["stages"].values() for o in st["outs"]}
+    assert {f"figures/${{profile}}/metrics/{s}.json" for s in STAGE_METRICS} <= stage_files
+    # one metrics file: `dvc metrics show` is one row, not a stage per row and a dash per other stage's number
+    assert not [st for st in dvc["stages"].values() if st.get("metrics")]
+    assert dvc["metrics"] == ["figures/${profile}/metrics.json"]
     (tmp_path / "table2_synthetic.csv").write_text(
         "model,method,scenes,mean_acc\nground truth,3d-neighborhood,12,0.93\ncompact,lower,12,0.8\ncompact,2d-slic,12,0.7\n")
     path = write_stage_metrics(tmp_path, "evaluate_synthetic")
     assert json.loads(path.read_text()) == {"table2.ground_truth.3d-neighborhood.mean_acc": 0.93,
                                             "table2.compact.lower.mean_acc": 0.8}
     assert write_stage_metrics(tmp_path, "qualitative") is None
+    (tmp_path / "metrics" / "panoptic.json").write_text('{"panoptic.oracle.pq_things": 0.7}')
+    write_stage_metrics(tmp_path, "evaluate_synthetic")  # gathers every stage's file
+    assert json.loads((tmp_path / "metrics.json").read_text()) == {
+        "table2.ground_truth.3d-neighborhood.mean_acc": 0.93, "table2.compact.lower.mean_acc": 0.8,
+        "panoptic.oracle.pq_things": 0.7}
+    for profile in ("full", "variance"):  # the committed figures: their one file is their stages' files gathered
+        committed = pipeline.ROOT / "figures" / profile
+        gathered = {k: v for f in sorted((committed / "metrics").glob("*.json")) for k, v in json.loads(f.read_text()).items()}
+        assert json.loads((committed / "metrics.json").read_text()) == gathered
 
 
 @pytest.mark.parametrize("name", ["04_label_transfer", "10_panoptic"])
@@ -378,7 +391,8 @@ def test_editing_views_or_execution_settings_reruns_no_stage():
     for name, st in stages.items():
         assert not [d for d in st["deps"] if d.startswith(untracked)], name
         assert "semmatch/experiments/__main__.py" in st["deps"], name  # `python -m semmatch.experiments run`
-        assert not [p for p in st["params"] if p.split(".")[-1] in ("jobs", "scheduler")], name
+        keys = [k for p in st["params"] for k in ([p] if isinstance(p, str) else [k for ks in p.values() for k in ks])]
+        assert not [k for k in keys if k.split(".")[-1] in ("jobs", "scheduler")], name
         draws = any(str(next(iter(o)) if isinstance(o, dict) else o).endswith(".png") for o in st["outs"])
         assert ("semmatch/plots/charts.py" in st["deps"]) == draws, name
     # 03 shows a 3D view (plots.views): its computing code stays tracked, the view module does not
@@ -434,16 +448,16 @@ def test_every_override_key_is_in_params_and_reaches_a_stage(tmp_path):
 
     top = yaml.safe_load((pipeline.ROOT / "params.yaml").read_text())
     stages = yaml.safe_load((pipeline.ROOT / "dvc.yaml").read_text())["stages"]
-    declared = {p for st in stages.values() for p in st["params"]}
+    declared = {p for st in stages.values() for p in st["params"] if isinstance(p, str)}
     for key in pipeline.OVERRIDABLE:
         assert key in top and top[key] is None, key  # committed params.yaml: the profiles decide
         assert key in declared, f"no stage reruns when {key} is overridden"
-    for name in top["profiles"]:
+    assert "profiles" not in top  # in profiles.yaml: DVC shows all of params.yaml (test_dvc_shows_the_active_profile_only)
+    for name in pipeline.read_params()["profiles"]:
         pipeline.load_params(pipeline.ROOT / "params.yaml", name)  # every override key resolves
     # every key can be set (networks is in common and in the panoptic section: common wins)
     text = (pipeline.ROOT / "params.yaml").read_text()
-    import re
-
+    (tmp_path / pipeline.PROFILES_FILE).write_text((pipeline.ROOT / pipeline.PROFILES_FILE).read_text())
     for key in pipeline.OVERRIDABLE:
         f = tmp_path / f"{key}.yaml"
         f.write_text(re.sub(rf"(?m)^{key}: null", f"{key}: [compact]" if key != "fused_base" else f"{key}: dbscan",
@@ -518,6 +532,29 @@ def test_snapshots_leave_out_machine_notices_and_machine_paths(tmp_path):
                               "lower_noisy: RGB-D odometry found no solution for 1 frame(s)\n"
                               "  est = estimate_poses(seq)\ntransfer: 100%\n")
     assert out.metadata["papermill"] == {"input_path": "notebooks/04_x.ipynb", "parameters": {"seed": 1}}
+
+
+def test_snapshots_show_injected_parameters_and_printed_values_from_the_repository(tmp_path):
+    from semmatch.experiments.snapshot import snapshot_notebook
+
+    nb = nbformat.v4.new_notebook()
+    params = nbformat.v4.new_code_cell('data_root = "/tmp/pytest-of-u/pytest-1/smoke0/data"\nseed = 1')
+    params.metadata["tags"] = ["injected-parameters"]
+    shown = nbformat.v4.new_code_cell("cfg")
+    shown.outputs = [nbformat.v4.new_output("execute_result", execution_count=1, data={
+        "text/plain": "TrainConfig(out='/tmp/pytest-of-u/pytest-1/smoke0/data/models/compact.pt')"})]
+    nb.cells = [params, shown]
+    nbformat.write(nb, tmp_path / "02_x.ipynb")
+    out = nbformat.read(snapshot_notebook(tmp_path / "02_x.ipynb", tmp_path / "s.ipynb"), as_version=4)
+    assert out.cells[0].source == 'data_root = "data"\nseed = 1'
+    assert out.cells[1].outputs[0]["data"]["text/plain"] == "TrainConfig(out='data/models/compact.pt')"
+
+
+def test_committed_snapshots_hold_no_machine_path_or_machine_notice():
+    for p in sorted((ROOT / "reports" / "snapshot").rglob("*.ipynb")):
+        text = p.read_text()
+        assert "NumbaWarning" not in text, p
+        assert not re.search(r"[\"'(]/(?:tmp|root|home|work)/", text), p
 
 
 def test_a_notebook_run_with_another_parameter_file_reads_that_file(tmp_path):

@@ -88,9 +88,8 @@ def check_heldout_seeds(seeds: Sequence[int], train_config: Mapping) -> None:
         Naming the seeds that are training, validation or evaluation seeds of the network, or
         seeds of a profile (training, validation, development, evaluation).
     """
-    import yaml
 
-    from .pipeline import ROOT
+    from .pipeline import ROOT, read_params
     from .protocol import used_seeds
 
     seeds = {int(s) for s in seeds}
@@ -98,7 +97,7 @@ def check_heldout_seeds(seeds: Sequence[int], train_config: Mapping) -> None:
         common = sorted(seeds & {int(s) for s in train_config.get(key) or ()})
         if common:
             raise ValueError(f"held-out adaptation seeds {common} are {what} seeds of the network")
-    used = used_seeds(yaml.safe_load((ROOT / "params.yaml").read_text())["profiles"])
+    used = used_seeds(read_params(ROOT / "params.yaml")["profiles"])
     common = sorted(seeds & set(used))
     if common:
         raise ValueError(f"held-out adaptation seeds {common} are used by params.yaml: "

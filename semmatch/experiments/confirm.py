@@ -39,7 +39,7 @@ import yaml
 
 from ..io import atomic_write_text
 from .analysis_plan import PLAN_FILE, PLAN_V2_FILE, AnalysisPlan, plan_for_seeds
-from .pipeline import NOTEBOOKS, ROOT, notebook_parameters, run_method_settings, run_notebook
+from .pipeline import NOTEBOOKS, ROOT, notebook_parameters, read_params, run_method_settings, run_notebook
 from .protocol import check_confirm_seeds, check_protocol
 
 __all__ = ["SKIPPED", "confirm_name", "write_confirm_params", "unshipped_networks", "run_confirm",
@@ -116,7 +116,7 @@ def write_confirm_params(seeds: Sequence[int], out: str | os.PathLike, *, base_p
     """
     from .plan_networks import plan_networks
 
-    data = yaml.safe_load(Path(params_file).read_text())
+    data = read_params(params_file)
     profiles = data.get("profiles") or {}
     if base_profile not in profiles:
         raise ValueError(f"{params_file}: profile {base_profile!r} does not exist; valid profiles: "
@@ -229,7 +229,7 @@ def run_confirm(seeds: Sequence[int], *, name: str | None = None, base_profile: 
     NotebookFailed
         A notebook failed (naming it and the cell).
     """
-    data = yaml.safe_load(Path(params_file).read_text())
+    data = read_params(params_file)
     seeds = check_confirm_seeds(seeds, data.get("profiles") or {}, where=str(params_file))
     _refuse_study_seeds(seeds)
     plan = plan_for_seeds(seeds)  # v2 for the v2 plan's confirmatory seeds, else v1

@@ -1,9 +1,12 @@
-"""Headline numbers of each pipeline stage as DVC metrics (``figures/<profile>/metrics/*.json``).
+"""Headline numbers of each pipeline stage as DVC metrics.
 
-``dvc metrics show`` / ``dvc metrics diff`` / ``dvc exp show`` read these files: one flat JSON
-object per stage, keys ``<table>.<row>.<measure>`` (e.g. ``table2.compact.3d-neighborhood.mean_acc``),
+Each stage writes one flat JSON object (``figures/<profile>/metrics/<stage>.json``, a stage
+output), keys ``<table>.<row>.<measure>`` (e.g. ``table2.compact.3d-neighborhood.mean_acc``),
 taken from the stage's CSV tables after its notebook ran (:func:`write_stage_metrics`, called by
-:func:`semmatch.experiments.pipeline.run_notebook`). Stages without headline numbers write none.
+:func:`semmatch.experiments.pipeline.run_notebook`); stages without headline numbers write none.
+The stages' files are then gathered into ``figures/<profile>/metrics.json``
+(:func:`gather_metrics`), the one metrics file of dvc.yaml that ``dvc metrics show`` / ``diff``
+and ``dvc exp show`` read.
 """
 
 from __future__ import annotations
@@ -16,7 +19,7 @@ import pandas as pd
 
 from ..io import atomic_write_text
 
-__all__ = ["STAGE_METRICS", "stage_metrics", "write_stage_metrics", "metrics_path"]
+__all__ = ["STAGE_METRICS", "stage_metrics", "write_stage_metrics", "gather_metrics", "metrics_path"]
 
 
 def _rows(csv: Path, keys: tuple[str, ...], values: tuple[str, ...], prefix: str,
@@ -124,4 +127,27 @@ def write_stage_metrics(figures_dir: str | Path, section: str) -> Path | None:
     path = metrics_path(figures_dir, section)
     path.parent.mkdir(parents=True, exist_ok=True)
     atomic_write_text(path, json.dumps(stage_metrics(figures_dir, section), indent=1, sort_keys=True) + "\n")
+    gather_metrics(figures_dir)
+    return path
+
+
+def gather_metrics(figures_dir: str | Path) -> Path | None:
+    """Write ``<figures_dir>/metrics.json``: every stage's headline numbers (the ``metrics/*.json``
+    files present) in one flat object, the file ``dvc metrics show`` reads (one row, no column of
+    another stage's dashes). None when no stage has written any.
+
+    Raises
+    ------
+    ValueError
+        If two stages' files hold the same key with different values.
+    """
+    out: dict = {}
+    for f in sorted((Path(figures_dir) / "metrics").glob("*.json")):
+        for k, v in json.loads(f.read_text()).items():
+            if out.setdefault(k, v) != v:
+                raise ValueError(f"{f}: headline number {k} = {v} differs from another stage's {out[k]}")
+    if not out:
+        return None
+    path = Path(figures_dir) / "metrics.json"
+    atomic_write_text(path, json.dumps(out, indent=1, sort_keys=True) + "\n")
     return path

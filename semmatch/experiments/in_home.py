@@ -471,7 +471,7 @@ def run_in_home_study(data: str | Path, figures: str | Path, *, plan_path: str |
 
 def main(argv: Sequence[str] | None = None) -> int:
     """``python -m semmatch.experiments.in_home``: run the study, write its tables and figure."""
-    from .pipeline import ROOT
+    from .pipeline import ROOT, read_params
     from .protocol import check_confirm_seeds
 
     ap = argparse.ArgumentParser(prog="python -m semmatch.experiments.in_home", description=__doc__.splitlines()[0])
@@ -485,7 +485,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = ap.parse_args(argv)
     try:
         plan = load_in_home_plan(args.plan)
-        check_confirm_seeds(list(plan.seeds), yaml.safe_load((ROOT / "params.yaml").read_text())["profiles"],
+        check_confirm_seeds(list(plan.seeds), read_params(ROOT / "params.yaml")["profiles"],
                             where=str(args.plan))
     except (OSError, ValueError) as e:
         ap.error(str(e))

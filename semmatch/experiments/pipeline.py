@@ -35,6 +35,7 @@ __all__ = [
     "find_root",
     "NotebookFailed",
     "section_of",
+    "read_params",
     "load_params",
     "METHOD_SETTING_KEYS",
     "run_method_settings",
@@ -182,8 +183,41 @@ def _apply_overrides(params_file: Path, data: dict, name: str, profile: dict) ->
     return out
 
 
+#: the file beside ``params.yaml`` that holds the profiles (kept out of params.yaml, which DVC shows whole)
+PROFILES_FILE = "profiles.yaml"
+
+
+def read_params(params_file: str | os.PathLike = ROOT / "params.yaml") -> dict:
+    """The parameter file's top level, with ``profiles`` from :data:`PROFILES_FILE` beside it.
+
+    A parameter file that holds its own ``profiles`` (a confirmatory run's, a test's) is used
+    as it is.
+
+    Raises
+    ------
+    FileNotFoundError
+        If the parameter file is missing.
+    ValueError
+        If it (or the profiles file) is not a YAML mapping.
+    """
+    params_file = Path(params_file)
+    try:
+        data = yaml.safe_load(params_file.read_text())
+    except FileNotFoundError:
+        raise FileNotFoundError(f"{params_file}: no parameter file") from None
+    if not isinstance(data, dict):
+        raise ValueError(f"{params_file}: not a YAML mapping of parameters")
+    beside = params_file.with_name(PROFILES_FILE)
+    if "profiles" not in data and beside.is_file():
+        profiles = yaml.safe_load(beside.read_text())
+        if not isinstance(profiles, dict) or not isinstance(profiles.get("profiles"), dict):
+            raise ValueError(f"{beside}: expected a top-level 'profiles:' mapping")
+        data = {**data, "profiles": profiles["profiles"]}
+    return data
+
+
 def load_params(params_file: str | os.PathLike = ROOT / "params.yaml", profile: str | None = None) -> dict:
-    """Load ``params.yaml`` and return the selected profile as a dict (plus ``profile``).
+    """Load ``params.yaml`` (:func:`read_params`) and return the selected profile as a dict (plus ``profile``).
 
     Top-level keys of :data:`OVERRIDABLE` that are not ``null`` replace the profile's value
     (in ``common`` or in the section that holds the key).
@@ -195,10 +229,7 @@ def load_params(params_file: str | os.PathLike = ROOT / "params.yaml", profile: 
         unknown, or an override matches no section of the profile.
     """
     params_file = Path(params_file)
-    try:
-        data = yaml.safe_load(params_file.read_text())
-    except FileNotFoundError:
-        raise FileNotFoundError(f"{params_file}: no parameter file") from None
+    data = read_params(params_file)
     profiles = data.get("profiles") or {}
     name = profile or data.get("profile")
     if name not in profiles:
@@ -505,8 +536,7 @@ def main(argv: list[str] | None = None, extra_commands: Sequence[Callable] = ())
     args = _parser(extra_commands).parse_args(argv)
     try:
         if args.cmd == "profiles":
-            data = yaml.safe_load((ROOT / "params.yaml").read_text())
-            print("\n".join(sorted(data.get("profiles", {}))))
+            print("\n".join(sorted(read_params().get("profiles", {}))))
             return 0
         if getattr(args, "handler", None) is not None:  # an extra command
             return args.handler(args)

@@ -34,7 +34,9 @@ _MACHINE_NOTICES = (("NumbaWarning", "TBB"),)
 #: an absolute path into an installed package: shown from the package (``numba/np/...``)
 _SITE_PACKAGES = re.compile(r"/[^\s:'\"]*/(?:site|dist)-packages/")
 #: an absolute path into a clone of the repository: shown from the repository (``semmatch/...``)
-_REPOSITORY = re.compile(r"(?<![\w.~-])/[^\s:'\"]*?/(?=(?:semmatch|data|figures|reports|models|notebooks|scripts)/)")
+#: (also the folder itself: ``/tmp/run/data`` -> ``data``)
+_REPOSITORY = re.compile(r"(?<![\w.~-])/[^\s:'\"]*?/"
+                         r"(?=(?:semmatch|data|figures|reports|models|notebooks|scripts)(?:/|(?![\w.-])))")
 
 
 def clean_stream(text: str) -> str:
@@ -81,12 +83,15 @@ def _machine_free(value):
 
 def clean_streams(nb) -> None:
     """Apply :func:`clean_stream` to every ``stream`` output of a notebook (in place; outputs
-    left empty are removed), and show the paths of its papermill metadata from the repository."""
+    left empty are removed), and show the paths of its papermill metadata, of papermill's
+    injected-parameters cell and of printed values (``text/plain``) from the repository."""
     if "papermill" in nb.metadata:
         nb.metadata["papermill"] = _machine_free(nb.metadata["papermill"])
     for cell in nb.cells:
         if cell.get("cell_type") != "code":
             continue
+        if "injected-parameters" in cell.get("metadata", {}).get("tags", ()):  # papermill's cell: data_root = "/tmp/.../data"
+            cell.source = _machine_free(cell.source)
         outputs = []
         for out in cell.get("outputs", []):
             if out.get("output_type") == "stream":
@@ -94,6 +99,8 @@ def clean_streams(nb) -> None:
                 out["text"] = clean_stream(text)
                 if not out["text"]:
                     continue
+            elif "text/plain" in out.get("data", {}):  # a printed value: TrainConfig(out='/tmp/.../data/...')
+                out["data"]["text/plain"] = _machine_free(out["data"]["text/plain"])
             outputs.append(out)
         cell.outputs = outputs
 

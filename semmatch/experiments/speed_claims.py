@@ -35,7 +35,8 @@ def lever_settings(plan: AnalysisPlan, params_file: str | os.PathLike) -> dict[s
     """The plan's speed lever as a run states it: ``{method: {parameter: value}}``.
 
     The plan's ``speed.lever`` names the method and ``params_key``, the dotted path of the
-    setting in a run's parameter file (``profiles.full.common.slic_2d``); the value found there
+    setting in a run's parameters (``profiles.full.common.slic_2d``, the profiles read as
+    :func:`~semmatch.experiments.pipeline.read_params` reads them); the value found there
     must be the plan's ``chosen_value``, so a run cannot be judged under a lever its plan did not
     choose. A plan without a lever gives ``{}``.
 
@@ -44,12 +45,12 @@ def lever_settings(plan: AnalysisPlan, params_file: str | os.PathLike) -> dict[s
     ValueError
         The parameter file lacks the key, or its value is not the plan's chosen value.
     """
-    import yaml
+    from .pipeline import read_params
 
     lever = (plan.raw.get("speed") or {}).get("lever")
     if not lever:
         return {}
-    value: object = yaml.safe_load(Path(params_file).read_text()) or {}
+    value: object = read_params(params_file)  # the profiles of profiles.yaml beside it, or its own
     for part in str(lever["params_key"]).split("."):
         if not isinstance(value, dict) or part not in value:
             raise ValueError(f"{params_file}: analysis plan v{plan.version}'s speed lever is read from "

@@ -199,9 +199,9 @@ def study_scenes(seeds: Sequence[int], split: str = "eval", *, params_file: str 
     ValueError
         An unknown split, or a ``val`` seed that is not one of the full profile's ``val_seeds``.
     """
-    from .pipeline import ROOT
+    from .pipeline import ROOT, read_params
 
-    common = yaml.safe_load(Path(params_file or ROOT / "params.yaml").read_text())["profiles"]["full"]["common"]
+    common = read_params(params_file or ROOT / "params.yaml")["profiles"]["full"]["common"]
     kinds = list(common["kinds"])
     if split == "eval":
         return [(k, int(s)) for s in seeds for k in kinds]
@@ -805,7 +805,7 @@ def run_when_transfer_pays(data_root: str | Path, figures: str | Path, scenes: S
 
 def main(argv: Sequence[str] | None = None) -> int:
     """``python -m semmatch.experiments.when_transfer_pays``: run the study, write its tables and figure."""
-    from .pipeline import ROOT
+    from .pipeline import ROOT, read_params
     from .protocol import check_confirm_seeds
 
     ap = argparse.ArgumentParser(prog="python -m semmatch.experiments.when_transfer_pays",
@@ -827,7 +827,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         scenes = study_scenes(args.seeds, args.split)
         if args.split == "eval":
-            profiles = yaml.safe_load((ROOT / "params.yaml").read_text())["profiles"]
+            profiles = read_params(ROOT / "params.yaml")["profiles"]
             dev = set(map(int, profiles["full"]["common"]["eval_seeds"]))
             fresh = [s for s in args.seeds if s not in dev]
             if fresh:

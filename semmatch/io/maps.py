@@ -92,9 +92,7 @@ class SemanticMap:
         """Raise ``ValueError`` for an empty map or NaN/inf vertices; return self."""
         if len(self.points) == 0:
             raise ValueError(f"{self.source}: the map is empty (no vertices)")
-        bad = ~np.isfinite(self.points).all(axis=1)
-        if bad.any():
-            raise ValueError(f"{self.source}: {int(bad.sum())} vertices hold NaN or inf")
+        _check_vertices(self.points, self.source)
         return self
 
     def canonical(self) -> SemanticMap:
@@ -346,10 +344,23 @@ def read_map(path: PathLike, *, require_labels: bool = True) -> SemanticMap:
             raise ValueError(f"{path}: only triangle faces are supported")
     m = SemanticMap(pts, labels, colors=colors, faces=faces, normals=normals, source=str(path),
                     instances=instances)
-    bad = ~np.isfinite(m.points).all(axis=1)
-    if bad.any():
-        raise ValueError(f"{path}: {int(bad.sum())} vertices hold NaN or inf")
+    _check_vertices(m.points, path)
     return m
+
+
+def _check_vertices(points: np.ndarray, where: PathLike | str) -> None:
+    """Refuse NaN/inf vertices and vertices beyond :data:`~semmatch.io.reading_checks.MAX_POSITION`
+    of the origin (no mapped room spans 10 km; such a vertex is a corrupt or foreign file)."""
+    from .reading_checks import MAX_POSITION
+
+    bad = ~np.isfinite(points).all(axis=1)
+    if bad.any():
+        raise ValueError(f"{where}: {int(bad.sum())} vertices hold NaN or inf")
+    far = np.abs(points).max(axis=1, initial=0.0) > MAX_POSITION
+    if far.any():
+        k = int(np.flatnonzero(far)[0])
+        raise ValueError(f"{where}: {int(far.sum())} vertices lie beyond {MAX_POSITION:g} m of the origin "
+                         f"(first: vertex {k} at {points[k].tolist()}); is this a map in metres?")
 
 
 def write_map(

@@ -45,7 +45,7 @@ _LEGEND = dict(itemsizing="constant", font=dict(size=13), bgcolor="rgba(255,255,
 
 
 def _as_map(m: SemanticMap | str | os.PathLike) -> SemanticMap:
-    return read_map(m) if isinstance(m, str | os.PathLike) else m.check()
+    return (read_map(m) if isinstance(m, str | os.PathLike) else m).check()
 
 
 def decimate(m: SemanticMap, max_vertices: int = MAX_DISPLAY_VERTICES, *, seed: int = 0) -> SemanticMap:

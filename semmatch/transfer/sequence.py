@@ -47,7 +47,14 @@ def _frame_params(params: dict, i: int) -> dict:
         path = Path(probs) / f"{i:06d}.npy"
         if not path.is_file():
             raise FileNotFoundError(f"{path}: probabilities of frame {i} are missing")
-        return {**params, "probs": np.load(path)}
+        try:
+            probs = np.load(path)
+        except (EOFError, ValueError, OSError) as e:  # empty, truncated, pickled or not an .npy file
+            raise ValueError(f"{path}: probabilities of frame {i} are not a readable .npy array ({e})") from None
+        if not isinstance(probs, np.ndarray) or probs.ndim != 3 or not probs.size:
+            raise ValueError(f"{path}: probabilities of frame {i} must be a non-empty 3-D array, "
+                             f"got shape {getattr(probs, 'shape', None)}")
+        return {**params, "probs": probs}
     return params
 
 

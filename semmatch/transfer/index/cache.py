@@ -184,6 +184,8 @@ def _write_index(index: MapIndex, cf: Path, digest: str) -> None:
                                 content_sha256=np.asarray(_arrays_digest(arrays)))
     except OSError:  # a read-only folder: no cache
         pass
+    except ValueError as e:  # a folder or special file at the cache's path (io.files.atomic_path): no cache
+        warnings.warn(f"index cache not written ({e}); transferring without it", UserWarning, stacklevel=3)
 
 
 def load_index(path: str | os.PathLike, *, max_distance: float = DEFAULT_MAX_DISTANCE, voxel_size: float = 0.02,
