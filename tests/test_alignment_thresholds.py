@@ -27,8 +27,17 @@ def rows(*pairs):
 def test_labels_wrong_pairs_and_right_pairs_off_target():
     r = rows(pair("a", "a", 0.5), pair("b", "b", 0.5, err_cm=6.0), pair("c", "c", 0.5, rot=2.5), pair("a", "b", 0.2))
     assert must_refuse(r).tolist() == [False, True, True, True]
-    with pytest.raises(ValueError, match="mesh-fit"):
+    with pytest.raises(ValueError, match="without a mesh error"):
         must_refuse(rows(pair("a", "a", 0.5, err_cm=np.nan)))
+    # pairs stored without a mesh fit: labelled by the trajectory truth when asked
+    t = r.rename(columns={"trans_err_mesh_m": "trans_err_m", "rot_err_mesh_deg": "rot_err_deg"})
+    assert must_refuse(t, truth="trajectory").tolist() == [False, True, True, True]
+    with pytest.raises(ValueError, match="without a mesh error"):
+        must_refuse(t)
+    # the mesh fit where a pair has one, the trajectory truth elsewhere
+    mixed = pd.concat([r.iloc[:1].assign(trans_err_m=0.09, rot_err_deg=0.1), t.iloc[1:]], ignore_index=True)
+    assert must_refuse(mixed, truth="mesh-or-trajectory").tolist() == [False, True, True, True]
+    assert must_refuse(mixed, truth="trajectory").tolist() == [True, True, True, True]
 
 
 def test_the_minimum_goes_to_the_middle_of_the_gap_between_wrong_and_right_pairs():

@@ -45,6 +45,7 @@ __all__ = [
     "alignment_figure",
     "validation_seed_check",
     "validate_thresholds",
+    "choose_on_rows",
     "main",
 ]
 
@@ -418,7 +419,7 @@ def validation_seed_check(scene_dirs: Sequence[Path]) -> None:
 
 
 def validate_thresholds(scene_dirs: Sequence[Path], pose_dir: Path, out: Path, *, figures: str | Path | None = None,
-                        progress: bool = True) -> dict:
+                        truth: str = "mesh", progress: bool = True) -> dict:
     """Choose the refusal thresholds on validation scenes (:mod:`semmatch.experiments.alignment_thresholds`).
 
     Every scene's robot aligned into its own person's map and into the next scene's
@@ -435,6 +436,9 @@ def validate_thresholds(scene_dirs: Sequence[Path], pose_dir: Path, out: Path, *
     figures : path, optional
         Also ``alignment_validation.csv``/``.md`` (one row per pair, with its label and its verdict
         under the default and the chosen thresholds) and ``alignment_validation.png`` there.
+    truth : {"mesh", "trajectory"}
+        The errors that label right pairs (:func:`~semmatch.experiments.alignment_thresholds.must_refuse`):
+        the mesh fit (the rule's), or the trajectory truth for pairs stored without a mesh fit.
     progress : bool
 
     Returns
@@ -444,33 +448,55 @@ def validate_thresholds(scene_dirs: Sequence[Path], pose_dir: Path, out: Path, *
         ``under_chosen`` (pairs that must be refused but were accepted, good pairs refused), as
         written to ``thresholds.json``.
     """
+    validation_seed_check(scene_dirs)
+    rows = two_height_study(scene_dirs, pose_dir, out, chain=False, wrong_pairs=True, progress=progress)
+    return choose_on_rows(rows, Path(out) / "thresholds.json", figures=figures, truth=truth)
+
+
+def choose_on_rows(rows: pd.DataFrame, report_file: Path, *, figures: str | Path | None = None,
+                   truth: str = "mesh") -> dict:
+    """The rule of :mod:`semmatch.experiments.alignment_thresholds` on stored validation pairs.
+
+    Parameters
+    ----------
+    rows : DataFrame
+        Pairs of :func:`two_height_study` runs with ``wrong_pairs`` (validation scenes only).
+    report_file : path
+        ``thresholds.json`` to write.
+    figures, truth
+        As :func:`validate_thresholds`.
+
+    Returns
+    -------
+    dict
+        As :func:`validate_thresholds`.
+    """
     from ..poses.alignment import DEFAULT_CHECKS
     from .alignment_thresholds import choose_thresholds, judge_rows, must_refuse, threshold_figure
     from .tables import save_table
 
-    validation_seed_check(scene_dirs)
-    rows = two_height_study(scene_dirs, pose_dir, out, chain=False, wrong_pairs=True, progress=progress)
-    chosen, steps = choose_thresholds(rows)
-    refuse = must_refuse(rows)
+    chosen, steps = choose_thresholds(rows, truth=truth)
+    refuse = must_refuse(rows, truth=truth)
 
     def counts(th):
         acc = judge_rows(rows, th)
         return {"bad_accepted": int((acc & refuse).sum()), "good_refused": int((~acc & ~refuse).sum()),
                 "pairs": len(rows), "must_refuse": int(refuse.sum())}
 
-    report = {"thresholds": chosen, "defaults": dict(DEFAULT_CHECKS), "steps": steps,
-              "under_defaults": counts(DEFAULT_CHECKS), "under_chosen": counts(chosen),
-              "scenes": [Path(s).name for s in scene_dirs]}
-    write_json(Path(out) / "thresholds.json", report)
+    scenes = sorted(set(rows["scene"]))
+    report = {"thresholds": chosen, "defaults": dict(DEFAULT_CHECKS), "steps": steps, "truth": truth,
+              "under_defaults": counts(DEFAULT_CHECKS), "under_chosen": counts(chosen), "scenes": scenes}
+    write_json(Path(report_file), report)
     if figures is not None:
-        table = rows[["scene", "person", "trans_err_mesh_m", "rot_err_mesh_deg", "structure_fitness", "agreement",
-                      "inlier_rmse", "floor_angle_deg", "floor_offset_m", "constrained"]].copy()
+        cols = ["scene", "person", "trans_err_m", "rot_err_deg", "trans_err_mesh_m", "rot_err_mesh_deg",
+                "structure_fitness", "agreement", "inlier_rmse", "floor_angle_deg", "floor_offset_m", "constrained"]
+        table = rows.reindex(columns=cols).copy()
         table.insert(2, "must_refuse", refuse)
         table["accepted_defaults"] = judge_rows(rows, DEFAULT_CHECKS)
         table["accepted_chosen"] = judge_rows(rows, chosen)
         save_table(table, figures, "alignment_validation", floatfmt=".4f")
-        threshold_figure(rows, chosen, Path(figures) / "alignment_validation.png",
-                         title=f"validation pairs ({len(scene_dirs)} scenes): structure_fitness")
+        threshold_figure(rows, chosen, Path(figures) / "alignment_validation.png", truth=truth,
+                         title=f"validation pairs ({len(scenes)} scenes, {truth} truth): structure_fitness")
     return report
 
 
@@ -526,7 +552,7 @@ def alignment_figure(rows: pd.DataFrame, out: str | Path, *, kitchen: dict | Non
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m semmatch.experiments.alignment_study {kitchen,two-heights,validate,figure,simulate-val}``."""
+    """``python -m semmatch.experiments.alignment_study {kitchen,two-heights,validate,choose,figure,simulate-val}``."""
     p = argparse.ArgumentParser(prog="python -m semmatch.experiments.alignment_study", description=__doc__.split("\n")[0])
     sub = p.add_subparsers(dest="what", required=True)
     k = sub.add_parser("kitchen", help="the real pair (7-Scenes red kitchen, development frames)")
@@ -545,6 +571,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     c.add_argument("--poses", required=True, help="odometry cache folder")
     c.add_argument("--out", required=True, help="work folder (rows.csv, thresholds.json)")
     c.add_argument("--figures", help="also write alignment_validation.csv/.md and .png there")
+    c.add_argument("--truth", choices=("mesh", "trajectory", "mesh-or-trajectory"), default="mesh",
+                   help="errors that label right pairs: the mesh fit (the rule's) or the trajectory truth "
+                        "(pairs stored without a mesh fit)")
+    h = sub.add_parser("choose", help="the threshold rule on stored validation pairs (work folders of validate runs)")
+    h.add_argument("work", nargs="+", help="validate work folders (their <pair>/row.json)")
+    h.add_argument("--out", required=True, help="thresholds.json to write")
+    h.add_argument("--figures", help="also write alignment_validation.csv/.md and .png there")
+    h.add_argument("--truth", choices=("mesh", "trajectory", "mesh-or-trajectory"), default="mesh",
+                   help="errors that label right pairs (mesh-or-trajectory: the mesh fit where a pair has one)")
     f = sub.add_parser("figure", help="the figure of docs/recordings.md from the studies' outputs")
     f.add_argument("rows", nargs="+", help="rows.csv of two-heights runs")
     f.add_argument("--kitchen", help="kitchen.json")
@@ -565,9 +600,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(df.to_string())
     elif args.what == "validate":
         report = validate_thresholds([Path(s) for s in args.scenes], Path(args.poses), Path(args.out),
-                                     figures=args.figures)
+                                     figures=args.figures, truth=args.truth)
         print(json.dumps({k: report[k] for k in ("thresholds", "defaults", "under_defaults", "under_chosen")},
                          indent=2))
+    elif args.what == "choose":
+        rows = pd.DataFrame([json.loads(f.read_text()) for w in args.work for f in sorted(Path(w).glob("*/row.json"))])
+        validation_seed_check([Path(s) for s in sorted(set(rows["scene"]) | set(rows["person"]))])  # seeds by name
+        report = choose_on_rows(rows, Path(args.out), figures=args.figures, truth=args.truth)
+        print(json.dumps({k: report[k] for k in ("thresholds", "under_defaults", "under_chosen")}, indent=2))
     elif args.what == "figure":
         rows = pd.concat([pd.read_csv(r) for r in args.rows], ignore_index=True)
         kitchen = json.loads(Path(args.kitchen).read_text()) if args.kitchen else None

@@ -36,7 +36,7 @@ from collections.abc import Mapping
 import numpy as np
 import pandas as pd
 
-__all__ = ["CHECK_VALUES", "must_refuse", "judge_rows", "choose_thresholds", "threshold_figure"]
+__all__ = ["CHECK_VALUES", "TRUTHS", "must_refuse", "judge_rows", "choose_thresholds", "threshold_figure"]
 
 #: the column of a study row (:func:`semmatch.experiments.alignment_study.two_height_scene`) each check reads
 CHECK_VALUES: dict[str, str] = {
@@ -48,15 +48,26 @@ CHECK_VALUES: dict[str, str] = {
 }
 
 
-def must_refuse(rows: pd.DataFrame, *, max_trans_m: float = 0.05, max_rot_deg: float = 2.0) -> np.ndarray:
+#: the errors that can label right pairs (:func:`must_refuse`)
+TRUTHS = ("mesh", "trajectory", "mesh-or-trajectory")
+
+
+def must_refuse(rows: pd.DataFrame, *, max_trans_m: float = 0.05, max_rot_deg: float = 2.0,
+                truth: str = "mesh") -> np.ndarray:
     """Per pair: whether it must be refused (a wrong pair, or a right pair off by more than the target).
 
     Parameters
     ----------
     rows : DataFrame
-        ``scene``, ``person`` (another scene: a wrong pair), ``trans_err_mesh_m``, ``rot_err_mesh_deg``.
+        ``scene``, ``person`` (another scene: a wrong pair), ``trans_err_mesh_m``, ``rot_err_mesh_deg``
+        (``trans_err_m``, ``rot_err_deg`` with ``truth="trajectory"``).
     max_trans_m, max_rot_deg : float
         The target: a right pair within both is good.
+    truth : {"mesh", "trajectory", "mesh-or-trajectory"}
+        The errors that label right pairs: against each map fitted onto the scene's mesh (the
+        rule's), against the trajectories aligned onto their true ones (pairs run without a
+        mesh fit; a weaker truth, off by the odometry's drift), or the mesh fit where a pair has
+        one and the trajectory truth elsewhere.
 
     Returns
     -------
@@ -67,11 +78,21 @@ def must_refuse(rows: pd.DataFrame, *, max_trans_m: float = 0.05, max_rot_deg: f
     ValueError
         A right pair without its mesh-fit error (the label would be a guess).
     """
+    if truth not in TRUTHS:
+        raise ValueError(f"truth must be one of {TRUTHS}, got {truth!r}")
     wrong = (rows["person"] != rows["scene"]).to_numpy()
-    t, r = rows["trans_err_mesh_m"].to_numpy(float), rows["rot_err_mesh_deg"].to_numpy(float)
+
+    def col(c):
+        return rows[c].to_numpy(float) if c in rows else np.full(len(rows), np.nan)
+
+    t, r = col("trans_err_mesh_m"), col("rot_err_mesh_deg")
+    if truth != "mesh":
+        use = ~(np.isfinite(t) & np.isfinite(r)) if truth == "mesh-or-trajectory" else np.ones(len(rows), bool)
+        t, r = np.where(use, col("trans_err_m"), t), np.where(use, col("rot_err_deg"), r)
     unknown = ~wrong & ~(np.isfinite(t) & np.isfinite(r))
     if unknown.any():
-        raise ValueError(f"right pairs without a mesh-fit error: {list(rows['scene'][unknown])} (a scene.ply is needed)")
+        raise ValueError(f"right pairs without a {truth} error: {list(rows['scene'][unknown])}"
+                         + (" (a scene.ply is needed)" if truth == "mesh" else ""))
     return wrong | (~wrong & ((t > max_trans_m) | (r > max_rot_deg)))
 
 
@@ -113,7 +134,7 @@ def _holds(t: float, lo: float, hi: float, minimum: bool) -> bool:
 def _check_table(rows: pd.DataFrame, name: str, current: float) -> dict:
     """One check's intervals, the pairs each passes, and the interval that holds ``current``."""
     minimum = name.startswith("min_")
-    col = rows[CHECK_VALUES[name]].to_numpy(float)
+    col = rows[CHECK_VALUES[name]].to_numpy(float) if CHECK_VALUES[name] in rows else np.full(len(rows), np.nan)
     if name == "max_floor_offset":
         col = np.abs(col)
     skipped = ~np.isfinite(col) if name.startswith("max_floor") else np.zeros(len(col), bool)  # no floors: no check
@@ -143,7 +164,7 @@ def _place(table: dict, run: tuple[int, int], current: float) -> float:
 
 
 def choose_thresholds(rows: pd.DataFrame, defaults: Mapping[str, float] | None = None, *,
-                      max_trans_m: float = 0.05, max_rot_deg: float = 2.0) -> tuple[dict, list[dict]]:
+                      max_trans_m: float = 0.05, max_rot_deg: float = 2.0, truth: str = "mesh") -> tuple[dict, list[dict]]:
     """The thresholds the rule of the module documentation chooses on validation pairs.
 
     Parameters
@@ -154,8 +175,8 @@ def choose_thresholds(rows: pd.DataFrame, defaults: Mapping[str, float] | None =
         :data:`CHECK_VALUES`.
     defaults : mapping, optional
         Current thresholds (default :data:`~semmatch.poses.alignment.DEFAULT_CHECKS`).
-    max_trans_m, max_rot_deg : float
-        The target that labels right pairs good (:func:`must_refuse`).
+    max_trans_m, max_rot_deg, truth
+        The target that labels right pairs good, and the errors it reads (:func:`must_refuse`).
 
     Returns
     -------
@@ -175,7 +196,7 @@ def choose_thresholds(rows: pd.DataFrame, defaults: Mapping[str, float] | None =
 
     if not len(rows):
         raise ValueError("no validation pairs to choose thresholds on")
-    refuse = must_refuse(rows, max_trans_m=max_trans_m, max_rot_deg=max_rot_deg)
+    refuse = must_refuse(rows, max_trans_m=max_trans_m, max_rot_deg=max_rot_deg, truth=truth)
     current = dict(defaults or DEFAULT_CHECKS)
     names = list(DEFAULT_CHECKS)
     tables = {n: _check_table(rows, n, float(current[n])) for n in names}
@@ -224,7 +245,7 @@ def choose_thresholds(rows: pd.DataFrame, defaults: Mapping[str, float] | None =
 
 
 def threshold_figure(rows: pd.DataFrame, thresholds: Mapping[str, float], out, *, title: str = "",
-                     max_trans_m: float = 0.05, max_rot_deg: float = 2.0):
+                     max_trans_m: float = 0.05, max_rot_deg: float = 2.0, truth: str = "mesh"):
     """``structure_fitness`` per pair (right good, right off target, wrong) with the chosen minimum.
 
     Parameters
@@ -236,7 +257,8 @@ def threshold_figure(rows: pd.DataFrame, thresholds: Mapping[str, float], out, *
     out : path
         PNG, written atomically.
     title : str
-    max_trans_m, max_rot_deg : float
+    max_trans_m, max_rot_deg, truth
+        As :func:`must_refuse`.
 
     Returns
     -------
@@ -249,7 +271,7 @@ def threshold_figure(rows: pd.DataFrame, thresholds: Mapping[str, float], out, *
 
     from ..io import save_figure
 
-    refuse = must_refuse(rows, max_trans_m=max_trans_m, max_rot_deg=max_rot_deg)
+    refuse = must_refuse(rows, max_trans_m=max_trans_m, max_rot_deg=max_rot_deg, truth=truth)
     wrong = (rows["person"] != rows["scene"]).to_numpy()
     accepted = judge_rows(rows, thresholds)
     fig, ax = plt.subplots(figsize=(5.6, 3.2))
