@@ -35,9 +35,10 @@ import argparse
 import json
 import sys
 import time
-from collections.abc import Sequence
 
 import numpy as np
+
+from semmatch.cli.common import frame_range
 
 VARIANTS = {
     "default": dict(),
@@ -45,22 +46,6 @@ VARIANTS = {
     "ptp-misfit": dict(residual="point-to-plane", select="misfit"),
     "ptp-misfit-chained": dict(residual="point-to-plane", select="misfit", pose_graph=False),
 }
-
-
-class FrameRange(Sequence):
-    """Frames ``start:stop`` of a sequence (its ``path`` kept for messages)."""
-
-    def __init__(self, seq, start: int, stop: int) -> None:
-        self.seq, self.idx = seq, range(*slice(start, stop).indices(len(seq)))
-        self.path = getattr(seq, "path", "sequence")
-
-    def __len__(self) -> int:
-        return len(self.idx)
-
-    def __getitem__(self, i):  # type: ignore[override]
-        if isinstance(i, slice):
-            return [self[j] for j in range(*i.indices(len(self)))]
-        return self.seq[self.idx[i]]
 
 
 def open3d_plain(seq, init: np.ndarray, *, depth_max: float, prior: np.ndarray | None = None,
@@ -101,7 +86,8 @@ def main(argv: list[str] | None = None) -> int:
     """Run the methods and print the table."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("recording")
-    ap.add_argument("--frames", default=":", help="START:STOP of the frames used (default: all)")
+    ap.add_argument("--frames", type=frame_range, default=None,
+                    help="START:STOP of the frames used; the reader opens only these (default: all)")
     ap.add_argument("--variants", default="default,chained,ptp-misfit-chained,open3d",
                     help=f"comma-separated, of {', '.join([*VARIANTS, 'open3d'])}")
     ap.add_argument("--depth-max", type=float, default=5.0, help="ignore depth beyond this (m, default 5)")
@@ -115,24 +101,27 @@ def main(argv: list[str] | None = None) -> int:
     from semmatch.poses.odometry import ground_truth_poses
     from semmatch.poses.trajectory_metrics import trajectory_errors
 
-    full = read_recording(args.recording)
-    a, _, b = args.frames.partition(":")
-    seq = FrameRange(full, int(a) if a else 0, int(b) if b else len(full))
-    gt_full = ground_truth_poses(full)
-    if gt_full is None:
+    # the reader opens only the frames asked for (a held-out half is never read)
+    frames = args.frames or slice(None)
+    seq = read_recording(args.recording, **({"frames": frames} if args.frames else {}))
+    start = frames.start or 0
+    span = f"{start}-{start + len(seq) - 1}"
+    gt = ground_truth_poses(seq)
+    if gt is None:
         print(f"error: {args.recording} has no ground truth to score against", file=sys.stderr)
         return 2
-    gt = gt_full[seq.idx.start:seq.idx.stop:seq.idx.step]
+    if len(gt) != len(seq):  # a simulated folder's poses_gt.txt holds every frame of the recording
+        gt = gt[frames]
     first = np.flatnonzero(np.isfinite(gt).all(axis=(1, 2)))
     if len(first) == 0 or first[0] != 0:
-        print(f"error: frame {seq.idx.start} has no ground truth; start --frames at a frame that has", file=sys.stderr)
+        print(f"error: frame {start} has no ground truth; start --frames at a frame that has", file=sys.stderr)
         return 2
     prior = None
     if args.prior:
-        if getattr(full, "poses", None) is None:
+        if getattr(seq, "poses", None) is None:
             print(f"error: {args.recording} has no recorded poses for --prior", file=sys.stderr)
             return 2
-        prior = np.asarray(full.poses, dtype=np.float64)[seq.idx.start:seq.idx.stop:seq.idx.step]
+        prior = np.asarray(seq.poses, dtype=np.float64)
     names = [v.strip() for v in args.variants.split(",") if v.strip()]
     unknown = [v for v in names if v not in VARIANTS and v != "open3d"]
     if unknown:
@@ -149,7 +138,7 @@ def main(argv: list[str] | None = None) -> int:
             est = estimate_poses(seq, init_pose=gt[0], depth_max=args.depth_max, downsample=args.downsample,
                                  prior=prior, progress=not args.quiet, **VARIANTS[name])
         e = trajectory_errors(est, gt)
-        rows.append({"method": name + (" +prior" if args.prior else ""), "frames": f"{seq.idx.start}-{seq.idx.stop - 1}", **{k: float(v) for k, v in e.items()},
+        rows.append({"method": name + (" +prior" if args.prior else ""), "frames": span, **{k: float(v) for k, v in e.items()},
                      "seconds": time.perf_counter() - t0})
         print(json.dumps(rows[-1]), file=sys.stderr, flush=True)
     print("| method | frames | ATE (cm) | RPE trans. (cm/frame) | RPE rot. (deg/frame) | s/frame |\n|---|---|---|---|---|---|")

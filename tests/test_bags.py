@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import os
 import pickle
 import warnings
 from concurrent.futures import ThreadPoolExecutor
@@ -376,3 +377,35 @@ def test_depth_not_registered_to_the_colour_camera(tmp_path):
                                          "'camera_color_optical_frame'"):
         seq = RosBagSequence(tmp_path / "unaligned", depth_topic="/camera/depth_same_size", intrinsics=INTR)
     assert len(seq) == 2
+
+
+def test_frame_files_name_the_bag_and_the_pose_cache_keys_on_them(tmp_path, monkeypatch):
+    """frame_files gives the bag's own files (a folder: metadata.yaml and storage), so the
+    --estimate-poses cache keys a bag on its files, stamps and topics without decoding a frame."""
+    from semmatch.poses.recording_poses import poses_cache_key
+
+    frames = synthetic_frames()
+    write_rosbag(tmp_path / "b", frames, poses=None, timestamps=STAMPS)
+    seq = RosBagSequence(tmp_path / "b")
+    files = seq.frame_files(3)
+    assert {f.name for f in files} >= {"metadata.yaml"} and any(f.suffix == ".db3" for f in files)
+    assert all(f.parent == tmp_path / "b" for f in files)
+    with pytest.raises(IndexError):
+        seq.frame_files(len(seq))
+    write_rosbag(tmp_path / "m", frames, storage="mcap", poses=None, timestamps=STAMPS)
+    mcap = next((tmp_path / "m").glob("*.mcap"))
+    assert RosBagSequence(mcap).frame_files(0) == (mcap,)
+
+    def no_decoding(self, i):
+        raise AssertionError("the cache key decoded a frame")
+
+    monkeypatch.setattr(RosBagSequence, "__getitem__", no_decoding)
+    key = poses_cache_key(seq, {"residual": "hybrid"})
+    assert key == poses_cache_key(RosBagSequence(tmp_path / "b"), {"residual": "hybrid"})
+    assert key != poses_cache_key(RosBagSequence(tmp_path / "b", frames=slice(1, 4)), {"residual": "hybrid"})
+    other = RosBagSequence(tmp_path / "b")
+    other.topics = {**other.topics, "color": "/other/color/image_raw"}  # another topic of the same bag
+    assert key != poses_cache_key(other, {"residual": "hybrid"})
+    db3 = next((tmp_path / "b").glob("*.db3"))
+    os.utime(db3, ns=(db3.stat().st_atime_ns, db3.stat().st_mtime_ns + 10**9))  # the bag rewritten
+    assert key != poses_cache_key(RosBagSequence(tmp_path / "b"), {"residual": "hybrid"})

@@ -31,6 +31,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from tqdm.auto import tqdm
 
 from ..io import read_tum, write_json, write_tum
 
@@ -42,6 +43,9 @@ __all__ = [
     "two_height_study",
     "pixels_near_map",
     "alignment_figure",
+    "validation_seed_check",
+    "validate_thresholds",
+    "choose_on_rows",
     "main",
 ]
 
@@ -261,26 +265,33 @@ def kitchen_study(data: str | Path, out: str | Path, *, progress: bool = False, 
 
 
 def two_height_scene(sd: Path, pose_dir: Path, work: Path, *, methods: Sequence[str] = ("3d-neighborhood",),
-                     chain: bool = True, person_scene: Path | None = None, progress: bool = False,
-                     **settings) -> dict:
+                     chain: bool = True, person_scene: Path | None = None, network: str | None = None,
+                     progress: bool = False, **settings) -> dict:
     """One scene of :func:`two_height_study`: alignment, its error, and the chain's Mean Acc. (estimated and true poses).
 
     With ``person_scene`` (another scene) the robot of ``sd`` is aligned into that scene's
     person's map: a wrong pair, which :func:`~semmatch.poses.alignment.align_to_map` must refuse
-    (no errors, no chain).
+    (no errors, no chain). With ``network`` (a shipped network of ``models/full``, e.g.
+    ``compact``) the chain also runs the real-like chain's network rows: the network's own labels
+    of the robot's frames (``lower``), each method from the network's person's map, and
+    ``fused`` (``methods[0]``'s label where the map has one, the robot's own network's elsewhere;
+    :func:`semmatch.transfer.write_fused_labels`); the network runs once per recording, its
+    labels shared by both arms.
 
     Returns
     -------
     dict
         scene, the alignment report's numbers, ``trans_err_m`` / ``rot_err_deg`` (against the
         trajectory-aligned truth), ``trans_err_mesh_m`` / ``rot_err_mesh_deg`` (each map fitted onto
-        the scene's mesh; NaN without ``scene.ply``), and with ``chain`` per method ``mean_acc`` at the aligned
-        estimated poses and ``mean_acc_true`` at the true poses.
+        the scene's mesh; NaN without ``scene.ply``), and with ``chain`` per method ``mean_acc:METHOD`` at the
+        aligned estimated poses and ``mean_acc_true:METHOD`` at the true poses (from the ground-truth
+        labelled person's map), with ``network`` also ``mean_acc:NETWORK:METHOD`` (``lower``, the
+        methods, ``fused``) and their ``mean_acc_true`` twins.
     """
     from ..fusion import reconstruct_many
     from ..io import read_sequence
     from ..poses.alignment import align_recording
-    from .layout import GT
+    from .layout import GT, model_name
     from .real import chain_from_poses
     from .real_poses import PosedSequence, cached_odometry, registration_errors, world_alignment
 
@@ -311,23 +322,38 @@ def two_height_scene(sd: Path, pose_dir: Path, work: Path, *, methods: Sequence[
            "trans_err_m": err["trans_err_m"], "rot_err_deg": err["rot_err_deg"],
            "trans_err_mesh_m": err_mesh["trans_err_m"], "rot_err_mesh_deg": err_mesh["rot_err_deg"],
            **{k: v for k, v in result.as_dict().items() if isinstance(v, float | int | bool) and k != "accepted"},
+           "floor_angle_deg": result.floor_angle_deg, "floor_offset_m": result.floor_offset_m,
            "failures": "; ".join(result.failures()), "align_seconds": seconds}
     if chain:
-        o = dict(voxel_size=0.04, eval_voxel_size=0.05, tol=None, fused_base=None, registration_voxel=0.1,
-                 registration_seed=0, registration_restarts=4, frame_jobs=1, world_truth="traj")
+        models, sources, predicted = {}, (GT,), {}
+        if network is not None:
+            from ..segment.shipping import load_shipped_network
+            from .pipeline import ROOT
+
+            models, sources = {network: load_shipped_network(ROOT / "models" / "full", network)}, (GT, network)
+        o = dict(voxel_size=0.04, eval_voxel_size=0.05, tol=None, fused_base=None if network is None else methods[0],
+                 registration_voxel=0.1, registration_seed=0, registration_restarts=4, frame_jobs=1,
+                 world_truth="traj")
         for arm, poses, T in (("", est, result.transform), ("_true", true, np.eye(4))):
             posed = {n: PosedSequence(seqs[n], poses[n]) for n in seqs}
-            rows, _ = chain_from_poses(sd, work / f"chain{arm or '_est'}", posed, poses, true, {}, methods, (GT,), o,
-                                       transform=T)
+            arm_work = work / f"chain{arm or '_est'}"
+            rows, _ = chain_from_poses(sd, arm_work, posed, poses, true, models, methods, sources, o, transform=T,
+                                       predicted=predicted)
+            if network is not None and not predicted:  # labels do not depend on poses: the network runs once
+                predicted = {("upper", network): arm_work / f"upper_labels_{network}",
+                             ("lower", network): arm_work / f"lower_labels_{network}" / "lower"}
             for r in rows:
-                row[f"mean_acc{arm}:{r['method']}"] = float(r["mean_acc"])
+                if r["method"] != "upper":  # the person's own map: no alignment in it
+                    key = r["method"] if r["model"] == model_name(GT) else f"{r['model']}:{r['method']}"
+                    row[f"mean_acc{arm}:{key}"] = float(r["mean_acc"])
     write_json(work / "row.json", row)
     return row
 
 
 def two_height_study(scene_dirs: Sequence[Path], pose_dir: Path, out: Path, *, chain: bool = True,
-                     progress: bool = False, **settings) -> pd.DataFrame:
-    """The two-height pairs of ``scene_dirs`` (:func:`two_height_scene` each), one row per scene (``rows.csv``).
+                     wrong_pairs: bool = False, network: str | None = None, progress: bool = False,
+                     **settings) -> pd.DataFrame:
+    """The two-height pairs of ``scene_dirs`` (:func:`two_height_scene` each), one row per pair (``rows.csv``).
 
     Parameters
     ----------
@@ -337,24 +363,141 @@ def two_height_study(scene_dirs: Sequence[Path], pose_dir: Path, out: Path, *, c
         Cache of the recordings' odometry (``<scene>/<recording>.txt``).
     out : path
     chain : bool
-        Also transfer and fuse (Mean Acc. at estimated and at true poses).
+        Also transfer and fuse (Mean Acc. at estimated and at true poses; right pairs only).
+    wrong_pairs : bool
+        Also align each scene's robot into the next scene's person's map (the last one's into the
+        first one's): pairs of two different rooms, which must be refused.
+    network : str, optional
+        Also the network rows and ``fused`` (:func:`two_height_scene`).
     progress : bool
     **settings
-        Passed to :func:`semmatch.poses.alignment.align_to_map`.
+        Passed to :func:`semmatch.poses.alignment.align_to_map` (e.g. ``checks``).
     """
-    out = Path(out)
+    from ..io import atomic_write_text
+
+    out, scene_dirs = Path(out), [Path(sd) for sd in scene_dirs]
+    pairs = [(sd, None) for sd in scene_dirs]
+    if wrong_pairs:
+        if len(scene_dirs) < 2:
+            raise ValueError("wrong pairs need at least two scenes")
+        pairs += [(sd, scene_dirs[(k + 1) % len(scene_dirs)]) for k, sd in enumerate(scene_dirs)]
     rows = []
-    for sd in scene_dirs:
-        cached = out / sd.name / "row.json"
+    for sd, person in tqdm(pairs, desc="alignment pairs", disable=not progress):
+        work = out / (sd.name if person is None else f"{sd.name}_into_{person.name}")
+        cached = work / "row.json"
         if cached.is_file():
             rows.append(json.loads(cached.read_text()))
             continue
-        rows.append(two_height_scene(Path(sd), Path(pose_dir), out / sd.name, chain=chain, progress=progress,
-                                     **settings))
-        pd.DataFrame(rows).to_csv(out / "rows.csv", index=False)
+        rows.append(two_height_scene(sd, Path(pose_dir), work, chain=chain and person is None, person_scene=person,
+                                     network=network, **settings))
+        atomic_write_text(out / "rows.csv", pd.DataFrame(rows).to_csv(index=False))
     df = pd.DataFrame(rows)
-    df.to_csv(out / "rows.csv", index=False)
+    atomic_write_text(out / "rows.csv", df.to_csv(index=False))
     return df
+
+
+def validation_seed_check(scene_dirs: Sequence[Path]) -> None:
+    """Refuse scenes that are not validation scenes (the seed ending the folder's name, or its ``scene.json``'s).
+
+    Raises
+    ------
+    ValueError
+        A scene whose seed is not among the full profile's ``val_seeds``, or has none.
+    """
+    from .pipeline import load_params
+
+    val = {int(s) for s in load_params(profile="full")["common"]["val_seeds"]}
+    for sd in scene_dirs:
+        info = Path(sd) / "scene.json"
+        seed = json.loads(info.read_text()).get("seed") if info.is_file() else None
+        if seed is None:
+            tail = Path(sd).name.rsplit("_", 1)[-1]
+            seed = int(tail) if tail.isdigit() else None
+        if seed is None or int(seed) not in val:
+            raise ValueError(f"{sd}: seed {seed} is not a validation seed ({sorted(val)}); the refusal thresholds "
+                             "are chosen on validation scenes only")
+
+
+def validate_thresholds(scene_dirs: Sequence[Path], pose_dir: Path, out: Path, *, figures: str | Path | None = None,
+                        truth: str = "mesh", progress: bool = True) -> dict:
+    """Choose the refusal thresholds on validation scenes (:mod:`semmatch.experiments.alignment_thresholds`).
+
+    Every scene's robot aligned into its own person's map and into the next scene's
+    (:func:`two_height_study` with ``wrong_pairs``, alignment only, under the current
+    :data:`~semmatch.poses.alignment.DEFAULT_CHECKS`), then the rule of
+    :func:`~semmatch.experiments.alignment_thresholds.choose_thresholds`.
+
+    Parameters
+    ----------
+    scene_dirs : sequence of path
+        Validation scenes (``upper_noisy/``, ``lower_noisy/``, ``scene.ply``; seeds of ``val_seeds``).
+    pose_dir, out : path
+        Odometry cache; work folder (``rows.csv``, ``thresholds.json``).
+    figures : path, optional
+        Also ``alignment_validation.csv``/``.md`` (one row per pair, with its label and its verdict
+        under the default and the chosen thresholds) and ``alignment_validation.png`` there.
+    truth : {"mesh", "trajectory"}
+        The errors that label right pairs (:func:`~semmatch.experiments.alignment_thresholds.must_refuse`):
+        the mesh fit (the rule's), or the trajectory truth for pairs stored without a mesh fit.
+    progress : bool
+
+    Returns
+    -------
+    dict
+        ``thresholds`` (chosen), ``defaults``, ``steps`` (the rule's steps), ``under_defaults`` and
+        ``under_chosen`` (pairs that must be refused but were accepted, good pairs refused), as
+        written to ``thresholds.json``.
+    """
+    validation_seed_check(scene_dirs)
+    rows = two_height_study(scene_dirs, pose_dir, out, chain=False, wrong_pairs=True, progress=progress)
+    return choose_on_rows(rows, Path(out) / "thresholds.json", figures=figures, truth=truth)
+
+
+def choose_on_rows(rows: pd.DataFrame, report_file: Path, *, figures: str | Path | None = None,
+                   truth: str = "mesh") -> dict:
+    """The rule of :mod:`semmatch.experiments.alignment_thresholds` on stored validation pairs.
+
+    Parameters
+    ----------
+    rows : DataFrame
+        Pairs of :func:`two_height_study` runs with ``wrong_pairs`` (validation scenes only).
+    report_file : path
+        ``thresholds.json`` to write.
+    figures, truth
+        As :func:`validate_thresholds`.
+
+    Returns
+    -------
+    dict
+        As :func:`validate_thresholds`.
+    """
+    from ..poses.alignment import DEFAULT_CHECKS
+    from .alignment_thresholds import choose_thresholds, judge_rows, must_refuse, threshold_figure
+    from .tables import save_table
+
+    chosen, steps = choose_thresholds(rows, truth=truth)
+    refuse = must_refuse(rows, truth=truth)
+
+    def counts(th):
+        acc = judge_rows(rows, th)
+        return {"bad_accepted": int((acc & refuse).sum()), "good_refused": int((~acc & ~refuse).sum()),
+                "pairs": len(rows), "must_refuse": int(refuse.sum())}
+
+    scenes = sorted(set(rows["scene"]))
+    report = {"thresholds": chosen, "defaults": dict(DEFAULT_CHECKS), "steps": steps, "truth": truth,
+              "under_defaults": counts(DEFAULT_CHECKS), "under_chosen": counts(chosen), "scenes": scenes}
+    write_json(Path(report_file), report)
+    if figures is not None:
+        cols = ["scene", "person", "trans_err_m", "rot_err_deg", "trans_err_mesh_m", "rot_err_mesh_deg",
+                "structure_fitness", "agreement", "inlier_rmse", "floor_angle_deg", "floor_offset_m", "constrained"]
+        table = rows.reindex(columns=cols).copy()
+        table.insert(2, "must_refuse", refuse)
+        table["accepted_defaults"] = judge_rows(rows, DEFAULT_CHECKS)
+        table["accepted_chosen"] = judge_rows(rows, chosen)
+        save_table(table, figures, "alignment_validation", floatfmt=".4f")
+        threshold_figure(rows, chosen, Path(figures) / "alignment_validation.png", truth=truth,
+                         title=f"validation pairs ({len(scenes)} scenes, {truth} truth): structure_fitness")
+    return report
 
 
 def alignment_figure(rows: pd.DataFrame, out: str | Path, *, kitchen: dict | None = None,
@@ -409,7 +552,7 @@ def alignment_figure(rows: pd.DataFrame, out: str | Path, *, kitchen: dict | Non
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m semmatch.experiments.alignment_study {kitchen,two-heights,simulate-val}``."""
+    """``python -m semmatch.experiments.alignment_study {kitchen,two-heights,validate,choose,figure,simulate-val}``."""
     p = argparse.ArgumentParser(prog="python -m semmatch.experiments.alignment_study", description=__doc__.split("\n")[0])
     sub = p.add_subparsers(dest="what", required=True)
     k = sub.add_parser("kitchen", help="the real pair (7-Scenes red kitchen, development frames)")
@@ -420,19 +563,51 @@ def main(argv: Sequence[str] | None = None) -> int:
     t.add_argument("--poses", required=True, help="odometry cache folder")
     t.add_argument("--out", required=True, help="work folder (rows.csv)")
     t.add_argument("--no-chain", dest="chain", action="store_false", help="alignment only (no transfer, no Mean Acc.)")
+    t.add_argument("--checks", help="thresholds.json of a validate run (default: DEFAULT_CHECKS)")
+    t.add_argument("--network", help="also the shipped network's rows and fused (e.g. compact)")
+    c = sub.add_parser("validate", help="choose the refusal thresholds on validation scenes: right and wrong pairs, "
+                                        "the rule of semmatch.experiments.alignment_thresholds")
+    c.add_argument("scenes", nargs="+", help="validation scene folders (seeds of val_seeds only)")
+    c.add_argument("--poses", required=True, help="odometry cache folder")
+    c.add_argument("--out", required=True, help="work folder (rows.csv, thresholds.json)")
+    c.add_argument("--figures", help="also write alignment_validation.csv/.md and .png there")
+    c.add_argument("--truth", choices=("mesh", "trajectory", "mesh-or-trajectory"), default="mesh",
+                   help="errors that label right pairs: the mesh fit (the rule's) or the trajectory truth "
+                        "(pairs stored without a mesh fit)")
+    h = sub.add_parser("choose", help="the threshold rule on stored validation pairs (work folders of validate runs)")
+    h.add_argument("work", nargs="+", help="validate work folders (their <pair>/row.json)")
+    h.add_argument("--out", required=True, help="thresholds.json to write")
+    h.add_argument("--figures", help="also write alignment_validation.csv/.md and .png there")
+    h.add_argument("--truth", choices=("mesh", "trajectory", "mesh-or-trajectory"), default="mesh",
+                   help="errors that label right pairs (mesh-or-trajectory: the mesh fit where a pair has one)")
     f = sub.add_parser("figure", help="the figure of docs/recordings.md from the studies' outputs")
     f.add_argument("rows", nargs="+", help="rows.csv of two-heights runs")
     f.add_argument("--kitchen", help="kitchen.json")
     f.add_argument("--out", required=True, help="PNG")
     v = sub.add_parser("simulate-val", help="validation pairs for the thresholds")
-    v.add_argument("--out", required=True)
-    v.add_argument("--seeds", type=int, nargs="+", default=[501, 502, 503, 504])
+    v.add_argument("--out", required=True, help="folder of the scenes")
+    v.add_argument("--seeds", type=int, nargs="+", default=[501, 502, 503, 504], help="validation seeds")
     args = p.parse_args(argv)
     if args.what == "kitchen":
         print(json.dumps(kitchen_study(args.data, args.out, progress=True), indent=2))
     elif args.what == "two-heights":
-        df = two_height_study([Path(s) for s in args.scenes], Path(args.poses), Path(args.out), chain=args.chain)
+        checks = None
+        if args.checks:
+            checks = json.loads(Path(args.checks).read_text())
+            checks = checks.get("thresholds", checks)
+        df = two_height_study([Path(s) for s in args.scenes], Path(args.poses), Path(args.out), chain=args.chain,
+                              network=args.network, progress=True, checks=checks)
         print(df.to_string())
+    elif args.what == "validate":
+        report = validate_thresholds([Path(s) for s in args.scenes], Path(args.poses), Path(args.out),
+                                     figures=args.figures, truth=args.truth)
+        print(json.dumps({k: report[k] for k in ("thresholds", "defaults", "under_defaults", "under_chosen")},
+                         indent=2))
+    elif args.what == "choose":
+        rows = pd.DataFrame([json.loads(f.read_text()) for w in args.work for f in sorted(Path(w).glob("*/row.json"))])
+        validation_seed_check([Path(s) for s in sorted(set(rows["scene"]) | set(rows["person"]))])  # seeds by name
+        report = choose_on_rows(rows, Path(args.out), figures=args.figures, truth=args.truth)
+        print(json.dumps({k: report[k] for k in ("thresholds", "under_defaults", "under_chosen")}, indent=2))
     elif args.what == "figure":
         rows = pd.concat([pd.read_csv(r) for r in args.rows], ignore_index=True)
         kitchen = json.loads(Path(args.kitchen).read_text()) if args.kitchen else None

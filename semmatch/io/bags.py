@@ -87,6 +87,7 @@ from .ros_transforms import (
     stamp_seconds,
     tf_frame,
 )
+from .sequences import frame_index
 from .timestamps import associate_frames, interpolate_poses
 
 __all__ = ["OPTICAL_FRAME", "is_rosbag", "RosBagSequence", "read_rosbag", "write_rosbag"]
@@ -442,8 +443,17 @@ class RosBagSequence(_ImageSequence):
         return len(self._pairs)
 
     def frame_files(self, i: int) -> tuple[Path, ...]:
-        """No file per frame: a bag's frames are messages (caches keyed on files decode the frames instead)."""
-        return ()
+        """The files frame ``i`` is read from: the bag's (every frame shares them).
+
+        A ``.bag`` or ``.mcap`` file itself; a ROS 2 bag folder's ``metadata.yaml`` and storage
+        files. Caches keyed on files (the ``--estimate-poses`` cache) then key a bag on their sizes and
+        times, and a frame range or topic choice on the frames' stamps and :attr:`topics`.
+        """
+        frame_index(i, len(self))
+        if self.path.is_file():
+            return (self.path,)
+        return tuple(sorted(f for f in self.path.iterdir() if f.name == "metadata.yaml" or f.name.endswith(
+            (".db3", ".mcap", ".db3.zstd", ".mcap.zstd"))))
 
     # ---- poses
     def _check_pose_cover(self, poses: np.ndarray, where: str) -> None:

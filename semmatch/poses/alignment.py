@@ -64,7 +64,7 @@ __all__ = [
 #: refusal thresholds of :func:`check_alignment` (docs/recordings.md, "A person and a robot", says
 #: how they were chosen: validation scenes and the kitchen's development frames only)
 DEFAULT_CHECKS: dict[str, float] = {
-    "min_structure_fitness": 0.30,  # share of source points off the large planes within check_distance of the target
+    "min_structure_fitness": 0.305,  # share of source points off the large planes within check_distance of the target
     "min_agreement": 0.5,  # share of restarts that reached the kept transform
     "max_inlier_rmse": 0.03,  # m, at the finest ICP level
     "max_floor_angle": 3.0,  # degrees between the aligned floors (with floors only)

@@ -55,7 +55,8 @@ def poses_cache_key(seq, settings: dict) -> str:
     Each frame contributes its files' resolved paths, sizes and modification times
     (:func:`semmatch.io.readers.frame_files`), or, for a reader that names no files, its
     decoded colour and depth; the camera, the number of frames and their timestamps always
-    count (a reader whose frames share one file, a bag, still keys each range apart).
+    count (a reader whose frames share one file, a bag, still keys each range apart), and a
+    bag's topics (``seq.topics``) too.
 
     Parameters
     ----------
@@ -70,8 +71,10 @@ def poses_cache_key(seq, settings: dict) -> str:
     from ..io.readers import frame_files
 
     h = hashlib.sha256()
-    h.update(json.dumps({"version": POSES_CACHE_VERSION, "n": len(seq), "settings": settings,
-                         "intrinsics": seq.intrinsics.to_dict()}, sort_keys=True, default=str).encode())
+    head = {"version": POSES_CACHE_VERSION, "n": len(seq), "settings": settings, "intrinsics": seq.intrinsics.to_dict()}
+    if getattr(seq, "topics", None):  # a bag: which of its topics the frames are read from
+        head["topics"] = dict(seq.topics)
+    h.update(json.dumps(head, sort_keys=True, default=str).encode())
     h.update(np.ascontiguousarray(getattr(seq, "timestamps", np.arange(len(seq))), dtype=np.float64).tobytes())
     for i in range(len(seq)):
         files = frame_files(seq, i)

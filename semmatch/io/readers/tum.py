@@ -23,7 +23,7 @@ from ..sequences import listed_file, read_tum
 from ..timestamps import associate_frames, interpolate_poses, read_file_list
 from .base import ImageSequence
 
-__all__ = ["TUM_INTRINSICS", "tum_camera", "is_tum_rgbd", "TumRgbdSequence", "read_tum_rgbd"]
+__all__ = ["TUM_INTRINSICS", "tum_camera", "is_tum_rgbd", "TumRgbdSequence", "read_tum_rgbd", "write_tum_rgbd"]
 
 PathLike = str | os.PathLike
 
@@ -169,3 +169,73 @@ class TumRgbdSequence(ImageSequence):
 def read_tum_rgbd(path: PathLike, intrinsics: Intrinsics | None = None, **kwargs) -> TumRgbdSequence:
     """Open a TUM RGB-D folder as a sequence (see :class:`TumRgbdSequence`)."""
     return TumRgbdSequence(path, intrinsics, **kwargs)
+
+
+def write_tum_rgbd(path: PathLike, frames, intrinsics: Intrinsics, *, fps: float | None = None,
+                   overwrite: bool = False, inputs=()) -> Path:
+    """Write frames as a TUM RGB-D folder (the layout :class:`TumRgbdSequence` reads), atomically.
+
+    ``rgb/<t>.png``, ``depth/<t>.png`` (16 bit, value / 5000 = metres), ``rgb.txt``,
+    ``depth.txt``, ``groundtruth.txt`` (the frames' poses, when any frame has one) and
+    ``intrinsics.json`` (the camera, depth scale 5000). The folder is filled under a temporary
+    name and renamed when complete (:func:`semmatch.io.files.output_dir_writer`).
+
+    Parameters
+    ----------
+    path : path
+        The new folder.
+    frames : iterable of Frame
+    intrinsics : Intrinsics
+    fps : float, optional
+        Stamp frame ``i`` at ``i / fps`` seconds instead of its own timestamp (a simulated
+        sequence's timestamps are frame numbers, 1 Hz: too sparse for TUM's pose interpolation,
+        which leaves frames more than 0.1 s from a pose sample without one).
+    overwrite : bool
+        Replace a folder semmatch wrote (anything else is refused).
+    inputs : sequence of paths
+        The recording read (the output may not be, lie inside or contain it).
+
+    Returns
+    -------
+    Path
+
+    Raises
+    ------
+    ValueError
+        No frames, a non-positive ``fps``, or timestamps that do not increase.
+    """
+    import dataclasses
+
+    from ..files import output_dir_writer
+    from ..images import write_depth, write_image
+    from ..sequences import write_intrinsics, write_tum
+
+    if fps is not None and not fps > 0:
+        raise ValueError(f"fps must be > 0, got {fps}")
+    with output_dir_writer(path, "tum-rgbd", overwrite=overwrite, inputs=inputs) as tmp:
+        lines = {"rgb": ["# color images", "# timestamp filename"], "depth": ["# depth maps", "# timestamp filename"]}
+        stamps, poses = [], []
+        for i, f in enumerate(frames):
+            t = i / fps if fps is not None else float(f.timestamp if f.timestamp is not None else i)
+            if stamps and t <= stamps[-1]:
+                raise ValueError(f"{path}: frame {i}'s timestamp {t:.6f} does not follow {stamps[-1]:.6f} "
+                                 "(pass fps to stamp the frames anew)")
+            stamps.append(t)
+            for kind in ("rgb", "depth"):
+                name = f"{kind}/{t:.6f}.png"
+                (tmp / kind).mkdir(exist_ok=True)
+                if kind == "rgb":
+                    write_image(tmp / name, f.rgb)
+                else:
+                    write_depth(tmp / name, f.depth, 5000.0)
+                lines[kind].append(f"{t:.6f} {name}")
+            if f.pose is not None:
+                poses.append((t, f.pose))
+        if not stamps:
+            raise ValueError(f"{path}: no frames to write")
+        for kind, text in lines.items():
+            (tmp / f"{kind}.txt").write_text("\n".join(text) + "\n")
+        write_intrinsics(tmp / "intrinsics.json", dataclasses.replace(intrinsics, depth_scale=5000.0))
+        if poses:
+            write_tum(tmp / "groundtruth.txt", np.array([t for t, _ in poses]), np.stack([T for _, T in poses]))
+    return Path(path)
