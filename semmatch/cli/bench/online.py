@@ -191,9 +191,16 @@ def run(args: argparse.Namespace) -> int:
     # one warm-up frame in a throw-away session (first calls load kernels), then the timed replay
     RobotSession(None, method=method, index=index, voxel_size=args.voxel_size, initialiser=given_pose(gt[0])).step(
         frames[0])
-    report = replay(session, frames, rate=0)
+    rss: dict[int, float] = {}
+
+    def sample_rss(i, frame, result) -> None:
+        if i % 100 == 0 or i == len(frames) - 1:
+            rss[i] = current_rss_gb()
+
+    report = replay(session, frames, rate=0, on_frame=sample_rss)
     s = report.summary(gt)
     s["peak_rss_gb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6
+    s["rss_gb_by_frame"] = rss
     s.update(recording=str(args.recording), played=len(order), method=method, threads=threads,
              standin_map_cpu_s=build_s)
     # other methods: their transfer on every 10th tracked frame, in the chain of the first
@@ -233,6 +240,17 @@ def run(args: argparse.Namespace) -> int:
     return emit(s, args.json, _table(s))
 
 
+def current_rss_gb() -> float:
+    """This process's resident memory now (GB; from /proc/self/statm), or NaN where there is none."""
+    import os
+
+    try:
+        with open("/proc/self/statm") as f:
+            return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 1e9
+    except (OSError, ValueError, IndexError):
+        return float("nan")
+
+
 def latency_figure(report, path, *, title: str = "") -> Path:
     """Per-frame CPU time by stage (stacked) and wall latency (line) of a replay, as a PNG."""
     import matplotlib
@@ -270,7 +288,8 @@ def _table(s: dict) -> str:
         f"{s['latency_ms_median']:.1f} ms, p95 {s['latency_ms_p95']:.1f} ms wall (CPU p95 {s['cpu_ms_p95']:.1f} ms)",
         "  mean CPU per frame: " + ", ".join(f"{k} {v:.1f} ms" for k, v in s["mean_cpu_ms"].items()),
         "  chain rate by method: " + ", ".join(f"{k} {v:.1f}" for k, v in s["chain_frames_per_cpu_second"].items()),
-        f"  tracking losses {s['tracking_losses']} ({s['lost_frames']} lost frames); peak RSS {s['peak_rss_gb']:.2f} GB",
+        f"  tracking losses {s['tracking_losses']} ({s['lost_frames']} lost frames); peak RSS {s['peak_rss_gb']:.2f} GB"
+        " (RSS by frame: " + ", ".join(f"{k} {v:.2f}" for k, v in s["rss_gb_by_frame"].items()) + ")",
         f"  ATE: online {cm(s.get('online_ate_m'))}"
         + (f" | plain Open3D frame-to-frame {cm(s['plain_open3d']['ate_m'])}" if "plain_open3d" in s else "")
         + (f" | offline estimate {cm(s['offline_estimate']['ate_m'])}" if "offline_estimate" in s else ""),
