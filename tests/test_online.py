@@ -282,3 +282,35 @@ def test_bench_online_prints_the_chain_beside_plain_open3d(room, tmp_path, capsy
     s = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert s["played"] == 6 and s["processed"] == 6 and s["frames_per_cpu_second"] > 0
     assert s["plain_open3d"]["ate_m"] >= 0 and "online_ate_m" in s and s["peak_rss_gb"] > 0
+
+
+@pytest.mark.slow
+def test_online_study_scores_the_online_map_against_the_true_pose_chain(room, tmp_path):
+    """semmatch.experiments.online_study on a small scene folder: both maps scored, the trajectories
+    measured, the recording's odometry (here a drifting copy of the truth) as prior."""
+    from semmatch.experiments.online_study import main, online_scene
+    from semmatch.io import write_tum
+
+    _, lower = room
+    scene = generate_scene("living_room", 0)
+    r = Renderer(scene, INTR)
+    upper = _frames(r, make_trajectory(scene, 1.6, 12, kind="upper", seed=0))
+    sd = tmp_path / "living_room_0"
+    drift = np.eye(4)
+    for name, frames in (("upper_noisy", upper), ("lower_noisy", lower[:8])):
+        with SequenceWriter(sd / name, INTR) as w:
+            for k, f in enumerate(frames):
+                drift[0, 3] = 0.002 * k  # the recording's odometry drifts 2 mm a frame
+                w.add(f.rgb, f.depth, drift @ f.pose, labels=f.labels, timestamp=f.timestamp)
+        write_tum(sd / name / "poses_gt.txt", np.arange(len(frames), dtype=float), np.stack([f.pose for f in frames]))
+    row = online_scene(sd, tmp_path / "study" / sd.name, init="register")
+    assert row["frames"] == 8 and 0.5 < row["mean_acc_true"] <= 1
+    assert row["posed_frames"] + row["initialising"] + row["lost_frames"] == 8
+    if row["posed_frames"]:
+        assert 0 <= row["mean_acc_online"] <= 1 and row["ate_online_abs_m"] >= 0
+    assert row["ate_prior_m"] >= 0 and row["ate_offline_m"] >= 0
+    assert (tmp_path / "study" / sd.name / "row.json").is_file()
+    with pytest.raises(FileNotFoundError, match="poses_gt"):
+        online_scene(tmp_path / "nope", tmp_path / "w2")
+    assert main([str(sd), "--out", str(tmp_path / "study"), "--init", "register"]) == 0  # the row reused
+    assert (tmp_path / "study" / "rows.csv").is_file()
