@@ -235,8 +235,10 @@ def run(args: argparse.Namespace) -> int:
         s["offline_estimate"] = {"ate_m": ate(P, gt), "frames_per_cpu_second": len(P) / cpu}
     s["ate_frames"] = trajectory_error(report, gt).get("ate_frames", 0)
     if args.figure:
-        latency_figure(report, args.figure, title=f"{Path(args.recording).name} frames {args.frames}, "
-                                                  f"{method}, one thread")
+        fr = args.frames
+        shown = f"{fr.start or 0}:{'' if fr.stop is None else fr.stop}" if isinstance(fr, slice) else fr
+        latency_figure(report, args.figure, title=f"{Path(args.recording).name} frames {shown}"
+                       + (f" x{args.passes}" if args.passes > 1 else "") + f", {method}, one thread")
     return emit(s, args.json, _table(s))
 
 
