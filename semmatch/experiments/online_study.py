@@ -36,10 +36,11 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-__all__ = ["online_scene", "online_study", "main"]
+__all__ = ["online_scene", "online_study", "markdown_table", "main"]
 
-#: initialisers of the online arm (first pose in the person's map)
-INITS = ("align", "register")
+#: initialisers of the online arm (first pose in the person's map; ``first-pose``: the true one, as
+#: a robot starting from a known dock)
+INITS = ("align", "register", "first-pose")
 
 
 def _run_arm(session, frames, *, poses=None, priors=None):
@@ -82,7 +83,7 @@ def online_scene(sd: Path, work: Path, *, method: str = "3d-neighborhood", init:
         Output folder (``row.json``; the odometry cache without ``pose_dir``).
     method : str
         Transfer method.
-    init : {"align", "register"}
+    init : {"align", "register", "first-pose"}
         The online arm's initialiser.
     prior : bool
         Predict each pose from the recording's odometry (``lower_noisy/poses.txt``).
@@ -108,7 +109,7 @@ def online_scene(sd: Path, work: Path, *, method: str = "3d-neighborhood", init:
     """
     from ..fusion import reconstruct
     from ..io import read_sequence, read_tum
-    from ..online import ModelTracker, RobotSession, align_frame, register_frame
+    from ..online import ModelTracker, RobotSession, align_frame, given_pose, register_frame
     from ..poses.trajectory_metrics import ate
     from ..transfer import MapIndex
     from .real_poses import cached_odometry
@@ -133,14 +134,16 @@ def online_scene(sd: Path, work: Path, *, method: str = "3d-neighborhood", init:
 
     s_true = session()
     _, P_true, cpu_true = _run_arm(s_true, lower, poses=true_l)
-    s_on = session(align_frame if init == "align" else register_frame)
+    s_on = session({"align": align_frame, "register": register_frame}.get(init) or given_pose(true_l[0]))
     report, P_on, cpu_on = _run_arm(s_on, lower, priors=odometry if prior else None)
     summ = report.summary(true_l)
     posed = np.isfinite(P_on).all(axis=(1, 2))
     row = {"scene": sd.name, "frames": len(lower), "method": method, "init": init, "prior": prior,
            "mean_acc_true": _mean_acc(lower, P_true, s_true.semantic_map(), eval_voxel_size, voxel_size)}
-    row["mean_acc_online"] = (_mean_acc(lower, P_on, s_on.semantic_map(), eval_voxel_size, voxel_size)
-                              if posed.any() else float("nan"))
+    try:  # no frame placed, or too few to leave a surface: no map to score
+        row["mean_acc_online"] = _mean_acc(lower, P_on, s_on.semantic_map(), eval_voxel_size, voxel_size)
+    except ValueError:
+        row["mean_acc_online"] = float("nan")
     row["mean_acc_diff"] = row["mean_acc_online"] - row["mean_acc_true"]
     row.update(first_posed=int(np.flatnonzero(posed)[0]) if posed.any() else -1, posed_frames=int(posed.sum()),
                initialising=summ["statuses"].get("initialising", 0), lost_frames=summ["lost_frames"],
@@ -190,6 +193,35 @@ def online_study(scene_dirs: Sequence[Path], out: Path, *, progress: bool = Fals
     return pd.DataFrame(rows)
 
 
+def markdown_table(df: pd.DataFrame) -> str:
+    """The study's rows as the Markdown table of docs/online.md, with the mean of the scenes.
+
+    Parameters
+    ----------
+    df : DataFrame
+        Rows of :func:`online_study`.
+
+    Returns
+    -------
+    str
+    """
+    cm = lambda v: "-" if not np.isfinite(v) else f"{v * 100:.2f}"  # noqa: E731
+    lines = ["| scene | Mean Acc. true poses | online | difference | first posed frame | lost frames (losses) "
+             "| ATE online, aligned / as placed (cm) | ATE offline estimate (cm) | ATE odometry prior (cm) "
+             "| online frames per CPU-s |", "|" + "---|" * 10]
+    for r in df.itertuples():
+        lines.append(f"| {r.scene} | {r.mean_acc_true:.3f} | {r.mean_acc_online:.3f} | {r.mean_acc_diff:+.3f} "
+                     f"| {r.first_posed} | {r.lost_frames} ({r.tracking_losses}) "
+                     f"| {cm(r.ate_online_m)} / {cm(r.ate_online_abs_m)} | {cm(r.ate_offline_m)} "
+                     f"| {cm(r.ate_prior_m)} | {r.frames_per_cpu_second_online:.1f} |")
+    m = df.mean(numeric_only=True)
+    lines.append(f"| mean of {len(df)} | {m.mean_acc_true:.3f} | {m.mean_acc_online:.3f} | {m.mean_acc_diff:+.3f} "
+                 f"| | {df.lost_frames.sum()} ({df.tracking_losses.sum()}) | {cm(m.ate_online_m)} / "
+                 f"{cm(m.ate_online_abs_m)} | {cm(m.ate_offline_m)} | {cm(m.ate_prior_m)} "
+                 f"| {m.frames_per_cpu_second_online:.1f} |")
+    return "\n".join(lines)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """``python -m semmatch.experiments.online_study SCENE ... --out DIR``: run the study, print its table."""
     p = argparse.ArgumentParser(prog="python -m semmatch.experiments.online_study", description=__doc__.split("\n")[0])
@@ -204,10 +236,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = p.parse_args(argv)
     df = online_study([Path(s) for s in args.scenes], Path(args.out), method=args.method, init=args.init,
                       prior=args.prior, pose_dir=args.poses, progress=True)
-    cols = ["scene", "mean_acc_true", "mean_acc_online", "mean_acc_diff", "first_posed", "lost_frames",
-            "tracking_losses", "ate_online_m", "ate_online_abs_m", "ate_offline_m", "ate_prior_m",
-            "frames_per_cpu_second_online"]
-    print(df[cols].to_string(index=False, float_format=lambda v: f"{v:.4f}"))
+    print(markdown_table(df))
     return 0
 
 
