@@ -278,8 +278,11 @@ def test_bench_online_prints_the_chain_beside_plain_open3d(room, tmp_path, capsy
         w.add(f.rgb, f.depth, f.pose, timestamp=f.timestamp)
     w.close()
     capsys.readouterr()
-    assert main(["bench", "online", str(tmp_path / "lower"), "--frames", "0:6", "--no-offline", "--json"]) == 0
+    assert main(["bench", "online", str(tmp_path / "lower"), "--frames", "0:6", "--no-offline", "--json",
+                 "--methods", "3d-neighborhood", "3d-projected-sp"]) == 0
     s = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert set(s["chain_frames_per_cpu_second"]) == {"3d-neighborhood", "3d-projected-sp"}
+    assert s["chain_frames_per_cpu_second"]["3d-projected-sp"] > 0 and len(s["rss_gb_by_frame"]) == 2
     assert s["played"] == 6 and s["processed"] == 6 and s["frames_per_cpu_second"] > 0
     assert s["plain_open3d"]["ate_m"] >= 0 and "online_ate_m" in s and s["peak_rss_gb"] > 0
 

@@ -166,7 +166,7 @@ def run(args: argparse.Namespace) -> int:
     from semmatch.online import ModelTracker, RobotSession, given_pose
     from semmatch.online.replay import replay, trajectory_error
     from semmatch.poses.trajectory_metrics import ate
-    from semmatch.transfer import MapIndex, transfer_frame
+    from semmatch.transfer import MapIndex
 
     iterations = _iterations(args.track_iterations)
     seq = open_recording(args.recording, frames=args.frames)  # the other frames are never read
@@ -204,20 +204,8 @@ def run(args: argparse.Namespace) -> int:
     s.update(recording=str(args.recording), played=len(order), method=method, threads=threads,
              standin_map_cpu_s=build_s)
     # other methods: their transfer on every 10th tracked frame, in the chain of the first
-    rates = {method: s["frames_per_cpu_second"]}
-    base = (s["cpu_seconds"] - sum(r.cpu["transfer"] for r in report.results)) / max(len(report.results), 1)
-    for other in args.methods[1:]:
-        cpu = []
-        for r in report.results[::10]:
-            if r.pose is None:
-                continue
-            f = frames[r.index]
-            f.pose = r.pose
-            c0 = time.process_time()
-            transfer_frame(other, f, index)
-            cpu.append(time.process_time() - c0)
-        rates[other] = 1.0 / (base + float(np.mean(cpu))) if cpu else float("nan")
-    s["chain_frames_per_cpu_second"] = rates
+    s["chain_frames_per_cpu_second"] = {method: s["frames_per_cpu_second"],
+                                        **_other_rates(report, frames, index, args.methods[1:], s["cpu_seconds"])}
     s["online_ate_m"] = s.get("ate_m")
     if not args.no_baseline:
         P, fails, cpu = plain_open3d_odometry(frames, gt[0])
@@ -240,6 +228,27 @@ def run(args: argparse.Namespace) -> int:
         latency_figure(report, args.figure, title=f"{Path(args.recording).name} frames {shown}"
                        + (f" x{args.passes}" if args.passes > 1 else "") + f", {method}, one thread")
     return emit(s, args.json, _table(s))
+
+
+def _other_rates(report, frames, index, methods, cpu_seconds: float) -> dict:
+    """Chain rate of each of ``methods``: the replay's CPU per frame without its own transfer, plus
+    the method's transfer CPU on every 10th frame with a pose."""
+    from semmatch.transfer import transfer_frame
+
+    base = (cpu_seconds - sum(r.cpu["transfer"] for r in report.results)) / max(len(report.results), 1)
+    rates = {}
+    for other in methods:
+        cpu = []
+        for r in report.results[::10]:
+            if r.pose is None:
+                continue
+            f = frames[r.index]
+            f.pose = r.pose
+            c0 = time.process_time()
+            transfer_frame(other, f, index)
+            cpu.append(time.process_time() - c0)
+        rates[other] = 1.0 / (base + float(np.mean(cpu))) if cpu else float("nan")
+    return rates
 
 
 def current_rss_gb() -> float:
