@@ -41,8 +41,8 @@ def room():
     return person, lower
 
 
-@pytest.mark.parametrize("method", ["3d-neighborhood", "fused"])
-def test_streamed_labels_and_map_equal_the_batch_verbs(room, tmp_path, method):
+@pytest.mark.parametrize("method", ["3d-neighborhood", "2d-slic", "fused"])
+def test_streamed_labels_and_map_equal_the_batch_functions(room, tmp_path, method):
     person, lower = room
     rng = np.random.default_rng(0)
     probs = [rng.dirichlet(np.ones(21), size=INTR.shape).astype(np.float32) for _ in lower]
@@ -64,6 +64,70 @@ def test_streamed_labels_and_map_equal_the_batch_verbs(room, tmp_path, method):
     streamed = session.semantic_map()
     for key in ("points", "labels", "colors", "faces"):
         np.testing.assert_array_equal(getattr(streamed, key), getattr(batch_map, key), err_msg=key)
+
+
+def test_batch_and_session_take_the_same_per_frame_steps(room, monkeypatch):
+    """transfer_sequence / fuse_sequence and the session call one shared transfer step and one shared
+    fusion step, with the same frames, poses and labels in the same order: the two cannot drift."""
+    import semmatch.fusion.reconstruction as fusion_mod
+    import semmatch.transfer.sequence as transfer_mod
+    from semmatch.fusion import fuse_sequence
+
+    person, lower = room
+    frames, calls = lower[:4], []
+    shared_transfer, shared_fuse = transfer_mod.transfer_posed_frame, fusion_mod.fuse_frame
+
+    def transfer_step(method, frame, index, *, pose=None, **kw):
+        r = shared_transfer(method, frame, index, pose=pose, **kw)
+        calls.append(("transfer", frame.index, np.asarray(frame.pose if pose is None else pose).tobytes(),
+                      r.labels.tobytes()))
+        return r
+
+    def fuse_step(vol, frame, pose, labels=None, **kw):
+        calls.append(("fuse", frame.index, np.asarray(pose).tobytes(), np.asarray(labels).tobytes()))
+        return shared_fuse(vol, frame, pose, labels, **kw)
+
+    monkeypatch.setattr(transfer_mod, "transfer_posed_frame", transfer_step)
+    monkeypatch.setattr(fusion_mod, "fuse_frame", fuse_step)
+    index = MapIndex(person)
+    labels = [transfer_mod._transfer_one(frames, None, index, "3d-neighborhood", {}, i)[1] for i in range(4)]
+    fuse_sequence(frames, labels=labels)
+    batch, calls[:] = list(calls), []
+    session = RobotSession(person, index=index)
+    for f in frames:
+        session.step(f, pose=f.pose)
+    # the batch transfers every frame, then fuses; the session alternates: compare each kind in order
+    for kind in ("transfer", "fuse"):
+        assert [c for c in calls if c[0] == kind] == [c for c in batch if c[0] == kind], kind
+    assert len(calls) == 8
+
+
+@pytest.mark.slow
+def test_streamed_outputs_equal_the_batch_verbs(room, tmp_path):
+    """semmatch transfer + semmatch reconstruct and semmatch replay --true-poses write the same labels and map."""
+    from semmatch.cli import main
+    from semmatch.io import read_map, write_map
+
+    person, lower = room
+    write_map(tmp_path / "person.ply", person)
+    w = SequenceWriter(tmp_path / "lower", INTR)
+    for f in lower[:6]:
+        w.add(f.rgb, f.depth, f.pose, timestamp=f.timestamp)
+    w.close()
+    seq, pmap, q = str(tmp_path / "lower"), str(tmp_path / "person.ply"), ["--quiet", "--no-index-cache"]
+    assert main(["transfer", seq, "--map", pmap, "--method", "3d-neighborhood", "--out", str(tmp_path / "batch"), *q]) == 0
+    assert main(["reconstruct", seq, "--labels", str(tmp_path / "batch"), "--depth-max", "4",
+                 "--out", str(tmp_path / "batch.ply"), "--quiet"]) == 0
+    assert main(["replay", seq, "--map", pmap, "--method", "3d-neighborhood", "--true-poses", "--rate", "0",
+                 "--labels-out", str(tmp_path / "stream"), "--map-out", str(tmp_path / "stream.ply"), *q]) == 0
+    batch, stream = read_labels_folder(tmp_path / "batch"), read_labels_folder(tmp_path / "stream")
+    assert len(batch) == len(stream) == 6
+    for a, b in zip(batch, stream, strict=True):
+        np.testing.assert_array_equal(read_label_image(a), read_label_image(b), err_msg=a.name)
+    a, b = read_map(tmp_path / "batch.ply"), read_map(tmp_path / "stream.ply")
+    assert a.labels.any()
+    for key in ("points", "labels", "colors", "faces"):
+        np.testing.assert_array_equal(getattr(a, key), getattr(b, key), err_msg=key)
 
 
 def test_tracking_in_the_person_map_with_an_odometry_prior(room):
@@ -214,7 +278,41 @@ def test_bench_online_prints_the_chain_beside_plain_open3d(room, tmp_path, capsy
         w.add(f.rgb, f.depth, f.pose, timestamp=f.timestamp)
     w.close()
     capsys.readouterr()
-    assert main(["bench", "online", str(tmp_path / "lower"), "--frames", "0:6", "--no-offline", "--json"]) == 0
+    assert main(["bench", "online", str(tmp_path / "lower"), "--frames", "0:6", "--no-offline", "--json",
+                 "--methods", "3d-neighborhood", "3d-projected-sp"]) == 0
     s = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert set(s["chain_frames_per_cpu_second"]) == {"3d-neighborhood", "3d-projected-sp"}
+    assert s["chain_frames_per_cpu_second"]["3d-projected-sp"] > 0 and len(s["rss_gb_by_frame"]) == 2
     assert s["played"] == 6 and s["processed"] == 6 and s["frames_per_cpu_second"] > 0
     assert s["plain_open3d"]["ate_m"] >= 0 and "online_ate_m" in s and s["peak_rss_gb"] > 0
+
+
+@pytest.mark.slow
+def test_online_study_scores_the_online_map_against_the_true_pose_chain(room, tmp_path):
+    """semmatch.experiments.online_study on a small scene folder: both maps scored, the trajectories
+    measured, the recording's odometry (here a drifting copy of the truth) as prior."""
+    from semmatch.experiments.online_study import main, online_scene
+    from semmatch.io import write_tum
+
+    _, lower = room
+    scene = generate_scene("living_room", 0)
+    r = Renderer(scene, INTR)
+    upper = _frames(r, make_trajectory(scene, 1.6, 12, kind="upper", seed=0))
+    sd = tmp_path / "living_room_0"
+    drift = np.eye(4)
+    for name, frames in (("upper_noisy", upper), ("lower_noisy", lower[:8])):
+        with SequenceWriter(sd / name, INTR) as w:
+            for k, f in enumerate(frames):
+                drift[0, 3] = 0.002 * k  # the recording's odometry drifts 2 mm a frame
+                w.add(f.rgb, f.depth, drift @ f.pose, labels=f.labels, timestamp=f.timestamp)
+        write_tum(sd / name / "poses_gt.txt", np.arange(len(frames), dtype=float), np.stack([f.pose for f in frames]))
+    row = online_scene(sd, tmp_path / "study" / sd.name, init="first-pose")  # global alignment: test above
+    assert row["frames"] == 8 and 0.5 < row["mean_acc_true"] <= 1
+    assert row["posed_frames"] + row["initialising"] + row["lost_frames"] == 8
+    assert row["posed_frames"] == 8 and abs(row["mean_acc_diff"]) < 0.1 and row["ate_online_abs_m"] < 0.1
+    assert row["ate_prior_m"] >= 0 and row["ate_offline_m"] >= 0
+    assert (tmp_path / "study" / sd.name / "row.json").is_file()
+    with pytest.raises(FileNotFoundError, match="poses_gt"):
+        online_scene(tmp_path / "nope", tmp_path / "w2")
+    assert main([str(sd), "--out", str(tmp_path / "study"), "--init", "first-pose"]) == 0  # the row reused
+    assert (tmp_path / "study" / "rows.csv").is_file()

@@ -20,7 +20,7 @@ import numpy as np
 from ..io import Frame, SemanticMap, read_label_image, read_labels_folder, write_map
 from .tsdf import SemanticTSDF
 
-__all__ = ["fuse_sequence", "extract", "reconstruct", "reconstruct_many"]
+__all__ = ["fuse_frame", "fuse_sequence", "extract", "reconstruct", "reconstruct_many"]
 
 
 def _label_source(labels, n: int | None) -> Iterator[np.ndarray | None] | None:
@@ -75,6 +75,32 @@ def _posed_frames(seq, poses, n: int | None, name: str, progress: bool):
         if pose is None:
             raise ValueError(f"{where}: no pose (estimate poses first, e.g. semmatch.poses.odometry.estimate_poses)")
         yield i, where, frame, pose
+
+
+def fuse_frame(vol: SemanticTSDF, frame: Frame, pose: np.ndarray, labels: np.ndarray | None = None, *,
+               where: str = "") -> bool:
+    """Integrate one posed frame (and its labels) into ``vol``: the step :func:`fuse_sequence`
+    repeats and the online session (:class:`semmatch.online.RobotSession`) takes per frame, so
+    that the batch map and the streamed one cannot drift apart.
+
+    Parameters
+    ----------
+    vol : SemanticTSDF
+    frame : Frame
+        Metric depth, RGB and intrinsics (its own pose is not used).
+    pose : (4, 4)
+        ``T_world_camera``.
+    labels : uint8 (H, W) or float (H, W, C), optional
+        Label or probability image; None: geometry only.
+    where : str
+        Names the frame in errors.
+
+    Returns
+    -------
+    bool
+        False when the frame had no usable depth (a sensor dropout; skipped).
+    """
+    return vol.integrate(frame.depth, frame.rgb, pose, frame.intrinsics, labels=labels, where=where)
 
 
 def _next_labels(lab_iter: Iterator, i: int, where: str) -> np.ndarray:
@@ -140,7 +166,7 @@ def fuse_sequence(
     count = 0
     for i, where, frame, pose in _posed_frames(seq, poses, n, name, progress):
         lab = frame.labels if lab_iter is None else _next_labels(lab_iter, i, where)
-        vol.integrate(frame.depth, frame.rgb, pose, frame.intrinsics, labels=lab, where=where)
+        fuse_frame(vol, frame, pose, lab, where=where)
         count += 1
     _check_counts(count, lab_iter, name)
     _check_dropouts(vol, count, name)
@@ -286,7 +312,7 @@ def reconstruct_many(
     frames = []  # per frame: (where, own labels)
     pixels = []  # per frame: its evidence pixels (voxel blocks that exist when it is integrated)
     for _, where, frame, pose in _posed_frames(seq, poses, n, name, progress):
-        used = vol.integrate(frame.depth, frame.rgb, pose, frame.intrinsics, where=where)
+        used = fuse_frame(vol, frame, pose, where=where)
         ev = vol.evidence_pixels(frame.depth, pose, frame.intrinsics)
         pixels.append(ev if used else dataclasses.replace(ev, index=ev.index[:0]))
         frames.append((where, frame.labels if own_labels else None))

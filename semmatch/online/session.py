@@ -10,17 +10,19 @@
    (:mod:`semmatch.online.initialisation`; a given pose, or global registration onto the person's
    map), and while tracking is lost the session tries to relocalise;
 2. transfers the person's labels into the frame with any registered method
-   (:func:`semmatch.transfer.transfer_frame`; ``fused`` with the frame's class probabilities);
-3. integrates the frame and its labels into the robot's :class:`~semmatch.fusion.tsdf.SemanticTSDF`.
+   (:func:`semmatch.transfer.sequence.transfer_posed_frame`, the per-frame step of
+   ``transfer_sequence``; ``fused`` with the frame's class probabilities);
+3. integrates the frame and its labels into the robot's :class:`~semmatch.fusion.tsdf.SemanticTSDF`
+   (:func:`semmatch.fusion.reconstruction.fuse_frame`, the per-frame step of ``fuse_sequence``).
 
 A frame whose pose is unknown (lost, or not yet initialised) gets void labels (all 0) and is not
-fused: nothing is guessed. With the same poses, the session's labels and map are those of the
-batch verbs (tests/test_online.py checks them byte for byte).
+fused: nothing is guessed. The session and the batch verbs (``semmatch transfer``,
+``semmatch reconstruct``) share their per-frame steps, so with the same poses the session's labels
+and map are the batch verbs' byte for byte (tests/test_online.py checks both, API and verbs).
 """
 
 from __future__ import annotations
 
-import dataclasses
 import time
 from dataclasses import dataclass, field
 
@@ -222,7 +224,8 @@ class RobotSession:
         ValueError
             A bad pose, ``fused`` without ``probs``, a frame that breaks the frame contract.
         """
-        from ..transfer import transfer_frame
+        from ..fusion.reconstruction import fuse_frame
+        from ..transfer.sequence import transfer_posed_frame
 
         where = f"frame {frame.index}"
         c0, t0 = time.process_time(), time.perf_counter()
@@ -238,14 +241,14 @@ class RobotSession:
                 labels = np.zeros(frame.intrinsics.shape, np.uint8)
             else:
                 extra = {} if probs is None else {"probs": probs}
-                labels = transfer_frame(self.method, dataclasses.replace(frame, pose=T), self.index,
-                                        max_distance=self.max_distance, **self.params, **extra).labels
+                labels = transfer_posed_frame(self.method, frame, self.index, pose=T, max_distance=self.max_distance,
+                                              **self.params, **extra).labels
         elif probs is not None:
             labels = probs
         t2, c2 = time.perf_counter(), time.process_time()
         fused = False
         if T is not None:
-            fused = self.tsdf.integrate(frame.depth, frame.rgb, T, frame.intrinsics, labels=labels, where=where)
+            fused = fuse_frame(self.tsdf, frame, T, labels, where=where)
             moved = self.last_pose is not None and status in (TRACKED, "given")
             self.motion = np.linalg.inv(self.last_pose) @ T if moved else np.eye(4)
             self.last_pose, self._last_prior, self.lost_run = T, prior, 0

@@ -27,7 +27,7 @@ from ..runtime.workers import process_pool
 from .index import MapIndex, as_map_index
 from .registry import available_methods, check_params, transfer_frame
 
-__all__ = ["transfer_sequence", "LOW_SUPPORT", "LowSupportWarning"]
+__all__ = ["transfer_sequence", "transfer_posed_frame", "LOW_SUPPORT", "LowSupportWarning"]
 
 _WORKER: dict = {}
 
@@ -58,10 +58,34 @@ def _frame_params(params: dict, i: int) -> dict:
     return params
 
 
-def _frame(frames, poses: np.ndarray | None, i: int):
-    """Frame ``i``, carrying ``poses[i]`` when other poses are given."""
-    f = frames[i]
-    return f if poses is None else replace(f, pose=np.array(poses[i], dtype=np.float64))
+def transfer_posed_frame(method: str, frame, index: MapIndex, *, pose: np.ndarray | None = None,
+                         max_distance: float | None = None, **params):
+    """One frame's transfer, as :func:`transfer_sequence` and the online session make it.
+
+    The per-frame step both share (:class:`semmatch.online.RobotSession` calls it for each
+    frame with a pose), so that the batch verb and the stream cannot drift apart.
+
+    Parameters
+    ----------
+    method : str
+        A registered method.
+    frame : Frame
+        The frame (its own pose is used unless ``pose`` is given).
+    index : MapIndex
+        The person's map's index.
+    pose : (4, 4), optional
+        ``T_world_camera`` to transfer at instead of the frame's own pose.
+    max_distance : float, optional
+        As :func:`~semmatch.transfer.transfer_frame` (checked against the index's).
+    **params
+        Method parameters of this frame (``fused``: ``probs`` as an (H, W, C) array).
+
+    Returns
+    -------
+    TransferResult
+    """
+    f = frame if pose is None else replace(frame, pose=np.array(pose, dtype=np.float64))
+    return transfer_frame(method, f, index, max_distance=max_distance, **params)
 
 
 def _init_worker(index: MapIndex, source, method: str, params: dict, poses, out: Path) -> None:
@@ -75,8 +99,8 @@ MIN_VALID_DEPTH = 0.001
 
 def _transfer_one(frames, poses, index, method: str, params: dict, i: int):
     """``(i, labels, coverage, seconds, dropout)`` of frame ``i``."""
-    f = _frame(frames, poses, i)
-    r = transfer_frame(method, f, index, **_frame_params(params, i))
+    f = frames[i]
+    r = transfer_posed_frame(method, f, index, pose=None if poses is None else poses[i], **_frame_params(params, i))
     d = np.asarray(f.depth)
     dropout = np.count_nonzero(np.isfinite(d) & (d > 0)) < MIN_VALID_DEPTH * d.size
     return i, r.labels, r.coverage, r.seconds, dropout

@@ -166,7 +166,7 @@ def run(args: argparse.Namespace) -> int:
     from semmatch.online import ModelTracker, RobotSession, given_pose
     from semmatch.online.replay import replay, trajectory_error
     from semmatch.poses.trajectory_metrics import ate
-    from semmatch.transfer import MapIndex, transfer_frame
+    from semmatch.transfer import MapIndex
 
     iterations = _iterations(args.track_iterations)
     seq = open_recording(args.recording, frames=args.frames)  # the other frames are never read
@@ -191,26 +191,21 @@ def run(args: argparse.Namespace) -> int:
     # one warm-up frame in a throw-away session (first calls load kernels), then the timed replay
     RobotSession(None, method=method, index=index, voxel_size=args.voxel_size, initialiser=given_pose(gt[0])).step(
         frames[0])
-    report = replay(session, frames, rate=0)
+    rss: dict[int, float] = {}
+
+    def sample_rss(i, frame, result) -> None:
+        if i % 100 == 0 or i == len(frames) - 1:
+            rss[i] = current_rss_gb()
+
+    report = replay(session, frames, rate=0, on_frame=sample_rss)
     s = report.summary(gt)
     s["peak_rss_gb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6
+    s["rss_gb_by_frame"] = rss
     s.update(recording=str(args.recording), played=len(order), method=method, threads=threads,
              standin_map_cpu_s=build_s)
     # other methods: their transfer on every 10th tracked frame, in the chain of the first
-    rates = {method: s["frames_per_cpu_second"]}
-    base = (s["cpu_seconds"] - sum(r.cpu["transfer"] for r in report.results)) / max(len(report.results), 1)
-    for other in args.methods[1:]:
-        cpu = []
-        for r in report.results[::10]:
-            if r.pose is None:
-                continue
-            f = frames[r.index]
-            f.pose = r.pose
-            c0 = time.process_time()
-            transfer_frame(other, f, index)
-            cpu.append(time.process_time() - c0)
-        rates[other] = 1.0 / (base + float(np.mean(cpu))) if cpu else float("nan")
-    s["chain_frames_per_cpu_second"] = rates
+    s["chain_frames_per_cpu_second"] = {method: s["frames_per_cpu_second"],
+                                        **_other_rates(report, frames, index, args.methods[1:], s["cpu_seconds"])}
     s["online_ate_m"] = s.get("ate_m")
     if not args.no_baseline:
         P, fails, cpu = plain_open3d_odometry(frames, gt[0])
@@ -228,9 +223,43 @@ def run(args: argparse.Namespace) -> int:
         s["offline_estimate"] = {"ate_m": ate(P, gt), "frames_per_cpu_second": len(P) / cpu}
     s["ate_frames"] = trajectory_error(report, gt).get("ate_frames", 0)
     if args.figure:
-        latency_figure(report, args.figure, title=f"{Path(args.recording).name} frames {args.frames}, "
-                                                  f"{method}, one thread")
+        fr = args.frames
+        shown = f"{fr.start or 0}:{'' if fr.stop is None else fr.stop}" if isinstance(fr, slice) else fr
+        latency_figure(report, args.figure, title=f"{Path(args.recording).name} frames {shown}"
+                       + (f" x{args.passes}" if args.passes > 1 else "") + f", {method}, one thread")
     return emit(s, args.json, _table(s))
+
+
+def _other_rates(report, frames, index, methods, cpu_seconds: float) -> dict:
+    """Chain rate of each of ``methods``: the replay's CPU per frame without its own transfer, plus
+    the method's transfer CPU on every 10th frame with a pose."""
+    from semmatch.transfer import transfer_frame
+
+    base = (cpu_seconds - sum(r.cpu["transfer"] for r in report.results)) / max(len(report.results), 1)
+    rates = {}
+    for other in methods:
+        cpu = []
+        for r in report.results[::10]:
+            if r.pose is None:
+                continue
+            f = frames[r.index]
+            f.pose = r.pose
+            c0 = time.process_time()
+            transfer_frame(other, f, index)
+            cpu.append(time.process_time() - c0)
+        rates[other] = 1.0 / (base + float(np.mean(cpu))) if cpu else float("nan")
+    return rates
+
+
+def current_rss_gb() -> float:
+    """This process's resident memory now (GB; from /proc/self/statm), or NaN where there is none."""
+    import os
+
+    try:
+        with open("/proc/self/statm") as f:
+            return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 1e9
+    except (OSError, ValueError, IndexError):
+        return float("nan")
 
 
 def latency_figure(report, path, *, title: str = "") -> Path:
@@ -270,7 +299,8 @@ def _table(s: dict) -> str:
         f"{s['latency_ms_median']:.1f} ms, p95 {s['latency_ms_p95']:.1f} ms wall (CPU p95 {s['cpu_ms_p95']:.1f} ms)",
         "  mean CPU per frame: " + ", ".join(f"{k} {v:.1f} ms" for k, v in s["mean_cpu_ms"].items()),
         "  chain rate by method: " + ", ".join(f"{k} {v:.1f}" for k, v in s["chain_frames_per_cpu_second"].items()),
-        f"  tracking losses {s['tracking_losses']} ({s['lost_frames']} lost frames); peak RSS {s['peak_rss_gb']:.2f} GB",
+        f"  tracking losses {s['tracking_losses']} ({s['lost_frames']} lost frames); peak RSS {s['peak_rss_gb']:.2f} GB"
+        " (RSS by frame: " + ", ".join(f"{k} {v:.2f}" for k, v in s["rss_gb_by_frame"].items()) + ")",
         f"  ATE: online {cm(s.get('online_ate_m'))}"
         + (f" | plain Open3D frame-to-frame {cm(s['plain_open3d']['ate_m'])}" if "plain_open3d" in s else "")
         + (f" | offline estimate {cm(s['offline_estimate']['ate_m'])}" if "offline_estimate" in s else ""),
