@@ -8,7 +8,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from semmatch.geometry import look_at
+from semmatch.io.geometry import look_at
 
 _spec = importlib.util.spec_from_file_location("odometry_real", Path(__file__).parents[1] / "scripts" / "odometry_real.py")
 odometry_real = importlib.util.module_from_spec(_spec)

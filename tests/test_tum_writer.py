@@ -10,8 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from semmatch.geometry import DEFAULT_INTRINSICS, look_at
 from semmatch.io import Frame, SequenceWriter
+from semmatch.io.geometry import DEFAULT_INTRINSICS, look_at
 from semmatch.io.readers.tum import TumRgbdSequence, write_tum_rgbd
 from semmatch.io.recordings import read_recording
 

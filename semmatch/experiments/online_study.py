@@ -180,7 +180,7 @@ def online_study(scene_dirs: Sequence[Path], out: Path, *, progress: bool = Fals
     -------
     DataFrame
     """
-    from ..progress import tqdm
+    from ..runtime.progress import tqdm
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
