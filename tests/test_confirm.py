@@ -345,7 +345,7 @@ def test_the_plans_speed_lever_is_read_from_the_runs_parameters_and_must_be_the_
     plan = load_analysis_plan(PLAN_V2_FILE)
     lever = plan.raw["speed"]["lever"]
     assert lever["params_key"] == "profiles.full.common.slic_2d"
-    assert lever_settings(plan, pipeline.ROOT / "params.yaml") == {"2d-slic": lever["chosen_value"]}
+    assert lever_settings(plan, pipeline.read_params()) == {"2d-slic": lever["chosen_value"]}
     full = pipeline.load_params(pipeline.ROOT / "params.yaml", "full")["common"]
     assert run_method_settings(full) == {"2d-slic": lever["chosen_value"]}
     smoke = pipeline.load_params(pipeline.ROOT / "params.yaml", "smoke")["common"]
@@ -354,13 +354,11 @@ def test_the_plans_speed_lever_is_read_from_the_runs_parameters_and_must_be_the_
         run_method_settings({"slic_2d": 3})
     cmd = speed_bench_command(plan, {"2d-slic": {"iterations": 3, "backend": "cv2-slic"}, "dbscan": {}})
     assert cmd[-2:] == ['--param=2d-slic:iterations=3,backend="cv2-slic"', "--json"]
-    data = pipeline.read_params(pipeline.ROOT / "params.yaml")  # with the profiles of profiles.yaml
+    data = pipeline.read_params()  # params.yaml with the profiles of profiles.yaml
     data["profiles"]["full"]["common"]["slic_2d"] = {"iterations": 4}
-    other = tmp_path / "params.yaml"
-    other.write_text(yaml.safe_dump(data))
-    with pytest.raises(ValueError, match=r"slic_2d is \{'iterations': 4\}, but analysis plan v2 chose"):
-        lever_settings(plan, other)
+    with pytest.raises(ValueError, match=r"run.yaml: profiles.full.common.slic_2d is \{'iterations': 4\}, but "
+                                         "analysis plan v2 chose"):
+        lever_settings(plan, data, where="run.yaml")
     del data["profiles"]["full"]["common"]["slic_2d"]
-    other.write_text(yaml.safe_dump(data))
     with pytest.raises(ValueError, match="speed lever is read from profiles.full.common.slic_2d, which is not there"):
-        lever_settings(plan, other)
+        lever_settings(plan, data)

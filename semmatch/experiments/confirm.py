@@ -345,14 +345,15 @@ def _judge(figures_dir: Path, ran: Sequence[str], plan: AnalysisPlan, params_fil
     """
     from .claims import judge_figures
     from .plan_networks import label_training_seeds
-    from .speed_claims import BENCH_RECORD, run_speed_bench
+    from .speed_claims import BENCH_RECORD, lever_settings, run_speed_bench
 
     walls = {}
     if set(ran) - {ADAPT_NOTEBOOK} and plan.rules == "v2":
         label_training_seeds(figures_dir)
         if not (figures_dir / BENCH_RECORD).is_file():  # once per run: an addition keeps the first measurement
             t = time.perf_counter()
-            run_speed_bench(figures_dir, plan, cwd=ROOT, params_file=params_file)
+            lever = lever_settings(plan, read_params(params_file), where=str(params_file))
+            run_speed_bench(figures_dir, plan, cwd=ROOT, settings=lever)
             walls["speed_bench"] = round(time.perf_counter() - t, 1)
     t = time.perf_counter()
     if set(ran) - {ADAPT_NOTEBOOK}:

@@ -31,34 +31,32 @@ BENCH_RECORD = "bench_speed.json"
 _REFERENCE = "reference (closest point)"
 
 
-def lever_settings(plan: AnalysisPlan, params_file: str | os.PathLike) -> dict[str, dict]:
+def lever_settings(plan: AnalysisPlan, params: Mapping, where: str = "the run's parameters") -> dict[str, dict]:
     """The plan's speed lever as a run states it: ``{method: {parameter: value}}``.
 
     The plan's ``speed.lever`` names the method and ``params_key``, the dotted path of the
-    setting in a run's parameters (``profiles.full.common.slic_2d``, the profiles read as
-    :func:`~semmatch.experiments.pipeline.read_params` reads them); the value found there
+    setting in a run's parameters ``params`` (``profiles.full.common.slic_2d``; the profiles as
+    :func:`~semmatch.experiments.pipeline.read_params` composes them); the value found there
     must be the plan's ``chosen_value``, so a run cannot be judged under a lever its plan did not
     choose. A plan without a lever gives ``{}``.
 
     Raises
     ------
     ValueError
-        The parameter file lacks the key, or its value is not the plan's chosen value.
+        The parameters lack the key, or its value is not the plan's chosen value (naming ``where``).
     """
-    from .pipeline import read_params
-
     lever = (plan.raw.get("speed") or {}).get("lever")
     if not lever:
         return {}
-    value: object = read_params(params_file)  # the profiles of profiles.yaml beside it, or its own
+    value: object = params
     for part in str(lever["params_key"]).split("."):
         if not isinstance(value, dict) or part not in value:
-            raise ValueError(f"{params_file}: analysis plan v{plan.version}'s speed lever is read from "
+            raise ValueError(f"{where}: analysis plan v{plan.version}'s speed lever is read from "
                              f"{lever['params_key']}, which is not there")
         value = value[part]
     chosen = lever.get("chosen_value")
     if chosen is not None and value != chosen:
-        raise ValueError(f"{params_file}: {lever['params_key']} is {value!r}, but analysis plan v{plan.version} "
+        raise ValueError(f"{where}: {lever['params_key']} is {value!r}, but analysis plan v{plan.version} "
                          f"chose {chosen!r} for {lever['method']}")
     return {str(lever["method"]): dict(value or {})}
 
@@ -83,7 +81,7 @@ def speed_bench_command(plan: AnalysisPlan, settings: Mapping[str, Mapping] | No
 
 
 def run_speed_bench(out_dir: str | os.PathLike, plan: AnalysisPlan, *, cwd: str | os.PathLike | None = None,
-                    params_file: str | os.PathLike | None = None) -> dict:
+                    settings: Mapping[str, Mapping] | None = None) -> dict:
     """Run the plan's speed benchmark once in a fresh (otherwise idle) process and keep its record.
 
     Parameters
@@ -94,9 +92,9 @@ def run_speed_bench(out_dir: str | os.PathLike, plan: AnalysisPlan, *, cwd: str 
         Its ``speed.command`` is run (:func:`speed_bench_command`).
     cwd : path, optional
         Working directory of the benchmark.
-    params_file : path, optional
-        The run's parameter file: the plan's speed lever is read from it (:func:`lever_settings`)
-        and passed to the benchmark.
+    settings : mapping, optional
+        The methods' settings passed to the benchmark: the plan's speed lever as the run states
+        it (:func:`lever_settings`).
 
     Returns
     -------
@@ -113,7 +111,7 @@ def run_speed_bench(out_dir: str | os.PathLike, plan: AnalysisPlan, *, cwd: str 
     from ..io import atomic_write_text
     from ..segment.training import machine_record
 
-    cmd = speed_bench_command(plan, lever_settings(plan, params_file) if params_file is not None else None)
+    cmd = speed_bench_command(plan, settings)
     shown = " ".join(["semmatch", *cmd[3:]])
     load = [round(x, 2) for x in os.getloadavg()] if hasattr(os, "getloadavg") else None
     started, t = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), time.perf_counter()
