@@ -340,8 +340,8 @@ def _score_network(model, tours: Mapping[str, Path], arms: Sequence[Arm], grid: 
             transferred = [m for m in methods if m != "fused"]
             if "fused" in methods and grid.fused_base not in transferred:
                 transferred.append(grid.fused_base)
-            lab = {m: [transfer_frame(m, f, index, **settings_for(m, method_settings)).labels for f in frames]
-                   for m in transferred}
+            params = {m: settings_for(m, method_settings) for m in transferred}  # checked once, not per frame
+            lab = {m: [transfer_frame(m, f, index, **params[m]).labels for f in frames] for m in transferred}
             if "fused" in methods:
                 lab["fused"] = [fuse_labels(t, p) for t, p in zip(lab[grid.fused_base], lower, strict=True)]
             labelings += [(arm, "lower", lower)] + [(arm, m, lab[m]) for m in methods]
